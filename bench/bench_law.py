@@ -1,0 +1,101 @@
+"""Time of one full command evaluation of the law (a_c with its exact d a_d / dt).
+
+Prints, for one vehicle with 3, 30 and 300 zones and for a batch of 10,000 vehicles with 3
+zones: the compiled kernel alone, ``GuidanceController.evaluate`` (kernel plus the Python
+wrapper that checks the state and names the outputs) and ``GuidanceController.step`` (that,
+plus the actuator update). Targets on the 2-core reference machine: <= 50 us for one
+vehicle with 3 zones, <= 300 us with 300 zones, <= 5 ms per step for the batch.
+
+    python bench/bench_law.py [--repeat N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from ezcompanion.guidance import Defender, GuidanceController, KinematicState, Target, ZoneSet
+from ezcompanion.guidance.law import O_SIZE, Z_SIZE, evaluate_batch
+
+
+def zones_ring(count: int) -> ZoneSet:
+    """``count`` defenders spread around the origin, like the paper's."""
+    angles = np.linspace(0.0, 2.0 * np.pi, count, endpoint=False)
+    radius = 3.0 + 0.05 * count
+    return ZoneSet.from_defenders(
+        [
+            Defender(
+                north_m=float(radius * np.cos(t)),
+                east_m=float(radius * np.sin(t)),
+                range_m=1.5,
+                capture_radius_m=0.5,
+                speed_ratio=0.7,
+            )
+            for t in angles
+        ]
+    )
+
+
+def per_call_s(function: Callable[[], object], repeat: int, number: int) -> float:
+    """Median over ``repeat`` rounds of the mean time of ``number`` calls."""
+    function()  # compile or load from the cache outside the timing
+    rounds = []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        for _ in range(number):
+            function()
+        rounds.append((time.perf_counter() - start) / number)
+    return statistics.median(rounds)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=7)
+    args = parser.parse_args()
+    target = Target(north_m=2.0, east_m=0.0)
+
+    print(f"{'case':32s} {'kernel':>10s} {'evaluate':>10s} {'step':>10s}   target")
+    for count, goal in ((3, "<= 50 us"), (30, ""), (300, "<= 300 us")):
+        zones = zones_ring(count)
+        controller = GuidanceController(zones=zones, target=target)
+        controller.reset(0.1)
+        state = KinematicState(8.0, -4.0, 2.5, 1.0)
+        packed = controller._packed
+        args_kernel = (
+            packed, zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_term,
+            np.array([2.0]), np.array([0.0]), np.array([8.0]), np.array([-4.0]),
+            np.array([2.5]), np.array([1.0]), np.array([0.1]),
+            np.empty((1, O_SIZE)), np.empty((1, Z_SIZE, count)),
+        )  # fmt: skip
+        number = 2000 if count < 300 else 500
+        kernel = per_call_s(lambda a=args_kernel: evaluate_batch(*a), args.repeat, number)
+        evaluate = per_call_s(lambda c=controller, s=state: c.evaluate(s), args.repeat, number)
+        step = per_call_s(lambda c=controller, s=state: c.step(s, 0.02), args.repeat, number)
+        print(
+            f"{'1 vehicle, ' + str(count) + ' zones':32s} {kernel * 1e6:8.1f}us "
+            f"{evaluate * 1e6:8.1f}us {step * 1e6:8.1f}us   {goal}"
+        )
+
+    batch = 10_000
+    rng = np.random.default_rng(1)
+    zones = zones_ring(3)
+    controller = GuidanceController(zones=zones, target=target)
+    controller.reset(np.zeros(batch))
+    state = KinematicState(
+        rng.uniform(-8.0, 8.0, batch), rng.uniform(-8.0, 8.0, batch),
+        rng.uniform(-np.pi, np.pi, batch), 1.0,
+    )  # fmt: skip
+    evaluate = per_call_s(lambda: controller.evaluate(state), args.repeat, 20)
+    step = per_call_s(lambda: controller.step(state, 0.02), args.repeat, 20)
+    print(
+        f"{'10,000 vehicles, 3 zones':32s} {'':>10s} {evaluate * 1e3:8.2f}ms "
+        f"{step * 1e3:8.2f}ms   <= 5 ms per step ({step / batch * 1e6:.2f} us per vehicle)"
+    )
+
+
+if __name__ == "__main__":
+    main()

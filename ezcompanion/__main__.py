@@ -1,0 +1,3 @@
+from ezcompanion.cli import main
+
+raise SystemExit(main())

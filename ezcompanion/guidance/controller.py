@@ -1,0 +1,212 @@
+"""The stateful guidance controller: owns the actuator state, steps the law.
+
+``GuidanceController.step(state, dt_s)`` evaluates the law at the measured state and the
+current actuator state a, integrates the saturation model over ``dt_s`` with the resulting
+a_c held (:mod:`ezcompanion.guidance.actuator`), and returns the lateral acceleration to fly
+(the new a) with every diagnostic.
+
+One vehicle or a batch: ``reset(0.0)`` starts one vehicle, ``reset(np.zeros(B))`` a batch of
+B, and the state's fields are then floats or arrays broadcastable to that shape. The same
+compiled kernel serves the simulator, the service and the Monte-Carlo batch.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+import numpy.typing as npt
+
+from ezcompanion.errors import StateError
+from ezcompanion.guidance._jit import jit
+from ezcompanion.guidance.actuator import advance_one
+from ezcompanion.guidance.law import (
+    O_AC,
+    O_ALPHA,
+    O_RT,
+    P_AMAX,
+    P_CMD_LIM,
+    P_INTERCEPT_R,
+    P_LAW_ROBUST,
+    P_N,
+    P_P1,
+    LawOutput,
+    pack_params,
+    run_kernel,
+)
+from ezcompanion.guidance.params import GuidanceParams, LawName, Target
+from ezcompanion.guidance.zones import ZoneSet
+
+__all__ = ["GuidanceController", "GuidanceMode", "GuidanceStep", "KinematicState"]
+
+FloatArray = npt.NDArray[np.float64]
+
+# alpha within this of 0 or 1 counts as one law acting alone in the reported mode
+_MODE_PURE = 0.01
+
+
+class GuidanceMode(IntEnum):
+    """Which part of the law is acting; ``CAPTURED`` once within the intercept radius."""
+
+    INTERCEPT = 0
+    BLEND = 1
+    SAFETY = 2
+    CAPTURED = 3
+
+
+# plain ints for the compiled kernel
+_INTERCEPT, _BLEND, _SAFETY, _CAPTURED = (int(m) for m in GuidanceMode)
+
+
+@dataclass(frozen=True)
+class KinematicState:
+    """What the law needs of the vehicle (local NED, SI).
+
+    ``course_rad`` is the direction of the ground velocity, clockwise from north: the law's
+    kinematics (and the EZ geometry) are written for the direction of motion, so course over
+    ground, not yaw, is what it uses. ``speed_m_s`` is the ground speed, > 0.
+    """
+
+    north_m: float | FloatArray
+    east_m: float | FloatArray
+    course_rad: float | FloatArray
+    speed_m_s: float | FloatArray
+
+
+@dataclass(frozen=True, eq=False)
+class GuidanceStep:
+    """One controller step: the command and the law's diagnostics.
+
+    ``accel_lat_m_s2`` is the actuator state at the start of the step (what the law saw),
+    ``accel_lat_cmd_m_s2`` the state at its end: the lateral acceleration to fly next.
+    ``mode`` holds ``GuidanceMode`` values.
+    """
+
+    law: LawOutput
+    accel_lat_m_s2: FloatArray
+    accel_lat_cmd_m_s2: FloatArray
+    mode: npt.NDArray[np.int8]
+    captured: npt.NDArray[np.bool_]
+
+
+class GuidanceController:
+    """``reset()`` then ``step(state, dt_s)``; see the module docstring."""
+
+    def __init__(
+        self,
+        *,
+        zones: ZoneSet,
+        target: Target,
+        params: GuidanceParams | None = None,
+        law: LawName = LawName.ROBUST,
+    ) -> None:
+        self.zones = zones
+        self.target = target
+        self.params = params if params is not None else GuidanceParams()
+        self.law = LawName(law)
+        self._packed = pack_params(self.law, self.params)
+        self._target_n = np.array([target.north_m])
+        self._target_e = np.array([target.east_m])
+        self._shape: tuple[int, ...] = ()
+        self._accel = np.zeros(1)
+
+    @property
+    def accel_m_s2(self) -> FloatArray:
+        """The actuator state a (m/s^2, positive turns right), batch-shaped."""
+        return self._accel.reshape(self._shape).copy()
+
+    def reset(self, accel_m_s2: float | FloatArray = 0.0) -> None:
+        """Start an engagement with actuator state ``accel_m_s2``; its shape is the batch's."""
+        accel = np.array(accel_m_s2, dtype=np.float64)
+        bound = self.params.accel_max_m_s2
+        if not np.all(np.isfinite(accel)) or np.any(np.abs(accel) >= bound):
+            raise StateError("accel_m_s2", accel_m_s2, f"must be finite with |a| < {bound}")
+        self._shape = accel.shape
+        self._accel = accel.reshape(-1).copy()
+
+    def evaluate(self, state: KinematicState) -> LawOutput:
+        """The law at ``state`` and the current actuator state, without advancing it."""
+        out, out_zone = self._run_law(state)
+        return LawOutput(out, out_zone, self._shape)
+
+    def step(self, state: KinematicState, dt_s: float) -> GuidanceStep:
+        """Evaluate the law, advance the actuator by ``dt_s`` and return the command."""
+        if not (math.isfinite(dt_s) and dt_s > 0.0):
+            raise StateError("dt_s", dt_s, "must be a finite number > 0")
+        out, out_zone = self._run_law(state)
+        accel = self._accel
+        accel_next = np.empty_like(accel)
+        mode = np.empty(accel.shape, dtype=np.int8)
+        _advance_batch(self._packed, out, accel, dt_s, accel_next, mode)
+        self._accel = accel_next
+        shape = self._shape
+        mode = mode.reshape(shape)
+        return GuidanceStep(
+            law=LawOutput(out, out_zone, shape),
+            accel_lat_m_s2=accel.reshape(shape),
+            accel_lat_cmd_m_s2=accel_next.reshape(shape),
+            mode=mode,
+            captured=mode == _CAPTURED,
+        )
+
+    def _run_law(self, state: KinematicState) -> tuple[FloatArray, FloatArray]:
+        north, east, course, speed = self._state_rows(state)
+        return run_kernel(
+            self._packed, self.zones, self._target_n, self._target_e, north, east, course,
+            speed, self._accel,
+        )  # fmt: skip
+
+    def _state_rows(
+        self, state: KinematicState
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """The state as four contiguous rows of the batch's size, checked finite."""
+        rows = np.empty((4, self._accel.shape[0]))
+        shaped = rows.reshape((4, *self._shape))
+        for index, name in enumerate(_STATE_FIELDS):
+            try:
+                shaped[index] = getattr(state, name)
+            except (ValueError, TypeError) as exc:
+                raise StateError(name, getattr(state, name), f"must fit the batch: {exc}") from None
+        if not np.isfinite(rows).all():
+            bad = int(np.flatnonzero(~np.isfinite(rows).all(axis=1))[0])
+            name = _STATE_FIELDS[bad]
+            raise StateError(name, getattr(state, name), "must be finite")
+        if (rows[3] <= 0.0).any():
+            raise StateError("speed_m_s", state.speed_m_s, "must be > 0")
+        return rows[0], rows[1], rows[2], rows[3]
+
+
+_STATE_FIELDS = ("north_m", "east_m", "course_rad", "speed_m_s")
+
+
+@jit
+def _advance_batch(
+    p: FloatArray,
+    out: FloatArray,
+    a: FloatArray,
+    dt: float,
+    a_next: FloatArray,
+    mode: npt.NDArray[np.int8],
+) -> None:
+    """Capture check, actuator and mode for every vehicle, from the law's outputs ``out``."""
+    robust = p[P_LAW_ROBUST] > 0.5
+    pure = _MODE_PURE
+    for k in range(a.shape[0]):
+        captured = out[k, O_RT] <= p[P_INTERCEPT_R]
+        command = out[k, O_AC]
+        if captured and robust:
+            # Inside the capture radius the engagement is over: a_T grows like 1 / r_T there
+            # and would only make the vehicle orbit. Let the actuator relax instead.
+            command = 0.0
+        a_next[k] = advance_one(a[k], command, dt, p[P_AMAX], p[P_P1], int(p[P_N]), p[P_CMD_LIM])
+        alpha = out[k, O_ALPHA]
+        if captured:
+            mode[k] = _CAPTURED
+        elif alpha >= 1.0 - pure:
+            mode[k] = _SAFETY
+        elif alpha <= pure:
+            mode[k] = _INTERCEPT
+        else:
+            mode[k] = _BLEND

@@ -1,0 +1,94 @@
+"""Engagement-zone geometry: the defenders as arrays, and the EZ boundary.
+
+The EZ boundary of a range-limited defender (paper eq. eng_bound), as a function of the
+lead angle sigma = course - line of sight to the defender's origin:
+
+    rho(sigma) = mu R [cos(sigma) + sqrt(cos^2(sigma) - 1 + (R + c)^2 / (mu R)^2)]
+
+Its first derivative is the paper's gradient (nabla rho); the second is needed for the exact
+time derivative of the law. Both were checked symbolically (docs/paper-notes) and are
+checked against finite differences in the tests.
+
+The boundary takes cos(sigma) and sin(sigma) rather than sigma: the law never needs the
+angle itself, and working with the pair avoids atan2 and angle wrapping per zone.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from ezcompanion.errors import ConfigError
+from ezcompanion.guidance._jit import jit
+from ezcompanion.guidance.params import Defender
+
+__all__ = ["ZoneSet", "ez_boundary_point"]
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True, eq=False)
+class ZoneSet:
+    """The defenders as arrays of shape (batch, zones), per-zone constants precomputed.
+
+    The batch axis is 1 for zones shared by every vehicle, or B for a batch whose vehicles
+    each face their own defenders (pad unused slots with far-away defenders).
+    ``mu_range_m`` is mu R and ``reach_term`` is (R + c)^2 / (mu R)^2 - 1, so that the
+    square root's argument is cos^2(sigma) + reach_term.
+    """
+
+    north_m: FloatArray
+    east_m: FloatArray
+    mu_range_m: FloatArray
+    reach_term: FloatArray
+    reach_m: FloatArray
+    names: tuple[str, ...]
+
+    @classmethod
+    def from_defenders(cls, defenders: Sequence[Defender]) -> ZoneSet:
+        """Zones shared by every vehicle; at least one defender is required."""
+        defenders = tuple(defenders)
+        if not defenders:
+            raise ConfigError("defenders", [], "at least one defender is required")
+        for index, defender in enumerate(defenders):
+            if not isinstance(defender, Defender):
+                raise ConfigError(f"defenders[{index}]", defender, "must be a Defender")
+        mu_range = np.array([[d.speed_ratio * d.range_m for d in defenders]])
+        reach = np.array([[d.reach_m for d in defenders]])
+        return cls(
+            north_m=np.array([[d.north_m for d in defenders]]),
+            east_m=np.array([[d.east_m for d in defenders]]),
+            mu_range_m=mu_range,
+            reach_term=(reach / mu_range) ** 2 - 1.0,
+            reach_m=reach,
+            names=tuple(d.name or f"D{i + 1}" for i, d in enumerate(defenders)),
+        )
+
+    def __len__(self) -> int:
+        return int(self.north_m.shape[1])
+
+
+@jit
+def ez_boundary_point(
+    mu_range_m: float, reach_term: float, cos_sigma: float, sin_sigma: float
+) -> tuple[float, float, float]:
+    """rho, d rho / d sigma and d^2 rho / d sigma^2 (m, m/rad, m/rad^2) of one zone.
+
+    With q = sqrt(cos^2 + reach_term):
+      rho   =  mu R (cos + q)
+      rho'  = -mu R sin (1 + cos / q)
+      rho'' = -mu R [cos + (cos^2 - sin^2) / q + sin^2 cos^2 / q^3]
+    """
+    cc = cos_sigma * cos_sigma
+    ss = sin_sigma * sin_sigma
+    root = math.sqrt(cc + reach_term)
+    inv_root = 1.0 / root
+    ratio = cos_sigma * inv_root
+    rho = mu_range_m * (cos_sigma + root)
+    drho = -mu_range_m * sin_sigma * (1.0 + ratio)
+    d2rho = -mu_range_m * (cos_sigma + (cc - ss) * inv_root + ss * ratio * ratio * inv_root)
+    return rho, drho, d2rho

@@ -13,6 +13,7 @@ compiled kernel serves the simulator, the service and the Monte-Carlo batch.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import IntEnum
 
@@ -98,17 +99,22 @@ class GuidanceController:
         self,
         *,
         zones: ZoneSet,
-        target: Target,
+        target: Target | Sequence[Target],
         params: GuidanceParams | None = None,
         law: LawName = LawName.ROBUST,
     ) -> None:
+        """``zones`` with one row (shared) or one row per vehicle; ``target`` one for all or
+        a sequence with one per vehicle."""
         self.zones = zones
-        self.target = target
         self.params = params if params is not None else GuidanceParams()
         self.law = LawName(law)
         self._packed = pack_params(self.law, self.params)
-        self._target_n = np.array([target.north_m])
-        self._target_e = np.array([target.east_m])
+        targets = (target,) if isinstance(target, Target) else tuple(target)
+        if not targets or not all(isinstance(t, Target) for t in targets):
+            raise StateError("target", target, "must be a Target or a non-empty sequence of them")
+        self.targets = targets
+        self._target_n = np.array([t.north_m for t in targets])
+        self._target_e = np.array([t.east_m for t in targets])
         self._shape: tuple[int, ...] = ()
         self._accel = np.zeros(1)
 
@@ -123,6 +129,9 @@ class GuidanceController:
         bound = self.params.accel_max_m_s2
         if not np.all(np.isfinite(accel)) or np.any(np.abs(accel) >= bound):
             raise StateError("accel_m_s2", accel_m_s2, f"must be finite with |a| < {bound}")
+        for name, rows in (("zones", self.zones.north_m.shape[0]), ("target", len(self.targets))):
+            if rows not in (1, accel.size):
+                raise StateError(name, rows, f"must have 1 or {accel.size} rows for this batch")
         self._shape = accel.shape
         self._accel = accel.reshape(-1).copy()
 

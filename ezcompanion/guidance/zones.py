@@ -57,15 +57,65 @@ class ZoneSet:
         for index, defender in enumerate(defenders):
             if not isinstance(defender, Defender):
                 raise ConfigError(f"defenders[{index}]", defender, "must be a Defender")
-        mu_range = np.array([[d.speed_ratio * d.range_m for d in defenders]])
-        reach = np.array([[d.reach_m for d in defenders]])
-        return cls(
+        return cls.from_arrays(
             north_m=np.array([[d.north_m for d in defenders]]),
             east_m=np.array([[d.east_m for d in defenders]]),
+            range_m=np.array([[d.range_m for d in defenders]]),
+            capture_radius_m=np.array([[d.capture_radius_m for d in defenders]]),
+            speed_ratio=np.array([[d.speed_ratio for d in defenders]]),
+            names=tuple(d.name or f"D{i + 1}" for i, d in enumerate(defenders)),
+        )
+
+    @classmethod
+    def from_arrays(
+        cls,
+        *,
+        north_m: FloatArray,
+        east_m: FloatArray,
+        range_m: FloatArray,
+        capture_radius_m: FloatArray,
+        speed_ratio: FloatArray,
+        names: tuple[str, ...] | None = None,
+    ) -> ZoneSet:
+        """Zones from arrays of shape (batch, zones), e.g. one row of defenders per run.
+
+        Checked as ``Defender`` checks one defender. Rows with fewer real defenders can be
+        padded with defenders far away (say 1e6 m): their softmin weight underflows to 0.
+        """
+        arrays = {
+            "north_m": north_m, "east_m": east_m, "range_m": range_m,
+            "capture_radius_m": capture_radius_m, "speed_ratio": speed_ratio,
+        }  # fmt: skip
+        shaped = {k: np.ascontiguousarray(v, dtype=np.float64) for k, v in arrays.items()}
+        shape = shaped["north_m"].shape
+        for name, value in shaped.items():
+            if value.ndim != 2 or value.shape != shape or shape[1] == 0:
+                raise ConfigError(
+                    name,
+                    value.shape,
+                    f"must be a non-empty (batch, zones) array like north_m {shape}",
+                )
+            if not np.isfinite(value).all():
+                raise ConfigError(name, value, "must be finite")
+        if (shaped["range_m"] <= 0.0).any():
+            raise ConfigError("range_m", shaped["range_m"].min(), "must be > 0")
+        if (shaped["capture_radius_m"] < 0.0).any():
+            raise ConfigError("capture_radius_m", shaped["capture_radius_m"].min(), "must be >= 0")
+        mu = shaped["speed_ratio"]
+        if ((mu <= 0.0) | (mu >= 1.0)).any():
+            bad = mu[(mu <= 0.0) | (mu >= 1.0)][0]
+            raise ConfigError(
+                "speed_ratio", float(bad), "must be in (0, 1): a defender faster than us"
+            )
+        mu_range = mu * shaped["range_m"]
+        reach = shaped["range_m"] + shaped["capture_radius_m"]
+        return cls(
+            north_m=shaped["north_m"],
+            east_m=shaped["east_m"],
             mu_range_m=mu_range,
             reach_term=(reach / mu_range) ** 2 - 1.0,
             reach_m=reach,
-            names=tuple(d.name or f"D{i + 1}" for i, d in enumerate(defenders)),
+            names=names if names is not None else tuple(f"D{i + 1}" for i in range(shape[1])),
         )
 
     def __len__(self) -> int:

@@ -1,0 +1,125 @@
+"""The stateful controller: checks its inputs, steps one vehicle or a batch the same way."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from ezcompanion.errors import ConfigError, StateError
+from ezcompanion.guidance import (
+    Defender,
+    GuidanceController,
+    GuidanceMode,
+    KinematicState,
+    Target,
+    ZoneSet,
+)
+
+D1 = Defender(north_m=2.0, east_m=3.0, range_m=1.5, capture_radius_m=0.5, speed_ratio=0.7)
+D2 = Defender(north_m=4.4, east_m=-2.0, range_m=1.5, capture_radius_m=0.5, speed_ratio=0.7)
+TARGET = Target(north_m=2.0, east_m=0.0)
+
+
+def controller(**kwargs: object) -> GuidanceController:
+    c = GuidanceController(zones=ZoneSet.from_defenders([D1, D2]), target=TARGET, **kwargs)  # type: ignore[arg-type]
+    c.reset()
+    return c
+
+
+@pytest.mark.parametrize("field", ["north_m", "east_m", "course_rad", "speed_m_s"])
+@pytest.mark.parametrize("bad", [float("nan"), float("inf")])
+def test_non_finite_state_is_refused_naming_the_field(field: str, bad: float) -> None:
+    values = {"north_m": 8.0, "east_m": -4.0, "course_rad": 2.5, "speed_m_s": 1.0, field: bad}
+    c = controller()
+    before = c.accel_m_s2
+    with pytest.raises(StateError) as caught:
+        c.step(KinematicState(**values), 0.02)
+    assert caught.value.field == field
+    assert c.accel_m_s2 == before  # nothing advanced
+
+
+def test_bad_speed_step_and_reset_are_refused() -> None:
+    c = controller()
+    with pytest.raises(StateError, match="speed_m_s"):
+        c.step(KinematicState(8.0, -4.0, 2.5, 0.0), 0.02)
+    with pytest.raises(StateError, match="dt_s"):
+        c.step(KinematicState(8.0, -4.0, 2.5, 1.0), -0.02)
+    with pytest.raises(StateError, match="accel_m_s2"):
+        c.reset(1.0)  # |a| must start strictly inside the bound
+
+
+def test_modes_follow_alpha_and_capture() -> None:
+    c = controller()
+    far = c.step(KinematicState(30.0, 30.0, math.radians(-135.0), 1.0), 0.02)
+    assert int(far.mode) == GuidanceMode.INTERCEPT and float(far.law.alpha) == 0.0
+    c.reset()
+    # heading straight at D2 from just outside its reach: the barrier residual is negative
+    near = c.step(KinematicState(4.4, -5.0, math.radians(90.0), 1.0), 0.02)
+    assert int(near.mode) == GuidanceMode.SAFETY and float(near.law.alpha) == 1.0
+    c.reset(0.5)
+    done = c.step(KinematicState(2.05, 0.0, 0.0, 1.0), 0.02)
+    assert bool(done.captured) and int(done.mode) == GuidanceMode.CAPTURED
+    # the robust law lets the actuator relax once captured
+    assert abs(float(done.accel_lat_cmd_m_s2)) < 0.5
+
+
+def test_a_batch_with_its_own_zones_and_targets_matches_single_vehicles() -> None:
+    rows = [
+        [D1, D2],
+        [D2, Defender(north_m=1e6, east_m=0.0, range_m=1.0, capture_radius_m=0.0, speed_ratio=0.5)],
+    ]
+    zones = ZoneSet.from_arrays(
+        north_m=np.array([[d.north_m for d in r] for r in rows]),
+        east_m=np.array([[d.east_m for d in r] for r in rows]),
+        range_m=np.array([[d.range_m for d in r] for r in rows]),
+        capture_radius_m=np.array([[d.capture_radius_m for d in r] for r in rows]),
+        speed_ratio=np.array([[d.speed_ratio for d in r] for r in rows]),
+    )
+    targets = [TARGET, Target(north_m=0.0, east_m=-3.0)]
+    batch = GuidanceController(zones=zones, target=targets)
+    batch.reset(np.array([0.1, -0.2]))
+    state = KinematicState(np.array([8.0, 6.0]), np.array([-4.0, 1.0]), np.array([2.5, -2.0]), 1.0)
+    stepped = batch.step(state, 0.02)
+    singles = [
+        GuidanceController(zones=ZoneSet.from_defenders([D1, D2]), target=targets[0]),
+        GuidanceController(
+            zones=ZoneSet.from_defenders([D2]), target=targets[1]
+        ),  # padding is inert
+    ]
+    for k, single in enumerate(singles):
+        single.reset([0.1, -0.2][k])
+        one = single.step(
+            KinematicState(
+                float(state.north_m[k]),
+                float(state.east_m[k]),  # type: ignore[index]
+                float(state.course_rad[k]),
+                1.0,
+            ),
+            0.02,
+        )  # type: ignore[index]
+        assert float(one.accel_lat_cmd_m_s2) == pytest.approx(
+            float(stepped.accel_lat_cmd_m_s2[k]), rel=1e-12
+        )
+        assert float(one.law.h_m) == pytest.approx(float(stepped.law.h_m[k]), rel=1e-12)
+
+
+def test_zone_arrays_are_checked_like_defenders() -> None:
+    good = {
+        "north_m": [[0.0]],
+        "east_m": [[0.0]],
+        "range_m": [[1.5]],
+        "capture_radius_m": [[0.5]],
+        "speed_ratio": [[0.7]],
+    }
+    with pytest.raises(ConfigError, match="speed_ratio"):
+        ZoneSet.from_arrays(**{**good, "speed_ratio": np.array([[1.2]])})  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="east_m"):
+        ZoneSet.from_arrays(**{**good, "east_m": np.array([[0.0, 1.0]])})  # type: ignore[arg-type]
+
+
+def test_batch_rows_must_match_the_batch() -> None:
+    c = GuidanceController(zones=ZoneSet.from_defenders([D1]), target=[TARGET, TARGET, TARGET])
+    with pytest.raises(StateError, match="target"):
+        c.reset(np.zeros(2))

@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
-PACKAGES := ezcompanion
+PACKAGES := ezcompanion sitl_stub
 
 .PHONY: demo test lint typecheck pytest bench clean
 

@@ -1,0 +1,397 @@
+"""The autopilot's side of MAVLink: modes, arming, commands, setpoints and their timeouts.
+
+:class:`Autopilot` reads decoded messages and keeps what the vehicle is being asked to do; it
+answers through :attr:`Autopilot.outbox` (COMMAND_ACK, STATUSTEXT, TIMESYNC, ...) and tells
+the simulation loop the vehicle command in force with :meth:`Autopilot.command_at`. It acts
+like the autopilots it imitates (ArduPilot 4.7 and PX4), with one deliberate difference:
+whatever it cannot follow is announced in a STATUSTEXT where they would stay silent.
+
+Setpoints are followed only in the guided mode (GUIDED, or OFFBOARD for PX4):
+
+- SET_POSITION_TARGET_LOCAL_NED (copter, PX4) with a velocity in MAV_FRAME_LOCAL_NED or
+  MAV_FRAME_BODY_NED: its direction becomes the commanded course (a body-frame direction is
+  fixed when received, turning at the yaw rate if one is given); the speed stays the
+  vehicle's cruise speed; a zero velocity stops the vehicle. Timeout: the last velocity is
+  flown for ``setpoint_timeout_s``, then the vehicle stops and holds (PX4: switches to HOLD).
+- SET_ATTITUDE_TARGET: the roll angle becomes a coordinated turn, a = g tan(roll) (or, copter
+  and PX4 with the attitude ignored, a body yaw rate becomes a turn rate). Plane reads
+  type_mask as ArduPlane does (198 = roll only). Held for ``attitude_timeout_s``.
+- MAV_CMD_GUIDED_CHANGE_HEADING (plane), COMMAND_INT or COMMAND_LONG: p1 0 course over
+  ground, 1 heading, 2 cancel; p2 degrees [0, 360); p3 lateral acceleration limit (m/s2).
+  No timeout by default (``course_timeout_s``).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from ezcompanion.wire import Message, euler_from_quaternion, is_finite, mavlink
+from sitl_stub.config import StubConfig
+from sitl_stub.profiles import Behaviour, ModeSpec, px4_custom_mode
+from sitl_stub.telemetry import STREAMED, StreamScheduler
+from sitl_stub.vehicle import (
+    FollowCourse,
+    LateralAccel,
+    Stop,
+    Straight,
+    TurnRate,
+    VehicleCommand,
+    VehicleState,
+)
+
+__all__ = ["Autopilot"]
+
+_log = logging.getLogger(__name__)
+
+_GRAVITY_M_S2 = 9.80665
+_MAX_SETPOINT_SPEED_M_S = 100.0  # faster than this is absurd for these vehicles: refused
+_MAX_YAW_RATE_RAD_S = 2.0 * math.pi
+_MAX_ROLL_RAD = math.radians(80.0)
+_REPEAT_NOTICE_S = 1.0  # the same rejection is announced at most this often
+_R = mavlink
+_POS_IGNORE = (_R.POSITION_TARGET_TYPEMASK_X_IGNORE | _R.POSITION_TARGET_TYPEMASK_Y_IGNORE
+               | _R.POSITION_TARGET_TYPEMASK_Z_IGNORE)
+_ACC_IGNORE = (_R.POSITION_TARGET_TYPEMASK_AX_IGNORE | _R.POSITION_TARGET_TYPEMASK_AY_IGNORE
+               | _R.POSITION_TARGET_TYPEMASK_AZ_IGNORE)
+_VEL_NE_IGNORE = _R.POSITION_TARGET_TYPEMASK_VX_IGNORE | _R.POSITION_TARGET_TYPEMASK_VY_IGNORE
+
+
+@dataclass(frozen=True)
+class _Active:
+    """A command in force: what, since when, for how long (0 = no timeout)."""
+
+    label: str
+    command: VehicleCommand
+    received_s: float
+    timeout_s: float
+    nose: tuple[float, float] | None = None  # body frame: (yaw_rad at received_s, yaw rate)
+
+    def nose_rad(self, t_s: float) -> float | None:
+        """Where the nose points at ``t_s`` for a body-frame setpoint (yaw turns at its rate)."""
+        if self.nose is None:
+            return None
+        return self.nose[0] + self.nose[1] * (t_s - self.received_s)
+
+    def expired(self, t_s: float) -> bool:
+        return self.timeout_s > 0.0 and t_s - self.received_s > self.timeout_s
+
+
+class Autopilot:
+    """Mode, arming and guidance state of the imitated autopilot (one thread owns it)."""
+
+    def __init__(self, config: StubConfig, scheduler: StreamScheduler, mav: Any) -> None:
+        self.config = config
+        self.spec = config.spec
+        self.scheduler = scheduler
+        self._mav = mav
+        self.system_id = config.settings.system_id
+        self.component_id = config.settings.component_id
+        mode = self.spec.mode_by_name(config.initial_mode)
+        assert mode is not None  # validated with the settings
+        self.mode: ModeSpec = mode
+        self.armed = config.settings.start_armed
+        self.outbox: list[Message] = []
+        self.requested: list[str] = []  # messages asked for once (MAV_CMD_REQUEST_MESSAGE)
+        self._guided: _Active | None = None  # velocity or course command
+        self._override: _Active | None = None  # attitude command, ahead of the guided one
+        self._last_setpoint_s = -math.inf
+        self._noticed: dict[str, float] = {}
+        self._label = ""
+
+    # ---- what the vehicle does ----------------------------------------------------------
+    def command_at(self, t_s: float, state: VehicleState) -> VehicleCommand:
+        """The vehicle command in force at ``t_s``; expires timed-out setpoints (announced)."""
+        command, label = self._resolve(t_s, state)
+        if label != self._label:
+            self._label = label
+            self.statustext(f"{self.mode.name}: {label}", _R.MAV_SEVERITY_INFO)
+        return command
+
+    def _resolve(self, t_s: float, state: VehicleState) -> tuple[VehicleCommand, str]:
+        if not self.armed:
+            return Stop(), "disarmed"
+        if self.mode.behaviour is Behaviour.CRUISE:
+            return Straight(), "cruising straight"
+        if self.mode.behaviour is Behaviour.HOLD:
+            return self._hold(state)
+        if self._override is not None and self._override.expired(t_s):
+            self.statustext(f"{self.mode.name}: attitude timeout", _R.MAV_SEVERITY_WARNING)
+            self._override = None
+        if self._guided is not None and self._guided.expired(t_s):
+            self._guided = None
+            if self.spec.failsafe_mode is not None:
+                self._set_mode(self.spec.failsafe_mode)
+                self.statustext(f"Failsafe: setpoints lost, {self.mode.name}",
+                                _R.MAV_SEVERITY_WARNING)
+                return self._resolve(t_s, state)
+            self.statustext(f"{self.mode.name}: setpoint timeout", _R.MAV_SEVERITY_WARNING)
+            if self.spec.can_hover:
+                self._guided = _Active("stopped, holding (timeout)", Stop(), t_s, 0.0)
+        active = self._override or self._guided
+        if active is not None:
+            return active.command, active.label
+        return self._hold(state)
+
+    def _hold(self, state: VehicleState) -> tuple[VehicleCommand, str]:
+        if self.spec.can_hover:
+            return Stop(), "holding position"
+        radius = self.config.settings.loiter_radius_m
+        accel = min(self.config.accel_max_m_s2, state.speed_m_s**2 / radius)
+        return LateralAccel(accel), "loitering"
+
+    # ---- heartbeat ----------------------------------------------------------------------
+    def heartbeat(self) -> Message:
+        """This autopilot's HEARTBEAT."""
+        base = _R.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | _R.MAV_MODE_FLAG_STABILIZE_ENABLED
+        if self.mode.behaviour is not Behaviour.CRUISE:
+            base |= _R.MAV_MODE_FLAG_GUIDED_ENABLED
+        if self.armed:
+            base |= _R.MAV_MODE_FLAG_SAFETY_ARMED
+        status = _R.MAV_STATE_ACTIVE if self.armed else _R.MAV_STATE_STANDBY
+        return self._mav.heartbeat_encode(self.spec.mav_type, self.spec.autopilot, base,
+                                          self.mode.custom_mode, status, 3)
+
+    def statustext(self, text: str, severity: int = _R.MAV_SEVERITY_NOTICE) -> None:
+        """Queue a STATUSTEXT (cut to the 50 characters of one frame)."""
+        _log.info("statustext: %s", text)
+        payload = text[:50].encode("ascii", "replace")
+        self.outbox.append(self._mav.statustext_encode(severity, payload))
+
+    def _notice(self, text: str, t_s: float) -> None:
+        """Announce a rejection, at most once per second of simulated time per text."""
+        last = self._noticed.get(text, -math.inf)
+        if t_s - last >= _REPEAT_NOTICE_S:
+            self._noticed[text] = t_s
+            self.statustext(text, _R.MAV_SEVERITY_WARNING)
+
+    # ---- incoming -----------------------------------------------------------------------
+    def handle(self, msg: Message, t_s: float, state: VehicleState) -> None:
+        """React to one decoded message received at ``t_s``."""
+        kind = msg.get_type()
+        handler = _HANDLERS.get(kind)
+        if handler is None:
+            return
+        if hasattr(msg, "target_system") and msg.target_system not in (0, self.system_id):
+            return  # addressed to another vehicle
+        handler(self, msg, t_s, state)
+
+    def _for_us(self, msg: Message) -> bool:
+        return getattr(msg, "target_component", 0) in (0, self.component_id)
+
+    def _guided_ok(self, what: str, t_s: float) -> bool:
+        if self.mode.behaviour is not Behaviour.GUIDED:
+            self._notice(f"{what} ignored: not in {self.spec.guided_mode}", t_s)
+            return False
+        if not self.armed:
+            self._notice(f"{what} ignored: disarmed", t_s)
+            return False
+        return True
+
+    def _on_position_target(self, msg: Message, t_s: float, state: VehicleState) -> None:
+        mask = int(msg.type_mask)
+        velocity_only = (mask & _POS_IGNORE == _POS_IGNORE and mask & _ACC_IGNORE == _ACC_IGNORE
+                         and not mask & _VEL_NE_IGNORE
+                         and not mask & _R.POSITION_TARGET_TYPEMASK_FORCE_SET)
+        yaw_rate_used = not mask & _R.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
+        values = (msg.vx, msg.vy, msg.yaw_rate if yaw_rate_used else 0.0)
+        if self.spec.accepts_velocity and velocity_only and is_finite(*values):
+            self._last_setpoint_s = t_s  # PX4's offboard signal, even outside OFFBOARD
+        if not self.spec.accepts_velocity:
+            self._notice("SET_POSITION_TARGET_LOCAL_NED unsupported", t_s)
+            return
+        if not self._guided_ok("Velocity setpoint", t_s):
+            return
+        frame = int(msg.coordinate_frame)
+        if frame not in (_R.MAV_FRAME_LOCAL_NED, _R.MAV_FRAME_BODY_NED):
+            self._notice(f"Setpoint frame {frame} unsupported", t_s)
+            return
+        if not velocity_only:
+            self._notice(f"Setpoint type_mask {mask} unsupported", t_s)
+            return
+        if not is_finite(*values):
+            self._notice("Setpoint rejected: not finite", t_s)
+            return
+        speed = math.hypot(msg.vx, msg.vy)
+        if speed > _MAX_SETPOINT_SPEED_M_S or abs(values[2]) > _MAX_YAW_RATE_RAD_S:
+            self._notice("Setpoint rejected: out of range", t_s)
+            return
+        timeout = self.config.timeout_s("setpoint")
+        if speed < 1e-3:
+            self._guided = _Active("velocity zero, holding", Stop(), t_s, timeout)
+            return
+        direction = math.atan2(msg.vy, msg.vx)
+        if frame == _R.MAV_FRAME_BODY_NED:
+            # fixed on receipt relative to the nose; the nose yaws at the yaw rate (as
+            # ArduCopter's yaw controller does), so a stream of forward + yaw-rate setpoints
+            # turns the path at that rate
+            previous = self._guided.nose_rad(t_s) if self._guided is not None else None
+            nose = state.heading_rad if previous is None else previous
+            rate = float(values[2])
+            command = FollowCourse(nose + direction, course_rate_rad_s=rate, since_s=t_s)
+            self._guided = _Active("following body velocity", command, t_s, timeout,
+                                   nose=(nose, rate))
+            return
+        command = FollowCourse(direction, since_s=t_s)
+        self._guided = _Active("following velocity", command, t_s, timeout)
+
+    def _on_attitude_target(self, msg: Message, t_s: float, state: VehicleState) -> None:
+        if not self._guided_ok("Attitude target", t_s):
+            return
+        mask = int(msg.type_mask)
+        q = [float(v) for v in msg.q]
+        q_ok = is_finite(*q) and 0.9 <= math.sqrt(sum(v * v for v in q)) <= 1.1
+        command: VehicleCommand | None = None
+        if self.spec.ardupilot_attitude_mask:
+            angles = (mask ^ 0xFF) & 0b10000111
+            if (angles & 0b10000001 or angles == 0b10000000) and q_ok:
+                command = self._roll_command(euler_from_quaternion(q)[0])
+        elif not mask & _R.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE and q_ok:
+            command = self._roll_command(euler_from_quaternion(q)[0])
+        elif not mask & _R.ATTITUDE_TARGET_TYPEMASK_BODY_YAW_RATE_IGNORE:
+            rate = float(msg.body_yaw_rate)
+            if is_finite(rate) and abs(rate) <= _MAX_YAW_RATE_RAD_S:
+                command = TurnRate(rate)
+        if command is None:
+            self._notice(f"Attitude target rejected (mask {mask})", t_s)
+            return
+        label = "following roll" if isinstance(command, LateralAccel) else "following yaw rate"
+        self._override = _Active(label, command, t_s, self.config.timeout_s("attitude"))
+
+    @staticmethod
+    def _roll_command(roll_rad: float) -> VehicleCommand | None:
+        if abs(roll_rad) > _MAX_ROLL_RAD:
+            return None
+        return LateralAccel(_GRAVITY_M_S2 * math.tan(roll_rad))
+
+    def _on_command(self, msg: Message, t_s: float, state: VehicleState) -> None:
+        if not self._for_us(msg):
+            return
+        command = int(msg.command)
+        params = [float(getattr(msg, f"param{i}")) for i in range(1, 5)]
+        if command == _R.MAV_CMD_DO_SET_MODE:
+            result = self._cmd_set_mode(params[0], params[1], params[2], t_s)
+        elif command == _R.MAV_CMD_COMPONENT_ARM_DISARM:
+            result = self._cmd_arm(params[0])
+        elif command == _R.MAV_CMD_SET_MESSAGE_INTERVAL:
+            result = self.scheduler.set_message_interval(params[0], params[1], t_s)
+        elif command == _R.MAV_CMD_GET_MESSAGE_INTERVAL:
+            result = self._cmd_get_interval(params[0])
+        elif command == _R.MAV_CMD_REQUEST_MESSAGE:
+            result = self._cmd_request_message(params[0])
+        elif command == _R.MAV_CMD_GUIDED_CHANGE_HEADING and self.spec.accepts_course_command:
+            result = self._cmd_change_heading(params[0], params[1], params[2], t_s)
+        else:
+            result = _R.MAV_RESULT_UNSUPPORTED
+        self.ack(msg, command, int(result))
+
+    def ack(self, msg: Message, command: int, result: int) -> None:
+        """Queue the COMMAND_ACK for ``command``, addressed to the sender of ``msg``."""
+        self.outbox.append(self._mav.command_ack_encode(
+            command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()))
+
+    def _cmd_set_mode(self, base: float, custom: float, sub: float, t_s: float) -> int:
+        if not is_finite(base, custom, sub) or not 0 <= custom < 2**32 or not 0 <= sub < 256:
+            return int(_R.MAV_RESULT_DENIED)
+        if not int(base) & _R.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+            return int(_R.MAV_RESULT_DENIED)
+        if self.spec.autopilot == _R.MAV_AUTOPILOT_PX4:
+            if not custom < 256:
+                return int(_R.MAV_RESULT_DENIED)
+            number = px4_custom_mode(int(custom), int(sub))
+        else:
+            number = int(custom)
+        mode = self.spec.mode_by_number(number)
+        if mode is None:
+            return int(_R.MAV_RESULT_FAILED)
+        if (mode.behaviour is Behaviour.GUIDED and self.spec.failsafe_mode is not None
+                and t_s - self._last_setpoint_s > self.config.timeout_s("setpoint")):
+            self._notice(f"{mode.name} needs setpoints first", t_s)
+            return int(_R.MAV_RESULT_TEMPORARILY_REJECTED)
+        self._set_mode(mode.name)
+        return int(_R.MAV_RESULT_ACCEPTED)
+
+    def set_mode_message(self, msg: Message, t_s: float, state: VehicleState) -> None:
+        """SET_MODE (the message, not the command): ArduPilot acks it with command = 11."""
+        result = self._cmd_set_mode(float(msg.base_mode), float(msg.custom_mode), 0.0, t_s)
+        self.ack(msg, int(_R.MAVLINK_MSG_ID_SET_MODE), result)
+
+    def _set_mode(self, name: str) -> None:
+        mode = self.spec.mode_by_name(name)
+        assert mode is not None
+        if mode != self.mode:
+            self._guided = None
+            self._override = None
+        self.mode = mode
+
+    def _cmd_arm(self, arm: float) -> int:
+        if arm not in (0.0, 1.0):
+            return int(_R.MAV_RESULT_DENIED)
+        self.armed = arm == 1.0
+        return int(_R.MAV_RESULT_ACCEPTED)
+
+    def _cmd_get_interval(self, msg_id: float) -> int:
+        if not is_finite(msg_id) or int(msg_id) != msg_id or int(msg_id) not in STREAMED:
+            return int(_R.MAV_RESULT_FAILED)
+        interval = self.scheduler.interval_s(STREAMED[int(msg_id)])
+        interval_us = -1 if interval is None else round(interval * 1e6)
+        self.outbox.append(self._mav.message_interval_encode(int(msg_id), interval_us))
+        return int(_R.MAV_RESULT_ACCEPTED)
+
+    def _cmd_request_message(self, msg_id: float) -> int:
+        if not is_finite(msg_id) or int(msg_id) != msg_id:
+            return int(_R.MAV_RESULT_DENIED)
+        if int(msg_id) == _R.MAVLINK_MSG_ID_HEARTBEAT:
+            self.outbox.append(self.heartbeat())
+        elif int(msg_id) in STREAMED:
+            self.requested.append(STREAMED[int(msg_id)])
+        else:
+            return int(_R.MAV_RESULT_DENIED)
+        return int(_R.MAV_RESULT_ACCEPTED)
+
+    def _cmd_change_heading(self, kind: float, heading_deg: float, accel: float, t_s: float) -> int:
+        if self.mode.behaviour is not Behaviour.GUIDED:
+            return int(_R.MAV_RESULT_FAILED)
+        if not is_finite(kind, heading_deg, accel) or not 0.0 <= heading_deg < 360.0:
+            return int(_R.MAV_RESULT_DENIED)
+        if int(kind) == _R.HEADING_TYPE_DEFAULT:
+            self._guided = None
+            return int(_R.MAV_RESULT_ACCEPTED)
+        if int(kind) not in (_R.HEADING_TYPE_COURSE_OVER_GROUND, _R.HEADING_TYPE_HEADING):
+            return int(_R.MAV_RESULT_DENIED)
+        over_ground = int(kind) == _R.HEADING_TYPE_COURSE_OVER_GROUND
+        command = FollowCourse(math.radians(heading_deg), over_ground=over_ground,
+                               accel_limit_m_s2=max(accel, 0.05), since_s=t_s)
+        label = "following course" if over_ground else "following heading"
+        self._guided = _Active(label, command, t_s, self.config.timeout_s("course"))
+        return int(_R.MAV_RESULT_ACCEPTED)
+
+    def _on_data_stream(self, msg: Message, t_s: float, state: VehicleState) -> None:
+        if not self._for_us(msg):
+            return
+        if not self.spec.supports_data_streams:
+            self._notice("REQUEST_DATA_STREAM unsupported", t_s)
+            return
+        rate = int(msg.req_message_rate)
+        if rate > self.scheduler.max_rate_hz:
+            self._notice(f"Stream rate limited to {self.scheduler.max_rate_hz:g} Hz", t_s)
+        if not self.scheduler.request_data_stream(int(msg.req_stream_id), rate,
+                                                  bool(msg.start_stop), t_s):
+            self._notice(f"Data stream {int(msg.req_stream_id)} unsupported", t_s)
+
+    def _on_timesync(self, msg: Message, t_s: float, state: VehicleState) -> None:
+        if int(msg.tc1) == 0:
+            self.outbox.append(self._mav.timesync_encode(int(t_s * 1e9), int(msg.ts1)))
+
+
+_HANDLERS = {
+    "SET_POSITION_TARGET_LOCAL_NED": Autopilot._on_position_target,
+    "SET_ATTITUDE_TARGET": Autopilot._on_attitude_target,
+    "COMMAND_LONG": Autopilot._on_command,
+    "COMMAND_INT": Autopilot._on_command,
+    "SET_MODE": Autopilot.set_mode_message,
+    "REQUEST_DATA_STREAM": Autopilot._on_data_stream,
+    "TIMESYNC": Autopilot._on_timesync,
+}

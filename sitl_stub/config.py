@@ -1,0 +1,253 @@
+"""The stub's settings: the optional ``sitl_stub:`` section of a scenario file, then flags.
+
+Layout (every key optional; see ``docs/sitl_stub.md``)::
+
+    sitl_stub:
+      profile: copter | plane | px4
+      connect: udpout:127.0.0.1:14550
+      system_id: 1
+      component_id: 1
+      speedup: 1.0
+      seed: 0
+      physics_dt_s: 0.01
+      response_time_s: 0.0          # first-order lag of lateral acceleration, 0 = ideal
+      course_gain_1_s: 2.0
+      yaw_rate_max_deg_s: 90.0
+      loiter_radius_m: 60.0
+      height_m: 20.0                # above the origin; constant
+      wind_north_m_s: 0.0
+      wind_east_m_s: 0.0
+      initial_mode: AUTO            # default per profile
+      start_armed: true
+      local_origin_after_s: 0.0     # LOCAL_POSITION_NED only from then on; < 0 = never
+      setpoint_timeout_s: 3.0       # default per profile; 0 = no timeout
+      attitude_timeout_s: 3.0
+      course_timeout_s: 0.0
+      max_stream_rate_hz: 200.0     # default per profile
+      signing_key_hex: null         # 64 hex digits: sign, refuse unsigned input
+      signing_passphrase: null      # or a passphrase (SHA-256, as MAVProxy)
+      streams: {global_position_int_hz: 10, local_position_ned_hz: 10, attitude_hz: 10,
+                vfr_hud_hz: 4}
+      faults: {drop_rate, delay_s, jitter_s, duplicate_rate, reorder_rate, reorder_delay_s,
+               freeze_start_s, freeze_duration_s, freeze_mode: silent | stale,
+               jump_at_s, jump_north_m, jump_east_m}
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ezcompanion.config import GeoOrigin, Scenario, VehicleStart, build_dataclass, load_scenario
+from ezcompanion.errors import ConfigError
+from ezcompanion.wire import URL_SCHEMES, signing_key_from_hex, signing_key_from_passphrase
+from sitl_stub.profiles import Profile, ProfileSpec, profile_spec
+
+__all__ = ["Faults", "StreamRates", "StubConfig", "StubSettings", "load_stub_config", "stub_config"]
+
+
+def _check(name: str, value: object, *, low: float = -math.inf, high: float = math.inf,
+           low_open: bool = False) -> None:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ConfigError(name, value, "must be a finite number")
+    if value < low or value > high or (low_open and value == low):
+        left = "(" if low_open else "["
+        raise ConfigError(name, value, f"must be within {left}{low}, {high}]")
+
+
+@dataclass(frozen=True, kw_only=True)
+class StreamRates:
+    """Default telemetry rates (Hz of simulated time; 0 = not streamed until requested)."""
+
+    global_position_int_hz: float = 10.0
+    local_position_ned_hz: float = 10.0
+    attitude_hz: float = 10.0
+    vfr_hud_hz: float = 4.0
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            _check(f.name, getattr(self, f.name), low=0.0, high=1000.0)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Faults:
+    """Telemetry faults, drawn from the run's seeded generator (times in simulated s)."""
+
+    drop_rate: float = 0.0  # probability a streamed message is lost
+    delay_s: float = 0.0  # added latency
+    jitter_s: float = 0.0  # plus a uniform [0, jitter_s) latency
+    duplicate_rate: float = 0.0  # probability a message is sent twice
+    reorder_rate: float = 0.0  # probability a message is held back by reorder_delay_s
+    reorder_delay_s: float = 0.2
+    freeze_start_s: float = 0.0
+    freeze_duration_s: float = 0.0  # 0 = no freeze
+    freeze_mode: str = "silent"  # silent: streams stop; stale: values stop changing
+    jump_at_s: float = -1.0  # < 0 = no jump; from then on the reported position is offset
+    jump_north_m: float = 0.0
+    jump_east_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("drop_rate", "duplicate_rate", "reorder_rate"):
+            _check(name, getattr(self, name), low=0.0, high=1.0)
+        for name in ("delay_s", "jitter_s", "reorder_delay_s", "freeze_start_s",
+                     "freeze_duration_s"):
+            _check(name, getattr(self, name), low=0.0, high=3600.0)
+        for name in ("jump_at_s", "jump_north_m", "jump_east_m"):
+            _check(name, getattr(self, name))
+        if self.freeze_mode not in ("silent", "stale"):
+            raise ConfigError("freeze_mode", self.freeze_mode, "must be silent or stale")
+
+    @property
+    def any(self) -> bool:
+        """True when some fault is configured."""
+        return self != Faults()
+
+
+@dataclass(frozen=True, kw_only=True)
+class StubSettings:
+    """The ``sitl_stub:`` section: how the loopback vehicle behaves and talks."""
+
+    profile: str = Profile.COPTER.value
+    connect: str = "udpout:127.0.0.1:14550"
+    system_id: int = 1
+    component_id: int = 1
+    speedup: float = 1.0
+    seed: int = 0
+    physics_dt_s: float = 0.01
+    response_time_s: float = 0.0
+    course_gain_1_s: float = 2.0
+    yaw_rate_max_deg_s: float = 90.0
+    loiter_radius_m: float = 60.0
+    height_m: float = 20.0
+    wind_north_m_s: float = 0.0
+    wind_east_m_s: float = 0.0
+    initial_mode: str | None = None
+    start_armed: bool = True
+    local_origin_after_s: float = 0.0
+    setpoint_timeout_s: float | None = None
+    attitude_timeout_s: float | None = None
+    course_timeout_s: float | None = None
+    max_stream_rate_hz: float | None = None
+    signing_key_hex: str | None = None
+    signing_passphrase: str | None = None
+    streams: StreamRates = field(default_factory=StreamRates)
+    faults: Faults = field(default_factory=Faults)
+
+    def __post_init__(self) -> None:
+        if self.profile not in {p.value for p in Profile}:
+            raise ConfigError("profile", self.profile, "must be copter, plane or px4")
+        if not isinstance(self.connect, str) or self.connect.split(":", 1)[0] not in URL_SCHEMES:
+            raise ConfigError("connect", self.connect, f"must start with one of {URL_SCHEMES}")
+        for name in ("system_id", "component_id"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 255:
+                raise ConfigError(name, value, "must be an integer within [1, 255]")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int):
+            raise ConfigError("seed", self.seed, "must be an integer")
+        _check("speedup", self.speedup, low=0.0, high=1000.0, low_open=True)
+        _check("physics_dt_s", self.physics_dt_s, low=0.0, high=0.1, low_open=True)
+        _check("response_time_s", self.response_time_s, low=0.0, high=60.0)
+        _check("course_gain_1_s", self.course_gain_1_s, low=0.0, high=100.0, low_open=True)
+        _check("yaw_rate_max_deg_s", self.yaw_rate_max_deg_s, low=0.0, high=3600.0, low_open=True)
+        _check("loiter_radius_m", self.loiter_radius_m, low=0.0, high=1e5, low_open=True)
+        for name in ("height_m", "wind_north_m_s", "wind_east_m_s", "local_origin_after_s"):
+            _check(name, getattr(self, name))
+        for name in ("setpoint_timeout_s", "attitude_timeout_s", "course_timeout_s"):
+            if getattr(self, name) is not None:
+                _check(name, getattr(self, name), low=0.0, high=3600.0)
+        if self.max_stream_rate_hz is not None:
+            _check("max_stream_rate_hz", self.max_stream_rate_hz, low=0.0, high=10000.0,
+                   low_open=True)
+        if not isinstance(self.start_armed, bool):
+            raise ConfigError("start_armed", self.start_armed, "must be true or false")
+        if self.signing_key_hex is not None and self.signing_passphrase is not None:
+            raise ConfigError("signing_key_hex", self.signing_key_hex,
+                              "give at most one of signing_key_hex and signing_passphrase")
+        if self.signing_key_hex is not None:
+            signing_key_from_hex(str(self.signing_key_hex))
+        if self.signing_passphrase is not None and not isinstance(self.signing_passphrase, str):
+            raise ConfigError("signing_passphrase", self.signing_passphrase, "must be a string")
+        spec = profile_spec(Profile(self.profile))
+        if self.initial_mode is not None and spec.mode_by_name(str(self.initial_mode)) is None:
+            names = ", ".join(m.name for m in spec.modes)
+            raise ConfigError("initial_mode", self.initial_mode, f"must be one of {names}")
+
+    @classmethod
+    def from_mapping(cls, data: Mapping[str, Any], path: str = "sitl_stub") -> StubSettings:
+        """Validate a raw ``sitl_stub:`` mapping; errors name ``sitl_stub.key``."""
+        raw = dict(data)
+        for key, kind in (("streams", StreamRates), ("faults", Faults)):
+            if key in raw:
+                value = raw[key]
+                if not isinstance(value, Mapping):
+                    raise ConfigError(f"{path}.{key}", value, "must be a mapping")
+                raw[key] = build_dataclass(f"{path}.{key}", kind, value)
+        settings: StubSettings = build_dataclass(path, cls, raw)
+        return settings
+
+    def signing_key(self) -> bytes | None:
+        """The configured signing key, if any."""
+        if self.signing_key_hex is not None:
+            return signing_key_from_hex(self.signing_key_hex)
+        if self.signing_passphrase is not None:
+            return signing_key_from_passphrase(self.signing_passphrase)
+        return None
+
+
+@dataclass(frozen=True, kw_only=True)
+class StubConfig:
+    """A stub run, resolved: start state and limits from the scenario, settings, profile."""
+
+    start: VehicleStart
+    accel_max_m_s2: float
+    origin: GeoOrigin
+    settings: StubSettings = field(default_factory=StubSettings)
+
+    @property
+    def spec(self) -> ProfileSpec:
+        """The profile's built-in description."""
+        return profile_spec(Profile(self.settings.profile))
+
+    def timeout_s(self, kind: str) -> float:
+        """``setpoint``, ``attitude`` or ``course`` timeout: the setting or the profile's."""
+        value = getattr(self.settings, f"{kind}_timeout_s")
+        return float(getattr(self.spec, f"{kind}_timeout_s") if value is None else value)
+
+    @property
+    def max_stream_rate_hz(self) -> float:
+        """Fastest stream rate a request may ask for."""
+        value = self.settings.max_stream_rate_hz
+        return self.spec.max_stream_rate_hz if value is None else float(value)
+
+    @property
+    def initial_mode(self) -> str:
+        """The mode the vehicle boots in."""
+        value = self.settings.initial_mode
+        return self.spec.initial_mode if value is None else str(value).upper()
+
+    def with_settings(self, **changes: Any) -> StubConfig:
+        """A copy with some settings replaced (validated again)."""
+        merged = {f.name: getattr(self.settings, f.name) for f in dataclasses.fields(StubSettings)}
+        merged.update(changes)
+        return dataclasses.replace(self, settings=StubSettings(**merged))
+
+
+def stub_config(scenario: Scenario, **overrides: Any) -> StubConfig:
+    """The stub's configuration for ``scenario``; ``overrides`` replace section values."""
+    raw = dict(scenario.sections.get("sitl_stub", {}))
+    settings = StubSettings.from_mapping(raw)
+    config = StubConfig(
+        start=scenario.start, accel_max_m_s2=scenario.guidance.accel_max_m_s2,
+        origin=scenario.origin, settings=settings,
+    )
+    changes = {k: v for k, v in overrides.items() if v is not None}
+    return config.with_settings(**changes) if changes else config
+
+
+def load_stub_config(path: str | Path, **overrides: Any) -> StubConfig:
+    """Read a scenario file and resolve the stub's configuration (file, then overrides)."""
+    return stub_config(load_scenario(path), **overrides)

@@ -1,0 +1,290 @@
+"""The loopback vehicle: a simulated clock, the vehicle model and the autopilot on one link.
+
+:class:`SitlStub` owns one thread. The thread keeps a simulated clock running ``speedup``
+times faster than ``time.monotonic()``, advances the vehicle in fixed physics steps up to
+the clock, sends the HEARTBEAT (1 Hz) and the telemetry streams when due, and otherwise
+sleeps in ``select`` on the link until the next thing is due or a message arrives. Incoming
+messages take effect at the simulated time they are read. ``time_boot_ms`` is the simulated
+time since the stub started.
+
+    with SitlStub(load_stub_config("config/paper_scenario1.yaml", speedup=10)) as stub:
+        stub.wait_sim_time(5.0)
+        print(stub.state)
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import socket
+import threading
+import time
+from dataclasses import replace
+from pathlib import Path
+from types import TracebackType
+
+from ezcompanion.sim.kinematics import Wind
+from ezcompanion.wire import Link, Message, open_link
+from sitl_stub.autopilot import Autopilot
+from sitl_stub.config import StubConfig
+from sitl_stub.faults import FaultInjector
+from sitl_stub.telemetry import StreamScheduler, TelemetryEncoder
+from sitl_stub.truth import TruthWriter
+from sitl_stub.vehicle import VehicleParams, VehicleState, step
+
+__all__ = ["SitlStub"]
+
+_log = logging.getLogger(__name__)
+
+_HEARTBEAT_PERIOD_S = 1.0
+_MAX_WAIT_WALL_S = 0.1  # wake at least this often (wall time) to publish the clock
+_MAX_STEPS_PER_PASS = 500  # then look at the link again before catching up further
+
+
+class SitlStub:
+    """A MAVLink vehicle on a pymavlink URL; start/stop or use as a context manager."""
+
+    def __init__(self, config: StubConfig, *, truth_out: str | Path | None = None,
+                 record_truth: bool = False, duration_s: float | None = None) -> None:
+        self.config = config
+        s = config.settings
+        self._wind = Wind(s.wind_north_m_s, s.wind_east_m_s)
+        self.params = VehicleParams(
+            cruise_speed_m_s=config.start.speed_m_s, accel_max_m_s2=config.accel_max_m_s2,
+            yaw_rate_max_rad_s=math.radians(s.yaw_rate_max_deg_s),
+            response_time_s=s.response_time_s, course_gain_1_s=s.course_gain_1_s,
+            can_hover=config.spec.can_hover, wind=self._wind,
+        )
+        grounded = not s.start_armed and config.spec.can_hover
+        speed = 0.0 if grounded else config.start.speed_m_s
+        self._state = VehicleState(
+            t_s=0.0, north_m=config.start.north_m, east_m=config.start.east_m,
+            heading_rad=config.start.course_rad, speed_m_s=speed,
+        )
+        self._truth_out = Path(truth_out) if truth_out is not None else None
+        self._record = record_truth
+        self.history: list[VehicleState] = [self._state] if record_truth else []
+        self._duration_s = duration_s
+        self._lock = threading.Condition()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._link: Link | None = None
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._wake_r.setblocking(False)
+        self._sim_s = 0.0
+        self._steps = 0
+        self.handler_errors = 0
+        self.error: BaseException | None = None
+        self.autopilot: Autopilot | None = None
+        self.faults = FaultInjector(s.faults, s.seed)
+        self._stale: VehicleState | None = None
+        self._truth: TruthWriter | None = None
+
+    # ---- lifecycle ---------------------------------------------------------------------
+    def start(self) -> SitlStub:
+        """Open the link and start the simulation thread."""
+        s = self.config.settings
+        self._link = open_link(s.connect, system_id=s.system_id, component_id=s.component_id)
+        key = s.signing_key()
+        if key is not None:
+            self._link.enable_signing(key)
+        self._scheduler = StreamScheduler(s.streams, self.config.max_stream_rate_hz)
+        self.autopilot = Autopilot(self.config, self._scheduler, self._link.mav)
+        self._encoder = TelemetryEncoder(self._link, self.config.origin, s.height_m, self._wind)
+        self._truth = TruthWriter(self._truth_out, self._wind) if self._truth_out else None
+        if self._truth is not None:
+            self._truth.write(self._state, self.autopilot.mode.name, self.autopilot.armed)
+        self._thread = threading.Thread(target=self._run, name="sitl-stub", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        """Stop the thread and close the link and files (idempotent)."""
+        self._stop.set()
+        if self._wake_w.fileno() >= 0:
+            self._wake_w.send(b"x")
+        if self._thread is not None:
+            self._thread.join()
+            self._thread = None
+        if self._link is not None:
+            self._link.close()
+            self._link = None
+        if self._truth is not None:
+            self._truth.close()
+            self._truth = None
+        self._wake_r.close()
+        self._wake_w.close()
+
+    def __enter__(self) -> SitlStub:
+        return self.start()
+
+    def __exit__(self, kind: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.stop()
+
+    @property
+    def running(self) -> bool:
+        """True while the simulation thread runs (it ends at ``duration_s`` or on error)."""
+        return self._thread is not None and self._thread.is_alive()
+
+    # ---- observation (thread-safe) -----------------------------------------------------
+    @property
+    def state(self) -> VehicleState:
+        """The vehicle's true state at the last physics step."""
+        with self._lock:
+            return self._state
+
+    @property
+    def sim_time_s(self) -> float:
+        """The simulated clock (s since start)."""
+        with self._lock:
+            return self._sim_s
+
+    @property
+    def local_address(self) -> tuple[str, int] | None:
+        """The address the stub's socket is bound to (for ``udpin:127.0.0.1:0``)."""
+        return self._link.local_address if self._link is not None else None
+
+    @property
+    def mode_name(self) -> str:
+        """The current flight mode's name."""
+        assert self.autopilot is not None
+        return self.autopilot.mode.name
+
+    def wait_sim_time(self, t_s: float, timeout_s: float | None = None) -> bool:
+        """Wait until the simulated clock reaches ``t_s``; False on wall ``timeout_s``."""
+        speedup = self.config.settings.speedup
+        if timeout_s is None:
+            timeout_s = 2.0 + 2.0 * max(t_s - self.sim_time_s, 0.0) / speedup
+        deadline = time.monotonic() + timeout_s
+        with self._lock:
+            while self._sim_s < t_s and not self._stop.is_set():
+                remaining = deadline - time.monotonic()
+                if remaining <= 0.0:
+                    return False
+                self._lock.wait(remaining)
+            return self._sim_s >= t_s
+
+    # ---- the loop ----------------------------------------------------------------------
+    def _run(self) -> None:
+        try:
+            self._loop()
+        except BaseException as exc:
+            self.error = exc
+            _log.exception("sitl_stub thread failed")
+        finally:
+            with self._lock:
+                self._stop.set()
+                self._lock.notify_all()
+
+    def _loop(self) -> None:
+        assert self._link is not None and self.autopilot is not None
+        link, speedup = self._link, self.config.settings.speedup
+        wall0 = time.monotonic()
+        self._next_heartbeat_s = 0.0
+        while not self._stop.is_set():
+            now = (time.monotonic() - wall0) * speedup
+            if self._duration_s is not None:
+                now = min(now, self._duration_s)
+            caught_up = self._advance(now)
+            for frame in self.faults.release(now):
+                link.write(frame)
+            with self._lock:
+                self._sim_s = self._state.t_s
+                self._lock.notify_all()
+            if self._duration_s is not None and self._state.t_s >= self._duration_s - 1e-9:
+                return
+            wait_s = 0.0 if not caught_up else self._wait_wall_s(now, speedup)
+            readable = link.wait_readable(wait_s, self._wake_r.fileno())
+            if self._wake_r.fileno() in readable:
+                self._drain_wake()
+            if link.fileno() in readable:
+                self._receive(link)
+
+    def _wait_wall_s(self, now: float, speedup: float) -> float:
+        events = [self._next_heartbeat_s, self._scheduler.next_due_s(),
+                  self._state.t_s + self.config.settings.physics_dt_s]
+        release = self.faults.next_release_s()
+        if release is not None:
+            events.append(release)
+        return max(0.0, min(_MAX_WAIT_WALL_S, (min(events) - now) / speedup))
+
+    def _drain_wake(self) -> None:
+        try:
+            while self._wake_r.recv(64):
+                pass
+        except BlockingIOError:
+            pass
+
+    def _receive(self, link: Link) -> None:
+        assert self.autopilot is not None
+        for msg in link.recv_messages():
+            try:
+                self.autopilot.handle(msg, self._state.t_s, self._state)
+            except Exception:
+                self.handler_errors += 1
+                _log.exception("handling %s failed", msg.get_type())
+        self._flush()
+
+    def _flush(self) -> None:
+        assert self._link is not None and self.autopilot is not None
+        for msg in self.autopilot.outbox:
+            self._link.send(msg)
+        self.autopilot.outbox.clear()
+        for name in self.autopilot.requested:
+            self._emit(name, self._state.t_s)
+        self.autopilot.requested.clear()
+
+    def _advance(self, now: float) -> bool:
+        """Step the physics up to ``now``; False if it stopped early to look at the link."""
+        assert self.autopilot is not None and self._link is not None
+        dt = self.config.settings.physics_dt_s
+        ap = self.autopilot
+        for _ in range(_MAX_STEPS_PER_PASS):
+            if self._state.t_s + dt > now + 1e-12:
+                return True
+            command = ap.command_at(self._state.t_s, self._state)
+            self._steps += 1
+            new = replace(step(self._state, command, self.params, dt), t_s=self._steps * dt)
+            with self._lock:
+                self._state = new
+            if self._record:
+                self.history.append(new)
+            if self._truth is not None:
+                self._truth.write(new, ap.mode.name, ap.armed)
+            self._periodic(new.t_s)
+            self._flush()
+        return False
+
+    def _periodic(self, t_s: float) -> None:
+        assert self.autopilot is not None and self._link is not None
+        while self._next_heartbeat_s <= t_s + 1e-9:
+            self._link.send(self.autopilot.heartbeat())
+            self._next_heartbeat_s += _HEARTBEAT_PERIOD_S
+        for stamp, name in self._scheduler.pop_due(t_s):
+            self._emit(name, stamp)
+
+    def _emit(self, name: str, stamp_s: float) -> None:
+        """Send one telemetry message about the current state, through the faults."""
+        assert self._link is not None
+        s = self.config.settings
+        if name == "LOCAL_POSITION_NED" and not (0.0 <= s.local_origin_after_s <= stamp_s):
+            return  # no local origin yet (ArduPilot sends it only once the EKF has one)
+        state = self._state
+        if self.faults.frozen(stamp_s):
+            if s.faults.freeze_mode == "silent":
+                return
+            if self._stale is None:
+                self._stale = state
+            state = self._stale
+        else:
+            self._stale = None
+        north, east = self.faults.position_offset_m(stamp_s)
+        msg: Message = self._encoder.encode(name, state, stamp_s, north, east)
+        frame = self._link.pack(msg)
+        if s.faults.any:
+            self.faults.submit(frame, stamp_s)
+            for ready in self.faults.release(self._state.t_s):
+                self._link.write(ready)
+        else:
+            self._link.write(frame)

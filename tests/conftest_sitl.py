@@ -1,0 +1,169 @@
+"""Helpers shared by the sitl_stub tests: a plain-pymavlink ground station on 127.0.0.1 and
+a stub built from the paper's first scenario.
+
+The ground station binds ``udpin:127.0.0.1:0`` (an ephemeral port) and the stub sends to it
+with ``udpout``, so tests never collide on ports and nothing leaves the loopback interface.
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+from pymavlink import mavutil
+
+import ezcompanion.wire  # noqa: F401  (sets MAVLink 2 before pymavlink loads)
+from ezcompanion.config import load_scenario
+from sitl_stub import SitlStub, StubConfig, stub_config
+
+SCENARIO = Path(__file__).resolve().parents[1] / "config" / "paper_scenario1.yaml"
+M = mavutil.mavlink
+
+Msg = Any
+
+
+class Gcs:
+    """A ground station speaking plain pymavlink over UDP on 127.0.0.1."""
+
+    def __init__(self, *, system_id: int = 255, component_id: int = 190) -> None:
+        self.conn: Any = mavutil.mavlink_connection(
+            "udpin:127.0.0.1:0", source_system=system_id, source_component=component_id)
+        self.port: int = self.conn.port.getsockname()[1]
+        # a fast stub outruns a test that is not reading: keep the kernel from dropping
+        self.conn.port.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
+
+    def close(self) -> None:
+        self.conn.close()
+
+    @property
+    def mav(self) -> Any:
+        return self.conn.mav
+
+    def recv(self, types: str | tuple[str, ...], timeout_s: float = 3.0,
+             where: Callable[[Msg], bool] | None = None) -> Msg | None:
+        """The next message of ``types`` (matching ``where``) within a wall-time deadline."""
+        wanted = (types,) if isinstance(types, str) else types
+        deadline = time.monotonic() + timeout_s
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0.0:
+                return None
+            msg = self.conn.recv_match(blocking=True, timeout=min(remaining, 0.2))
+            if msg is None or msg.get_type() not in wanted:
+                continue
+            if where is None or where(msg):
+                return msg
+
+    def collect(self, types: str | tuple[str, ...], wall_s: float) -> list[Msg]:
+        """Every message of ``types`` arriving during ``wall_s`` seconds."""
+        wanted = (types,) if isinstance(types, str) else types
+        out: list[Msg] = []
+        deadline = time.monotonic() + wall_s
+        while (remaining := deadline - time.monotonic()) > 0.0:
+            msg = self.conn.recv_match(blocking=True, timeout=min(remaining, 0.2))
+            if msg is not None and msg.get_type() in wanted:
+                out.append(msg)
+        return out
+
+    def drain(self) -> None:
+        """Forget everything received so far."""
+        while self.conn.recv_match(blocking=False) is not None:
+            pass
+
+    def command(self, command: int, *params: float, target_system: int = 1,
+                timeout_s: float = 3.0) -> Msg | None:
+        """Send COMMAND_LONG and wait for its COMMAND_ACK."""
+        p = [*params, *([0.0] * (7 - len(params)))]
+        self.drain()
+        self.mav.command_long_send(target_system, 1, command, 0, *p)
+        return self.recv("COMMAND_ACK", timeout_s, lambda m: m.command == command)
+
+    def command_int(self, command: int, p1: float = 0.0, p2: float = 0.0, p3: float = 0.0,
+                    p4: float = 0.0, *, target_system: int = 1,
+                    timeout_s: float = 3.0) -> Msg | None:
+        """Send COMMAND_INT and wait for its COMMAND_ACK."""
+        self.drain()
+        self.mav.command_int_send(target_system, 1, M.MAV_FRAME_GLOBAL, command, 0, 0,
+                                  p1, p2, p3, p4, 0, 0, 0.0)
+        return self.recv("COMMAND_ACK", timeout_s, lambda m: m.command == command)
+
+    def set_mode(self, custom_mode: int, sub_mode: int = 0, target_system: int = 1) -> Msg | None:
+        return self.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                            custom_mode, sub_mode, target_system=target_system)
+
+    def velocity(self, north_m_s: float, east_m_s: float, *, body: bool = False,
+                 yaw_rate_rad_s: float | None = None, mask: int | None = None) -> None:
+        frame = M.MAV_FRAME_BODY_NED if body else M.MAV_FRAME_LOCAL_NED
+        if mask is None:
+            mask = 0x0DC7 if yaw_rate_rad_s is None else 0x05C7
+        self.mav.set_position_target_local_ned_send(
+            0, 1, 1, frame, mask, 0, 0, 0, north_m_s, east_m_s, 0, 0, 0, 0, 0,
+            yaw_rate_rad_s or 0.0)
+
+
+@contextmanager
+def gcs_link(**kwargs: Any) -> Iterator[Gcs]:
+    gcs = Gcs(**kwargs)
+    try:
+        yield gcs
+    finally:
+        gcs.close()
+
+
+def make_config(port: int, **settings: Any) -> StubConfig:
+    """The paper's scenario 1 (1 m/s, 1 m/s2) as a stub sending to ``127.0.0.1:port``."""
+    settings.setdefault("connect", f"udpout:127.0.0.1:{port}")
+    settings.setdefault("speedup", 20.0)
+    return stub_config(load_scenario(SCENARIO), **settings)
+
+
+@contextmanager
+def running_stub(gcs: Gcs, *, record_truth: bool = True, **settings: Any) -> Iterator[SitlStub]:
+    """A started stub talking to ``gcs``; waits for its first heartbeat."""
+    stub = SitlStub(make_config(gcs.port, **settings), record_truth=record_truth)
+    with stub:
+        assert gcs.recv("HEARTBEAT", 3.0) is not None, "no heartbeat from the stub"
+        yield stub
+    assert stub.error is None, stub.error
+    assert stub.handler_errors == 0
+
+
+def stream_until(stub: SitlStub, send: Callable[[], None], until_s: float,
+                 period_s: float = 0.1) -> None:
+    """Call ``send`` every ``period_s`` of simulated time until ``until_s``."""
+    t = stub.sim_time_s
+    while t < until_s:
+        send()
+        t += period_s
+        assert stub.wait_sim_time(min(t, until_s)), "stub clock stalled"
+
+
+def course_deg(state: Any) -> float:
+    """Course over ground of a truth state in degrees [0, 360) (no wind in these tests)."""
+    return math.degrees(state.heading_rad) % 360.0
+
+
+def angle_diff_deg(a: float, b: float) -> float:
+    """a - b wrapped to [-180, 180)."""
+    return (a - b + 180.0) % 360.0 - 180.0
+
+
+def between(stub: SitlStub, t0_s: float, t1_s: float) -> list[Any]:
+    """Truth states with t0 <= t <= t1."""
+    return [s for s in list(stub.history) if t0_s - 1e-9 <= s.t_s <= t1_s + 1e-9]
+
+
+def stamps_s(msgs: list[Msg]) -> list[float]:
+    return [m.time_boot_ms / 1000.0 for m in msgs]
+
+
+def measured_rate_hz(msgs: list[Msg]) -> float:
+    """Rate from the messages' own (simulated) time stamps."""
+    t = sorted(stamps_s(msgs))
+    assert len(t) >= 3, f"too few messages: {len(t)}"
+    return (len(t) - 1) / (t[-1] - t[0])

@@ -1,0 +1,76 @@
+"""``python -m sitl_stub`` as a separate process: flags over the file, a ground-truth CSV,
+clean exit at ``--duration``, and config errors that name the field."""
+
+from __future__ import annotations
+
+import csv
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+from conftest_sitl import SCENARIO, gcs_link
+
+from sitl_stub import TRUTH_COLUMNS
+
+
+def _scenario(tmp_path: Path, section: dict[str, object]) -> Path:
+    data = yaml.safe_load(SCENARIO.read_text(encoding="utf-8"))
+    data["sitl_stub"] = section
+    path = tmp_path / "scenario.yaml"
+    path.write_text(yaml.safe_dump(data), encoding="utf-8")
+    return path
+
+
+def test_cli_runs_for_duration_and_writes_truth(tmp_path: Path) -> None:
+    config = _scenario(tmp_path, {"profile": "plane", "speedup": 1.0, "system_id": 9})
+    truth = tmp_path / "truth.csv"
+    with gcs_link() as gcs:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "sitl_stub", "--config", str(config),
+             "--connect", f"udpout:127.0.0.1:{gcs.port}", "--speedup", "10",
+             "--profile", "copter", "--duration", "3", "--truth-out", str(truth)],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )
+        try:
+            beat = gcs.recv("HEARTBEAT", 10.0)
+            _, err = proc.communicate(timeout=15.0)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    assert proc.returncode == 0, err
+    assert beat is not None and beat.get_srcSystem() == 9  # from the file
+    assert beat.type == 2  # quadrotor: the flag overrides the file's plane
+    with truth.open(encoding="utf-8") as f:
+        rows = list(csv.DictReader(f))
+    assert tuple(rows[0]) == TRUTH_COLUMNS
+    assert tuple(TRUTH_COLUMNS[:5]) == ("t_s", "north_m", "east_m", "heading_rad", "accel_lat_m_s2")
+    assert len(rows) == 301 and float(rows[-1]["t_s"]) == pytest.approx(3.0)
+    # AUTO: straight on at 1 m/s along the start course (towards the target)
+    course = math.atan2(0.0 - -4.0, 2.0 - 8.0)  # line of sight from (8, -4) to (2, 0)
+    end = rows[-1]
+    assert float(end["north_m"]) == pytest.approx(8.0 + 3.0 * math.cos(course), abs=1e-6)
+    assert float(end["east_m"]) == pytest.approx(-4.0 + 3.0 * math.sin(course), abs=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("section", "flags", "field"),
+    [
+        ({"speedup": 0}, [], "sitl_stub.speedup"),
+        ({"faults": {"freeze_mode": "melt"}}, [], "sitl_stub.faults.freeze_mode"),
+        ({}, ["--connect", "serial:/dev/ttyS0"], "connect"),
+    ],
+)
+def test_cli_config_errors_name_the_field(
+    tmp_path: Path, section: dict[str, object], flags: list[str], field: str
+) -> None:
+    config = _scenario(tmp_path, section)
+    done = subprocess.run(
+        [sys.executable, "-m", "sitl_stub", "--config", str(config), "--duration", "1", *flags],
+        capture_output=True, text=True, timeout=20.0, check=False,
+    )
+    assert done.returncode == 2
+    assert f"{field}:" in done.stderr

@@ -1,0 +1,118 @@
+"""Seeded telemetry faults, observed over UDP: loss, latency and jitter, duplication,
+reordering, a freeze (silent and stale) and a position jump; same seed, same faults."""
+
+from __future__ import annotations
+
+import collections
+import itertools
+
+import pytest
+from conftest_sitl import Gcs, gcs_link, running_stub, stamps_s
+
+from sitl_stub import Faults
+from sitl_stub.faults import FaultInjector
+
+
+@pytest.fixture
+def gcs() -> Gcs:
+    with gcs_link() as link:
+        yield link  # type: ignore[misc]
+
+
+def _run(gcs: Gcs, faults: Faults, until_s: float, speedup: float = 40.0, seed: int = 1,
+         types: tuple[str, ...] = ("GLOBAL_POSITION_INT",)) -> list[tuple[float, object]]:
+    """(simulated arrival time, message) of ``types`` until ``until_s``."""
+    out: list[tuple[float, object]] = []
+    with running_stub(gcs, speedup=speedup, faults=faults, seed=seed) as stub:
+        while stub.sim_time_s < until_s:
+            msg = gcs.recv(types, 0.2)
+            if msg is not None:
+                out.append((stub.sim_time_s, msg))
+        gcs.history = list(stub.history)  # type: ignore[attr-defined]
+    return out
+
+
+def test_drop_and_duplicate_rates(gcs: Gcs) -> None:
+    got = _run(gcs, Faults(drop_rate=0.3, duplicate_rate=0.25), until_s=30.0)
+    stamps = [round(s * 10) for s in stamps_s([m for _, m in got if m.time_boot_ms <= 28000])]
+    counts = collections.Counter(stamps)
+    produced = 280  # 10 Hz up to t = 28 s
+    delivered = len(counts)  # distinct stamps that arrived
+    assert delivered / produced == pytest.approx(0.7, abs=0.08)
+    duplicated = sum(1 for c in counts.values() if c == 2)
+    assert duplicated / delivered == pytest.approx(0.25, abs=0.08)
+    assert max(counts.values()) <= 2
+
+
+def test_delay_and_jitter(gcs: Gcs) -> None:
+    got = _run(gcs, Faults(delay_s=0.5, jitter_s=0.3), until_s=8.0, speedup=8.0)
+    lags = [arrival - m.time_boot_ms / 1000.0 for arrival, m in got]
+    assert len(lags) > 40
+    assert min(lags) >= 0.5 - 0.011  # never earlier than the configured latency
+    assert max(lags) <= 0.8 + 0.15  # jitter bound, plus the test's own reading lag
+    assert max(lags) - min(lags) >= 0.15  # jitter is really there
+
+
+def test_reordering(gcs: Gcs) -> None:
+    got = _run(gcs, Faults(reorder_rate=0.2, reorder_delay_s=0.35), until_s=20.0)
+    stamps = stamps_s([m for _, m in got])
+    inversions = sum(1 for a, b in itertools.pairwise(stamps) if b < a)
+    assert inversions >= 15  # ~0.2 * 190 held back, each arriving after later ones
+    assert len(set(stamps)) == len(stamps)  # nothing lost or duplicated
+
+
+def test_silent_freeze_and_position_jump(gcs: Gcs) -> None:
+    faults = Faults(freeze_start_s=2.0, freeze_duration_s=1.5, jump_at_s=5.0,
+                    jump_north_m=50.0, jump_east_m=-30.0)
+    got = _run(gcs, faults, until_s=7.0, speedup=20.0, types=("LOCAL_POSITION_NED", "HEARTBEAT"))
+    truth = {round(s.t_s * 100): s for s in gcs.history}  # type: ignore[attr-defined]
+    local = [m for _, m in got if m.get_type() == "LOCAL_POSITION_NED"]
+    stamps = stamps_s(local)
+    assert not [t for t in stamps if 2.0 <= t < 3.5]
+    assert [t for t in stamps if t < 2.0] and [t for t in stamps if t >= 3.5]
+    beats = [arrival for arrival, m in got if m.get_type() == "HEARTBEAT" and 2.1 < arrival < 3.4]
+    assert beats, "heartbeats must go on during a telemetry freeze"
+    for m in local:
+        true = truth[round(m.time_boot_ms / 10)]
+        jump = (50.0, -30.0) if m.time_boot_ms >= 5000 else (0.0, 0.0)
+        assert m.x - true.north_m == pytest.approx(jump[0], abs=1e-4)
+        assert m.y - true.east_m == pytest.approx(jump[1], abs=1e-4)
+
+
+def test_stale_freeze_repeats_old_values(gcs: Gcs) -> None:
+    faults = Faults(freeze_start_s=1.0, freeze_duration_s=2.0, freeze_mode="stale")
+    got = _run(gcs, faults, until_s=4.0, speedup=20.0, types=("LOCAL_POSITION_NED",))
+    frozen = [m for _, m in got if 1000 <= m.time_boot_ms < 3000]
+    after = [m for _, m in got if m.time_boot_ms >= 3000]
+    assert len(frozen) >= 15 and len({m.time_boot_ms for m in frozen}) == len(frozen)
+    assert len({(m.x, m.y) for m in frozen}) == 1  # time goes on, the position does not
+    assert abs(after[0].x - frozen[0].x) + abs(after[0].y - frozen[0].y) > 1.5  # 2 s at 1 m/s
+
+
+def test_same_seed_same_faults(gcs: Gcs) -> None:
+    faults = Faults(drop_rate=0.4)
+    runs = []
+    for _ in range(2):
+        got = _run(gcs, faults, until_s=6.0, seed=7)
+        runs.append({m.time_boot_ms for _, m in got if m.time_boot_ms <= 5000})
+    assert runs[0] == runs[1]
+    other = _run(gcs, faults, until_s=6.0, seed=8)
+    assert {m.time_boot_ms for _, m in other if m.time_boot_ms <= 5000} != runs[0]
+
+
+def test_injector_is_deterministic_and_orders_by_release() -> None:
+    faults = Faults(drop_rate=0.2, delay_s=0.1, jitter_s=0.05, duplicate_rate=0.1,
+                    reorder_rate=0.1, reorder_delay_s=0.3)
+
+    def run(seed: int) -> list[bytes]:
+        inj = FaultInjector(faults, seed)
+        out: list[bytes] = []
+        for k in range(200):
+            inj.submit(k.to_bytes(2, "big"), k * 0.05)
+            out += inj.release(k * 0.05)
+        return out + inj.release(1e9)
+
+    assert run(3) == run(3)
+    assert run(3) != run(4)
+    frames = run(3)
+    assert 120 < len({f for f in frames}) < 190

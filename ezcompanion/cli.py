@@ -1,6 +1,7 @@
 """The ``ezcompanion`` command line: each command builds its inputs and calls a typed function.
 
-Exit codes: 0 done, 1 the job ran but its outcome failed a check (``demo``), 2 bad input.
+Exit codes: 0 done, 1 the job ran but its outcome failed (no interception, a zone entered),
+2 bad input.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from ezcompanion.config import load_scenario
 from ezcompanion.errors import EzCompanionError
 from ezcompanion.guidance import LawName
 
-__all__ = ["main", "run_demo", "run_simulate"]
+__all__ = ["main", "run_demo", "run_reference_demo", "run_service", "run_simulate"]
 
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "config"
 PAPER_SCENARIOS = {1: "paper_scenario1.yaml", 2: "paper_scenario2.yaml"}
@@ -42,7 +43,66 @@ def run_simulate(
     return 0
 
 
-def run_demo(*, scenarios: Sequence[int], out_dir: Path) -> int:
+def run_service(
+    config: Path,
+    *,
+    law: LawName | None,
+    max_time_s: float | None,
+    track_csv: Path | None,
+    **overrides: object,
+) -> int:
+    """Steer a vehicle through one engagement; 0 if intercepted, 1 if it ended otherwise."""
+    import signal
+
+    from ezcompanion.service.events import EventLog
+    from ezcompanion.service.runner import CompanionService
+    from ezcompanion.service.settings import companion_settings
+
+    scenario = load_scenario(config)
+    settings = companion_settings(scenario, **overrides)
+    events = EventLog(lambda event: print(event.line(), flush=True))
+    service = CompanionService(scenario, settings, law=law, events=events, track_csv=track_csv)
+    previous = {
+        sig: signal.signal(sig, lambda *_: service.stop())
+        for sig in (signal.SIGINT, signal.SIGTERM)
+    }
+    try:
+        outcome = service.run(max_time_s=max_time_s)
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    return 0 if outcome.intercepted else 1
+
+
+def run_demo(*, scenarios: Sequence[int], out_dir: Path, speedup: float, profile: str) -> int:
+    """The paper's scenarios flown by the loopback vehicle and the companion, end to end.
+
+    Returns 1 if any engagement fails to intercept or enters an engagement zone.
+    """
+    from ezcompanion.service.demo import run_loopback
+    from ezcompanion.sim.output import read_track_csv
+    from ezcompanion.sim.plot import plot_result
+
+    failed = False
+    for number in scenarios:
+        config = CONFIG_DIR / PAPER_SCENARIOS[number]
+        scenario = load_scenario(config)
+        where = out_dir / f"scenario{number}"
+        print(
+            f"--- scenario {number}: sitl_stub ({profile}) and the companion over loopback UDP, "
+            f"{speedup:g}x speed-up",
+            flush=True,
+        )
+        result = run_loopback(config, where, speedup=speedup, profile=profile)
+        print(result.summary(scenario))
+        view = read_track_csv(where / "companion.csv", scenario, scenario.law)
+        print(f"  wrote {plot_result(view, where / 'engagement.png')}")
+        if not (result.intercepted and min(result.min_clearance_m) > 0.0):
+            failed = True
+    return 1 if failed else 0
+
+
+def run_reference_demo(*, scenarios: Sequence[int], out_dir: Path) -> int:
     """The paper's scenarios in the reference simulator, both laws, with figures and CSVs.
 
     Returns 1 if the robust law fails to intercept or enters an engagement zone.
@@ -80,9 +140,35 @@ def _parser() -> argparse.ArgumentParser:
     sim.add_argument("--out", type=Path, help="write the time series to this CSV file")
     sim.add_argument("--plot", type=Path, help="write the four-panel figure to this PNG file")
 
-    demo = commands.add_parser("demo", help="run the paper's scenarios and write their figures")
+    run = commands.add_parser("run", help="steer a vehicle over MAVLink (the companion service)")
+    run.add_argument("--config", type=Path, required=True, help="scenario YAML file")
+    run.add_argument("--connect", help="pymavlink URL (default udpin:0.0.0.0:14550)")
+    run.add_argument(
+        "--law", choices=[m.value for m in LawName], help="override the scenario's law"
+    )
+    run.add_argument(
+        "--engage",
+        action="store_true",
+        default=None,
+        help="ask the vehicle for GUIDED/OFFBOARD (never arms)",
+    )
+    run.add_argument("--setpoint", choices=["auto", "velocity", "course"])
+    run.add_argument("--signing-key-hex", help="MAVLink 2 signing key, 64 hex digits")
+    run.add_argument("--tlog", type=Path, help="record every frame in and out to this .tlog")
+    run.add_argument("--track", type=Path, help="write the companion's view to this CSV")
+    run.add_argument("--speedup", type=float, help="clock speed-up, to match a loopback vehicle")
+    run.add_argument("--max-time", type=float, help="give up after this many seconds")
+
+    demo = commands.add_parser("demo", help="fly the paper's scenarios on the loopback vehicle")
     demo.add_argument("--scenario", type=int, choices=sorted(PAPER_SCENARIOS), help="just one")
     demo.add_argument("--out", type=Path, default=Path("demo-out"), help="output directory")
+    demo.add_argument("--speedup", type=float, default=10.0, help="simulated s per wall s")
+    demo.add_argument("--profile", choices=["copter", "plane", "px4"], default="copter")
+    demo.add_argument(
+        "--reference",
+        action="store_true",
+        help="the reference simulator instead, both laws side by side",
+    )
     return parser
 
 
@@ -97,8 +183,25 @@ def main(argv: Sequence[str] | None = None) -> int:
                 out_csv=args.out,
                 plot_png=args.plot,
             )
+        if args.command == "run":
+            return run_service(
+                args.config,
+                law=LawName(args.law) if args.law else None,
+                max_time_s=args.max_time,
+                track_csv=args.track,
+                connect=args.connect,
+                engage=args.engage,
+                setpoint=args.setpoint,
+                signing_key_hex=args.signing_key_hex,
+                tlog=str(args.tlog) if args.tlog else None,
+                speedup=args.speedup,
+            )
         scenarios = [args.scenario] if args.scenario else sorted(PAPER_SCENARIOS)
-        return run_demo(scenarios=scenarios, out_dir=args.out)
+        if args.reference:
+            return run_reference_demo(scenarios=scenarios, out_dir=args.out)
+        return run_demo(
+            scenarios=scenarios, out_dir=args.out, speedup=args.speedup, profile=args.profile
+        )
     except EzCompanionError as exc:
         print(f"ezcompanion: error: {exc}", file=sys.stderr)
         return 2

@@ -18,6 +18,7 @@ Layout (see ``config/paper_scenario1.yaml`` for a commented example)::
     simulation: {dt_s, duration_s}                               # optional
     origin: {lat_deg, lon_deg, alt_m}    # optional: where local NED (0, 0) is on Earth
     sitl_stub: {...}                     # optional: validated by sitl_stub, kept raw here
+    companion: {...}                     # optional: validated by ezcompanion.service
 """
 
 from __future__ import annotations
@@ -54,7 +55,7 @@ __all__ = [
 ]
 
 # Top-level sections owned and validated by other components; kept raw in ``Scenario.sections``.
-COMPONENT_SECTIONS = frozenset({"sitl_stub"})
+COMPONENT_SECTIONS = frozenset({"sitl_stub", "companion"})
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -62,3 +62,24 @@ def test_bad_config_exits_2_naming_the_field(
     bad.write_text(text)
     assert main(["simulate", str(bad)]) == 2
     assert "defenders[0].speed_ratio: must be in (0, 1)" in capsys.readouterr().err
+
+
+def test_live_track_files_match_simulate_and_read_back(tmp_path: Path) -> None:
+    from ezcompanion.config import load_scenario
+    from ezcompanion.guidance import GuidanceController, KinematicState, LawName
+    from ezcompanion.sim.engine import simulate
+    from ezcompanion.sim.output import TrackWriter, read_track_csv, write_result_csv
+
+    scenario = load_scenario(CONFIG / "paper_scenario1.yaml")
+    simulated = write_result_csv(simulate(scenario), tmp_path / "sim.csv")
+    controller = GuidanceController(zones=scenario.zones(), target=scenario.target)
+    controller.reset()
+    with TrackWriter(tmp_path / "live.csv", scenario.zones().names) as track:
+        for k in range(3):
+            step = controller.step(KinematicState(8.0 - 0.1 * k, -4.0, 2.55, 1.0), 0.02)
+            track.write(0.02 * k, 8.0 - 0.1 * k, -4.0, 2.55, step)
+    header = (tmp_path / "live.csv").read_text().splitlines()[0]
+    assert header == simulated.read_text().splitlines()[0]
+    back = read_track_csv(tmp_path / "live.csv", scenario, LawName.ROBUST)
+    assert back.north_m.tolist() == pytest.approx([8.0, 7.9, 7.8])
+    assert back.clearance_m.shape == (3, 3) and not back.captured

@@ -1,0 +1,122 @@
+"""One guidance tick: the freshest state in, one law step, a command out (or a refusal).
+
+No I/O here: the service (``runner``) feeds states and clock times and sends what comes
+out. A tick refuses to command, and says why, when the position is missing or older than
+the budget, or when the engagement is over; a state the law must not see never reaches it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import StrEnum
+
+from ezcompanion.config import Scenario
+from ezcompanion.guidance import GuidanceController, GuidanceStep, KinematicState, LawName
+from ezcompanion.service.state import VehicleState
+
+__all__ = ["GuidanceLoop", "Hold", "TickCommand"]
+
+# Below this fraction of the nominal speed the velocity has no usable direction (yaw stands
+# in for course) and the law is fed this fraction of the nominal speed instead.
+_MIN_SPEED_FRACTION = 0.5
+
+
+class Hold(StrEnum):
+    """Why a tick sends nothing."""
+
+    NO_TELEMETRY = "no position yet"
+    STALE = "position older than the budget"
+    CAPTURED = "the engagement is over"
+
+
+@dataclass(frozen=True)
+class TickCommand:
+    """What one tick asks of the vehicle, with what the law saw."""
+
+    time_s: float
+    dt_s: float
+    state: VehicleState
+    course_rad: float  # measured course the law used
+    speed_m_s: float  # speed the law used (measured, at least half the nominal)
+    nominal_speed_m_s: float  # the speed to fly (the scenario's constant speed)
+    accel_lat_m_s2: float  # lateral acceleration to fly (the actuator state at the step's end)
+    step: GuidanceStep
+
+    @property
+    def captured(self) -> bool:
+        """This step reached the intercept radius: the engagement is over, send nothing."""
+        return bool(self.step.captured)
+
+    @property
+    def turn_rate_rad_s(self) -> float:
+        """Course rate that the lateral acceleration gives at the law's speed."""
+        return self.accel_lat_m_s2 / self.speed_m_s
+
+
+class GuidanceLoop:
+    """The law's controller with the service's rules around it."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        *,
+        law: LawName | None = None,
+        loop_rate_hz: float,
+        stale_after_s: float,
+    ) -> None:
+        self.scenario = scenario
+        self.controller = GuidanceController(
+            zones=scenario.zones(),
+            target=scenario.target,
+            params=scenario.guidance,
+            law=LawName(law if law is not None else scenario.law),
+        )
+        self.period_s = 1.0 / loop_rate_hz
+        self.stale_after_s = stale_after_s
+        self.nominal_speed_m_s = scenario.start.speed_m_s
+        self.captured = False
+        self.miss_distance_m = math.inf
+        self._last_tick_s: float | None = None
+        # Load the compiled law now (from numba's disk cache, or compiling it on a first
+        # run), not on the first tick, where it would stall the link for a second or more.
+        start = scenario.start
+        self.controller.reset()
+        self.controller.step(
+            KinematicState(start.north_m, start.east_m, start.course_rad, start.speed_m_s),
+            self.period_s,
+        )
+        self.controller.reset()
+
+    def reset(self) -> None:
+        """Forget the actuator state and the timing (after a gap: link loss, failsafe)."""
+        self.controller.reset()
+        self._last_tick_s = None
+
+    def tick(self, state: VehicleState | None, now_s: float) -> TickCommand | Hold:
+        """One law step on ``state`` at clock time ``now_s``."""
+        if self.captured:
+            return Hold.CAPTURED
+        if state is None:
+            return Hold.NO_TELEMETRY
+        if state.age_s(now_s) > self.stale_after_s:
+            return Hold.STALE
+        minimum = _MIN_SPEED_FRACTION * self.nominal_speed_m_s
+        course = state.course_rad(minimum)
+        speed = max(state.ground_speed_m_s, minimum)
+        last = self._last_tick_s
+        dt = self.period_s if last is None else min(max(now_s - last, 1e-4), 5.0 * self.period_s)
+        self._last_tick_s = now_s
+        step = self.controller.step(KinematicState(state.north_m, state.east_m, course, speed), dt)
+        self.miss_distance_m = min(self.miss_distance_m, float(step.law.range_to_target_m))
+        self.captured = bool(step.captured)
+        return TickCommand(
+            time_s=now_s,
+            dt_s=dt,
+            state=state,
+            course_rad=course,
+            speed_m_s=speed,
+            nominal_speed_m_s=self.nominal_speed_m_s,
+            accel_lat_m_s2=float(step.accel_lat_cmd_m_s2),
+            step=step,
+        )

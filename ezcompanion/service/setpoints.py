@@ -1,0 +1,139 @@
+"""Lateral acceleration to the setpoint each autopilot follows.
+
+``velocity`` (ArduCopter, ArduRover, PX4 multicopter): SET_POSITION_TARGET_LOCAL_NED in
+LOCAL_NED with velocity + yaw rate (type_mask 1479). The velocity has the scenario's
+constant speed (so a vehicle that was stopped, by its own timeout say, speeds up again) and
+points along a reference course that turns at omega = a / v; yaw_rate = omega keeps the nose
+with it. (Measured on ArduPilot 4.7 SITL: a 2 m/s vector rotated at 15 deg/s with yaw_rate
+15 deg/s flew 2.02 m/s at 15.1 deg/s.) LOCAL_NED rather than BODY_NED, because ArduCopter
+turns a body-frame velocity into a fixed direction when it arrives. The reference course
+starts at the measured course and may lead it by at most 30 degrees, so it cannot wind up
+while the vehicle lags. Vertical velocity 0 holds altitude. Streamed every tick, well
+inside the autopilots' timeouts (ArduCopter 3 s, PX4 needs > 2 Hz).
+
+``course`` (ArduPlane): MAV_CMD_GUIDED_CHANGE_HEADING as COMMAND_INT, p1 = 0 (course over
+ground), p2 = the course to turn to, p3 = the lateral-acceleration limit. We ask for the
+course 2 s of turning ahead (course + omega * 2 s) with the limit |a|, so the autopilot turns
+at the rate we want (its own heading loop would turn harder; the limit binds) and flies
+straight when a = 0. It has no timeout on ArduPlane and is acknowledged each time, so it is
+sent at most 10 times a second. (The roll-only SET_ATTITUDE_TARGET alternative is held for
+only 3 s and turned slower than its bank angle predicts, so it would need its own outer loop
+on the measured turn rate: not used.)
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+
+from ezcompanion.frames import wrap_pi
+from ezcompanion.service.loop import TickCommand
+from ezcompanion.service.settings import SetpointKind
+from ezcompanion.wire import Link, Message, course_command, s_to_ms, velocity_setpoint
+
+__all__ = ["CourseSetpoints", "Setpoints", "VelocitySetpoints", "make_setpoints"]
+
+_MAX_LEAD_RAD = math.radians(30.0)
+_COURSE_HORIZON_S = 2.0
+_COURSE_MIN_INTERVAL_S = 0.1
+_MIN_ACCEL_LIMIT_RATIO = 0.02  # of a_max: the smallest limit we hand the autopilot
+
+
+class Setpoints(ABC):
+    """Turns tick commands into messages for one vehicle."""
+
+    kind: SetpointKind
+
+    def __init__(
+        self, link: Link, *, target_system: int, target_component: int, accel_max_m_s2: float
+    ) -> None:
+        self.link = link
+        self.target_system = target_system
+        self.target_component = target_component
+        self.accel_max_m_s2 = accel_max_m_s2
+        self.reset()
+
+    @abstractmethod
+    def reset(self) -> None:
+        """Forget any reference (at the start, and after a gap in the command stream)."""
+
+    @abstractmethod
+    def message(self, command: TickCommand) -> Message | None:
+        """The message for ``command``, or None if nothing is due this tick."""
+
+
+class VelocitySetpoints(Setpoints):
+    """Velocity + yaw rate in LOCAL_NED (copter, rover, PX4)."""
+
+    kind = SetpointKind.VELOCITY
+    _reference_rad: float | None
+
+    def reset(self) -> None:
+        self._reference_rad = None
+
+    def message(self, command: TickCommand) -> Message:
+        omega = command.turn_rate_rad_s
+        reference = command.course_rad if self._reference_rad is None else self._reference_rad
+        reference += omega * command.dt_s
+        lead = float(wrap_pi(reference - command.course_rad))
+        lead = min(max(lead, -_MAX_LEAD_RAD), _MAX_LEAD_RAD)
+        reference = command.course_rad + lead
+        self._reference_rad = reference
+        speed = command.nominal_speed_m_s
+        return velocity_setpoint(
+            self.link,
+            target_system=self.target_system,
+            target_component=self.target_component,
+            time_boot_ms=s_to_ms(command.time_s) % 2**32,
+            north_m_s=speed * math.cos(reference),
+            east_m_s=speed * math.sin(reference),
+            down_m_s=0.0,
+            yaw_rate_rad_s=omega,
+        )
+
+
+class CourseSetpoints(Setpoints):
+    """ArduPlane's course command."""
+
+    kind = SetpointKind.COURSE
+    _last_sent_s: float
+
+    def reset(self) -> None:
+        self._last_sent_s = -math.inf
+
+    def message(self, command: TickCommand) -> Message | None:
+        if command.time_s - self._last_sent_s < _COURSE_MIN_INTERVAL_S:
+            return None
+        self._last_sent_s = command.time_s
+        course = command.course_rad + command.turn_rate_rad_s * _COURSE_HORIZON_S
+        limit = max(abs(command.accel_lat_m_s2), _MIN_ACCEL_LIMIT_RATIO * self.accel_max_m_s2)
+        return course_command(
+            self.link,
+            target_system=self.target_system,
+            target_component=self.target_component,
+            course_rad=float(wrap_pi(course)),
+            accel_limit_m_s2=limit,
+        )
+
+
+def make_setpoints(
+    kind: SetpointKind,
+    link: Link,
+    *,
+    target_system: int,
+    target_component: int,
+    accel_max_m_s2: float,
+) -> Setpoints:
+    """The setpoint writer for ``kind`` (not AUTO: resolve it from the heartbeat first)."""
+    kinds: dict[SetpointKind, type[Setpoints]] = {
+        SetpointKind.VELOCITY: VelocitySetpoints,
+        SetpointKind.COURSE: CourseSetpoints,
+    }
+    if kind not in kinds:
+        raise ValueError(f"setpoint: resolve {kind.value!r} before making setpoints")
+    return kinds[kind](
+        link,
+        target_system=target_system,
+        target_component=target_component,
+        accel_max_m_s2=accel_max_m_s2,
+    )

@@ -1,0 +1,114 @@
+"""The companion's settings: the optional ``companion:`` section of a scenario file, then flags.
+
+Layout (every key optional)::
+
+    companion:
+      connect: udpin:0.0.0.0:14550   # pymavlink URL; udpout:, tcp:, tcpin: too
+      system_id: 1                   # ours; the usual companion shares the vehicle's system
+      component_id: 191              # MAV_COMP_ID_ONBOARD_COMPUTER
+      target_system: 0               # the vehicle; 0 = the first autopilot heard
+      target_component: 0            # 0 = the component that sent that heartbeat
+      loop_rate_hz: 50.0             # guidance ticks per second
+      telemetry_rate_hz: 50.0        # what is requested of each streamed message
+      setpoint: auto                 # auto | velocity | course (see docs/service.md)
+      stale_after_s: 0.25            # position older than this is never fed to the law
+      link_lost_after_s: 3.0         # no heartbeat for this long: link lost
+      engage: false                  # ask for GUIDED/OFFBOARD ourselves
+      signing_key_hex: null          # 64 hex digits: sign, refuse unsigned input
+      tlog: null                     # path of the telemetry log (every frame in and out)
+      speedup: 1.0                   # the vehicle's clock over wall time (loopback tests)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import StrEnum
+from typing import Any
+
+from ezcompanion.config import Scenario, build_dataclass
+from ezcompanion.errors import ConfigError
+
+__all__ = ["CompanionSettings", "SetpointKind", "companion_settings"]
+
+
+class SetpointKind(StrEnum):
+    """How the lateral acceleration reaches the autopilot."""
+
+    AUTO = "auto"  # from the vehicle's heartbeat: fixed wing -> course, else velocity
+    VELOCITY = "velocity"  # SET_POSITION_TARGET_LOCAL_NED velocity + yaw rate (copter, PX4)
+    COURSE = "course"  # MAV_CMD_GUIDED_CHANGE_HEADING as COMMAND_INT (ArduPlane)
+
+
+@dataclass(frozen=True, kw_only=True)
+class CompanionSettings:
+    """Validated companion settings (SI units)."""
+
+    connect: str = "udpin:0.0.0.0:14550"
+    system_id: int = 1
+    component_id: int = 191
+    target_system: int = 0
+    target_component: int = 0
+    loop_rate_hz: float = 50.0
+    telemetry_rate_hz: float = 50.0
+    setpoint: SetpointKind = SetpointKind.AUTO
+    stale_after_s: float = 0.25
+    link_lost_after_s: float = 3.0
+    engage: bool = False
+    signing_key_hex: str | None = None
+    tlog: str | None = None
+    speedup: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name, low in (
+            ("system_id", 1),
+            ("component_id", 1),
+            ("target_system", 0),
+            ("target_component", 0),
+        ):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= 255:
+                raise ConfigError(name, value, f"must be an integer within [{low}, 255]")
+        for name in (
+            "loop_rate_hz",
+            "telemetry_rate_hz",
+            "stale_after_s",
+            "link_lost_after_s",
+            "speedup",
+        ):
+            value = getattr(self, name)
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, int | float)
+                or not (math.isfinite(value) and value > 0.0)
+            ):
+                raise ConfigError(name, value, "must be a finite number > 0")
+        if not 1.0 <= self.loop_rate_hz <= 1000.0:
+            raise ConfigError("loop_rate_hz", self.loop_rate_hz, "must be within [1, 1000]")
+        if self.stale_after_s < 2.0 / self.telemetry_rate_hz:
+            raise ConfigError(
+                "stale_after_s", self.stale_after_s, "must allow at least two telemetry periods"
+            )
+        if not isinstance(self.setpoint, SetpointKind):
+            raise ConfigError("setpoint", self.setpoint, "must be auto, velocity or course")
+        if not isinstance(self.engage, bool):
+            raise ConfigError("engage", self.engage, "must be true or false")
+        if self.connect.split(":", 1)[0] not in ("udpin", "udpout", "udp", "tcp", "tcpin"):
+            raise ConfigError(
+                "connect", self.connect, "must be a pymavlink URL such as udpin:0.0.0.0:14550"
+            )
+
+
+def companion_settings(scenario: Scenario, **overrides: Any) -> CompanionSettings:
+    """The scenario's ``companion:`` section with command-line ``overrides`` (None = unset)."""
+    raw = dict(scenario.sections.get("companion", {}))
+    raw.update({key: value for key, value in overrides.items() if value is not None})
+    if "setpoint" in raw:
+        try:
+            raw["setpoint"] = SetpointKind(raw["setpoint"])
+        except ValueError:
+            raise ConfigError(
+                "companion.setpoint", raw["setpoint"], "must be auto, velocity or course"
+            ) from None
+    settings: CompanionSettings = build_dataclass("companion", CompanionSettings, raw)
+    return settings

@@ -1,0 +1,271 @@
+"""The companion service against the loopback vehicle over real UDP on 127.0.0.1.
+
+The vehicle (``sitl_stub``) runs as its own process; the companion runs in this process
+(in a thread) so that a test can read its events. Every engagement is judged by the
+vehicle's own track (``--truth-out``), not by what the companion believed.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+
+from ezcompanion.config import load_scenario
+from ezcompanion.service.demo import free_udp_port, judge_truth, run_loopback
+from ezcompanion.service.events import EventKind, EventLog
+from ezcompanion.service.runner import CompanionService, EngagementOutcome
+from ezcompanion.service.settings import companion_settings
+
+CONFIG = Path(__file__).resolve().parents[1] / "config"
+SPEEDUP = 10.0
+KEY_A = "11" * 32
+KEY_B = "22" * 32
+
+
+def scenario_file(tmp_path: Path, number: int = 1, **sections: dict[str, Any]) -> Path:
+    """A paper scenario with extra sections (``sitl_stub``, ``companion``)."""
+    data = yaml.safe_load((CONFIG / f"paper_scenario{number}.yaml").read_text())
+    data.update(sections)
+    path = tmp_path / f"scenario{number}.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+@contextmanager
+def stub_process(
+    config: Path, port: int, truth: Path, *extra: str
+) -> Iterator[subprocess.Popen[bytes]]:
+    process = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "sitl_stub",
+            "--config",
+            str(config),
+            "--connect",
+            f"udpout:127.0.0.1:{port}",
+            "--speedup",
+            f"{SPEEDUP:g}",
+            "--truth-out",
+            str(truth),
+            "--duration",
+            "40",
+            *extra,
+        ],
+        stdout=subprocess.DEVNULL,
+    )
+    try:
+        yield process
+    finally:
+        process.terminate()
+        try:
+            process.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+
+
+@dataclass
+class Flight:
+    service: CompanionService
+    events: EventLog
+    outcome: EngagementOutcome
+    truth: Path
+
+
+def fly(
+    config: Path,
+    tmp_path: Path,
+    *,
+    profile: str = "copter",
+    start_mode: str | None = "GUIDED",
+    max_time_s: float = 30.0,
+    during: Any = None,
+    **companion: Any,
+) -> Flight:
+    """The companion in a thread, the vehicle in a process, until the engagement ends."""
+    scenario = load_scenario(config)
+    port = free_udp_port()
+    settings = companion_settings(
+        scenario,
+        connect=f"udpin:127.0.0.1:{port}",
+        engage=True,
+        speedup=SPEEDUP,
+        tlog=str(tmp_path / "companion.tlog"),
+        **companion,
+    )
+    events = EventLog()
+    listening = threading.Event()
+    events.add_sink(lambda e: listening.set() if e.kind is EventKind.LISTENING else None)
+    service = CompanionService(scenario, settings, events=events)
+    result: list[EngagementOutcome] = []
+    thread = threading.Thread(target=lambda: result.append(service.run(max_time_s=max_time_s)))
+    thread.start()
+    truth = tmp_path / "truth.csv"
+    try:
+        assert listening.wait(30.0), "the companion never opened its link"
+        mode = ["--initial-mode", start_mode] if start_mode else []
+        with stub_process(config, port, truth, "--profile", profile, *mode) as stub:
+            if during is not None:
+                during(service, stub, port, truth)
+            thread.join(timeout=max_time_s / SPEEDUP + 30.0)
+    finally:
+        service.stop()
+        thread.join(timeout=10.0)
+    assert result, "the companion did not finish"
+    return Flight(service, events, result[0], truth)
+
+
+@pytest.mark.parametrize("number", [1, 2])
+def test_paper_scenarios_intercept_with_positive_true_clearance(
+    number: int, tmp_path: Path
+) -> None:
+    # Both as separate processes, exactly as `make demo` runs them.
+    config = CONFIG / f"paper_scenario{number}.yaml"
+    result = run_loopback(config, tmp_path, speedup=SPEEDUP, quiet=True)
+    assert result.companion_exit == 0
+    assert result.intercepted
+    assert min(result.min_clearance_m) > 0.0
+    assert result.max_accel_ratio <= 1.0  # the airframe's own bound
+    for name in ("truth.csv", "companion.csv", "companion.tlog"):
+        assert (tmp_path / name).stat().st_size > 0
+
+
+@pytest.mark.parametrize(
+    ("profile", "start_mode", "kind"),
+    [
+        ("copter", "LOITER", "velocity"),
+        ("plane", "GUIDED", "course"),
+        ("px4", "AUTO.LOITER", "velocity"),
+    ],
+)
+def test_each_setpoint_profile_flies_the_stub(
+    profile: str, start_mode: str | None, kind: str, tmp_path: Path
+) -> None:
+    # The copter holds in LOITER and the companion asks for GUIDED; PX4 holds in AUTO.LOITER
+    # and refuses OFFBOARD until setpoints stream, so the companion streams first.
+    config = CONFIG / "paper_scenario1.yaml"
+    flight = fly(config, tmp_path, profile=profile, start_mode=start_mode)
+    found = flight.events.of_kind(EventKind.VEHICLE_FOUND)
+    assert found and f"setpoints {kind}" in found[0].message
+    engaged = flight.events.of_kind(EventKind.ENGAGED)
+    assert engaged and ("OFFBOARD" if profile == "px4" else "GUIDED") in engaged[0].message
+    assert flight.outcome.intercepted and flight.outcome.setpoints_sent > 20
+    intercepted, _, _, clearance, accel = judge_truth(load_scenario(config), flight.truth)
+    assert intercepted and min(clearance) > 0.0 and accel <= 1.0
+
+
+def test_telemetry_freeze_stops_the_setpoints_and_the_autopilot_timeout_takes_over(
+    tmp_path: Path,
+) -> None:
+    freeze_start, freeze_for = 1.5, 4.0  # vehicle seconds; the copter's guided timeout is 3 s
+    config = scenario_file(
+        tmp_path,
+        sitl_stub={
+            "faults": {
+                "freeze_start_s": freeze_start,
+                "freeze_duration_s": freeze_for,
+                "freeze_mode": "stale",
+            }
+        },
+    )
+    flight = fly(config, tmp_path)
+    failsafes = flight.events.of_kind(EventKind.FAILSAFE)
+    resumed = flight.events.of_kind(EventKind.RESUMED)
+    assert len(failsafes) == 1 and len(resumed) == 1
+    # No setpoint between failsafe and resumption...
+    assert resumed[0].data["setpoints_sent"] == failsafes[0].data["setpoints_sent"]
+    # ... and the vehicle's own timeout took over in the gap (announced, and it stopped).
+    gap = [
+        e
+        for e in flight.events.of_kind(EventKind.STATUSTEXT)
+        if failsafes[0].time_s < e.time_s < resumed[0].time_s
+    ]
+    assert any("setpoint timeout" in e.message for e in gap), [e.message for e in gap]
+    # The stream stopped within the budget (plus a loop period and the clocks' offset).
+    stale_budget = flight.service.settings.stale_after_s
+    engaged = flight.events.of_kind(EventKind.ENGAGED)[0].time_s
+    assert failsafes[0].data["reason"] == "stale"
+    assert resumed[0].time_s - failsafes[0].time_s > freeze_for - 1.5
+    assert failsafes[0].time_s < engaged + freeze_start + stale_budget + 1.5
+    # Guidance resumed from wherever the timeout left the vehicle, and kept it safe.
+    assert flight.outcome.setpoints_sent > resumed[0].data["setpoints_sent"] + 20
+    assert min(judge_truth(load_scenario(config), flight.truth)[3]) > 0.0
+
+
+def test_link_loss_and_recovery(tmp_path: Path) -> None:
+    config = CONFIG / "paper_scenario1.yaml"
+    second_truth = tmp_path / "truth2.csv"
+
+    def cut_and_restore(
+        service: CompanionService, stub: subprocess.Popen[bytes], port: int, _truth: Path
+    ) -> None:
+        engaged = threading.Event()
+        lost = threading.Event()
+        service.events.add_sink(lambda e: engaged.set() if e.kind is EventKind.ENGAGED else None)
+        service.events.add_sink(lambda e: lost.set() if e.kind is EventKind.LINK_LOST else None)
+        assert engaged.wait(20.0)
+        stub.kill()  # the vehicle goes silent
+        stub.wait()
+        assert lost.wait(20.0)
+        with stub_process(
+            config, port, second_truth, "--profile", "copter", "--initial-mode", "GUIDED"
+        ):
+            while service.phase.value != "done" and not service._stop.is_set():
+                if service.events.of_kind(EventKind.ENDED):
+                    break
+                threading.Event().wait(0.05)
+
+    flight = fly(config, tmp_path, during=cut_and_restore)
+    kinds = [e.kind for e in flight.events.events]
+    lost_at = kinds.index(EventKind.LINK_LOST)
+    assert EventKind.LINK_RESTORED in kinds[lost_at:]
+    lost = flight.events.events[lost_at]
+    re_engaged = [e for e in flight.events.of_kind(EventKind.ENGAGED) if e.time_s > lost.time_s]
+    assert re_engaged, "guidance never resumed"
+    # nothing was sent while the link was down
+    assert re_engaged[0].data["setpoints_sent"] == lost.data["setpoints_sent"]
+    assert flight.outcome.intercepted
+    intercepted, *_ = judge_truth(load_scenario(config), second_truth)
+    assert intercepted
+
+
+def test_signing_mismatch_is_refused_and_a_match_flies(tmp_path: Path) -> None:
+    mismatch = scenario_file(tmp_path, sitl_stub={"signing_key_hex": KEY_A})
+    flight = fly(mismatch, tmp_path, max_time_s=20.0, signing_key_hex=KEY_B)
+    assert not flight.events.of_kind(EventKind.VEHICLE_FOUND)  # its frames were refused
+    assert flight.outcome.setpoints_sent == 0 and not flight.outcome.intercepted
+    # A companion without a key hears the signed vehicle, but its setpoints are refused:
+    # the vehicle holds in GUIDED and never gets to the target.
+    unsigned = fly(mismatch, tmp_path, max_time_s=20.0)
+    assert unsigned.outcome.setpoints_sent > 0
+    assert not judge_truth(load_scenario(mismatch), unsigned.truth)[0]
+    assert any(
+        "holding position" in e.message for e in unsigned.events.of_kind(EventKind.STATUSTEXT)
+    )
+    match_dir = tmp_path / "match"
+    match_dir.mkdir()
+    matched = fly(mismatch, match_dir, signing_key_hex=KEY_A)
+    assert matched.outcome.intercepted
+
+
+def test_the_tlog_reads_back_with_pymavlink(tmp_path: Path) -> None:
+    from pymavlink import mavutil
+
+    flight = fly(CONFIG / "paper_scenario1.yaml", tmp_path)
+    log = mavutil.mavlink_connection(str(tmp_path / "companion.tlog"))
+    seen: dict[str, int] = {}
+    while (msg := log.recv_match()) is not None:
+        seen[msg.get_type()] = seen.get(msg.get_type(), 0) + 1
+    # what we received and what we sent
+    assert seen.get("LOCAL_POSITION_NED", 0) > 50 and seen.get("HEARTBEAT", 0) > 5
+    assert seen.get("SET_POSITION_TARGET_LOCAL_NED", 0) == flight.outcome.setpoints_sent

@@ -1,0 +1,164 @@
+"""The service's parts without sockets: telemetry decoding, the tick, setpoints, settings."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from ezcompanion.config import GeoOrigin, load_scenario
+from ezcompanion.errors import ConfigError
+from ezcompanion.service.loop import GuidanceLoop, Hold, TickCommand
+from ezcompanion.service.setpoints import make_setpoints
+from ezcompanion.service.settings import SetpointKind, companion_settings
+from ezcompanion.service.state import TelemetryState
+from ezcompanion.wire import deg_to_e7, m_to_mm, mavlink, ned_to_geodetic, open_link
+
+CONFIG = Path(__file__).resolve().parents[1] / "config" / "paper_scenario1.yaml"
+ORIGIN = GeoOrigin()
+
+
+def local(boot_ms: int, north: float, east: float, vn: float = 1.0, ve: float = 0.0) -> object:
+    return mavlink.MAVLink_local_position_ned_message(boot_ms, north, east, -20.0, vn, ve, 0.0)
+
+
+def test_local_position_is_taken_with_its_arrival_time() -> None:
+    t = TelemetryState(origin=ORIGIN)
+    assert t.update(local(1000, 3.0, 4.0, 0.0, 2.0), now_s=5.0) == "LOCAL_POSITION_NED"
+    state = t.snapshot(0.25, now_s=5.1)
+    assert state is not None and (state.north_m, state.east_m) == (3.0, 4.0)
+    assert state.course_rad(0.5) == pytest.approx(math.pi / 2)  # moving east
+    assert state.age_s(5.1) == pytest.approx(0.1)
+
+
+def test_global_position_goes_through_the_scenario_origin() -> None:
+    lat, lon, alt = ned_to_geodetic(
+        120.0,
+        -75.0,
+        -30.0,
+        origin_lat_deg=ORIGIN.lat_deg,
+        origin_lon_deg=ORIGIN.lon_deg,
+        origin_alt_m=ORIGIN.alt_m,
+    )
+    msg = mavlink.MAVLink_global_position_int_message(
+        2000, deg_to_e7(lat), deg_to_e7(lon), m_to_mm(alt), m_to_mm(30.0), -100, 50, 0, 0
+    )
+    t = TelemetryState(origin=ORIGIN)
+    assert t.update(msg, now_s=1.0) == "GLOBAL_POSITION_INT"
+    state = t.snapshot(0.25, now_s=1.0)
+    assert state is not None and state.position_source == "global"
+    assert state.north_m == pytest.approx(120.0, abs=0.02)  # 1e-7 deg quantisation
+    assert state.east_m == pytest.approx(-75.0, abs=0.02)
+    assert (state.velocity_north_m_s, state.velocity_east_m_s) == (-1.0, 0.5)
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        local(2000, float("nan"), 0.0),
+        local(2000, 0.0, 0.0, float("inf")),
+        local(1000, 0.5, 0.0),  # a duplicate: time did not advance
+        local(500, 0.5, 0.0),  # reordered
+        local(2000, 500.0, 0.0),  # a 500 m jump in 1 s
+    ],
+)
+def test_bad_samples_are_refused_and_change_nothing(bad: object) -> None:
+    t = TelemetryState(origin=ORIGIN)
+    t.update(local(1000, 0.0, 0.0), now_s=1.0)
+    assert t.update(bad, now_s=2.0) is None
+    assert sum(t.refused.values()) == 1
+    state = t.snapshot(10.0, now_s=2.0)
+    assert state is not None and state.north_m == 0.0 and state.position_time_s == 1.0
+
+
+def test_a_frozen_position_with_a_velocity_is_refused() -> None:
+    t = TelemetryState(origin=ORIGIN)
+    for k in range(10):  # moving north at 1 m/s, 50 Hz
+        assert t.update(local(1000 + 20 * k, 0.02 * k, 0.0), now_s=1.0 + 0.02 * k)
+    frozen = [t.update(local(1200 + 20 * k, 0.18, 0.0), now_s=1.2 + 0.02 * k) for k in range(20)]
+    assert frozen[0] is not None  # within what one step can hide
+    assert frozen[-1] is None  # but not for long: 0.4 s at 1 m/s should have moved 0.4 m
+    # and a vehicle that really is still (velocity 0) is not frozen
+    still = TelemetryState(origin=ORIGIN)
+    assert all(
+        still.update(local(1000 + 20 * k, 5.0, 5.0, 0.0, 0.0), 1.0 + 0.02 * k) for k in range(50)
+    )
+
+
+def test_course_falls_back_to_yaw_when_nearly_still() -> None:
+    t = TelemetryState(origin=ORIGIN)
+    t.update(mavlink.MAVLink_attitude_message(1000, 0.0, 0.0, -2.0, 0.0, 0.0, 0.0), now_s=1.0)
+    t.update(local(1000, 0.0, 0.0, 0.01, 0.0), now_s=1.0)
+    state = t.snapshot(1.0, now_s=1.0)
+    assert state is not None and state.course_rad(0.5) == -2.0
+
+
+def test_tick_refuses_stale_or_missing_telemetry_and_ends_at_capture() -> None:
+    scenario = load_scenario(CONFIG)
+    loop = GuidanceLoop(scenario, loop_rate_hz=50.0, stale_after_s=0.25)
+    assert loop.tick(None, 0.0) is Hold.NO_TELEMETRY
+    t = TelemetryState(origin=ORIGIN)
+    t.update(local(1000, 8.0, -4.0, -0.83, 0.55), now_s=1.0)
+    assert loop.tick(t.snapshot(0.25, 1.5), 1.5) is Hold.STALE
+    command = loop.tick(t.snapshot(0.25, 1.1), 1.1)
+    assert isinstance(command, TickCommand) and not command.captured
+    assert abs(command.accel_lat_m_s2) < scenario.guidance.accel_max_m_s2
+    t.update(local(2000, 2.05, 0.0, 0.0, 1.0), now_s=2.0)
+    done = loop.tick(t.snapshot(0.25, 2.0), 2.0)
+    assert isinstance(done, TickCommand) and done.captured
+    assert loop.tick(t.snapshot(0.25, 2.02), 2.02) is Hold.CAPTURED
+
+
+def _command(
+    loop: GuidanceLoop, north: float, east: float, vn: float, ve: float, now: float
+) -> TickCommand:
+    t = TelemetryState(origin=ORIGIN)
+    t.update(local(int(now * 1000), north, east, vn, ve), now_s=now)
+    command = loop.tick(t.snapshot(0.25, now), now)
+    assert isinstance(command, TickCommand)
+    return command
+
+
+def test_velocity_setpoint_turns_at_the_commanded_rate() -> None:
+    scenario = load_scenario(CONFIG)
+    loop = GuidanceLoop(scenario, loop_rate_hz=50.0, stale_after_s=0.25)
+    with open_link("udpout:127.0.0.1:9", system_id=1, component_id=191) as link:
+        writer = make_setpoints(
+            SetpointKind.VELOCITY, link, target_system=1, target_component=1, accel_max_m_s2=1.0
+        )
+        first = _command(loop, 8.0, -4.0, -0.832, 0.555, 1.0)
+        msg = writer.message(first)
+        assert msg.type_mask == 1479 and msg.coordinate_frame == mavlink.MAV_FRAME_LOCAL_NED
+        assert math.hypot(msg.vx, msg.vy) == pytest.approx(1.0)  # the scenario's speed
+        assert msg.yaw_rate == pytest.approx(first.turn_rate_rad_s)
+        direction = math.atan2(msg.vy, msg.vx)
+        assert direction == pytest.approx(first.course_rad + first.turn_rate_rad_s * first.dt_s)
+
+
+def test_course_command_asks_for_the_turn_with_its_limit() -> None:
+    scenario = load_scenario(CONFIG)
+    loop = GuidanceLoop(scenario, loop_rate_hz=50.0, stale_after_s=0.25)
+    with open_link("udpout:127.0.0.1:9", system_id=1, component_id=191) as link:
+        writer = make_setpoints(
+            SetpointKind.COURSE, link, target_system=1, target_component=1, accel_max_m_s2=1.0
+        )
+        command = _command(loop, 8.0, -4.0, -0.832, 0.555, 1.0)
+        msg = writer.message(command)
+        assert msg.command == mavlink.MAV_CMD_GUIDED_CHANGE_HEADING and msg.param1 == 0
+        assert msg.param3 == pytest.approx(max(abs(command.accel_lat_m_s2), 0.02))
+        expected = math.degrees(command.course_rad + 2.0 * command.turn_rate_rad_s) % 360.0
+        assert msg.param2 == pytest.approx(expected, abs=1e-4)
+        assert writer.message(command) is None  # at most 10 Hz
+
+
+def test_settings_errors_name_the_field() -> None:
+    scenario = load_scenario(CONFIG)
+    with pytest.raises(ConfigError, match=r"^companion\.loop_rate_hz"):
+        companion_settings(scenario, loop_rate_hz=0.0)
+    with pytest.raises(ConfigError, match=r"^companion\.setpoint"):
+        companion_settings(scenario, setpoint="roll")
+    with pytest.raises(ConfigError, match=r"^companion\.connect"):
+        companion_settings(scenario, connect="serial:/dev/ttyS0")
+    with pytest.raises(ConfigError, match=r"^companion\.stale_after_s"):
+        companion_settings(scenario, stale_after_s=0.01)

@@ -30,6 +30,9 @@ pytest: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python bench/bench_law.py
+	$(BIN)/python bench/bench_batch.py
+	$(BIN)/python bench/bench_service.py
+	$(BIN)/python bench/bench_qp.py
 
 clean:
 	rm -rf $(VENV) demo-out .pytest_cache .mypy_cache .ruff_cache

@@ -14,6 +14,7 @@ from pathlib import Path
 from ezcompanion.config import load_scenario
 from ezcompanion.errors import EzCompanionError
 from ezcompanion.guidance import LawName
+from ezcompanion.validation.cli import add_validate_parser, run_validate
 
 __all__ = ["main", "run_demo", "run_reference_demo", "run_service", "run_simulate"]
 
@@ -169,6 +170,8 @@ def _parser() -> argparse.ArgumentParser:
         action="store_true",
         help="the reference simulator instead, both laws side by side",
     )
+
+    add_validate_parser(commands)
     return parser
 
 
@@ -176,6 +179,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``ezcompanion`` console script."""
     args = _parser().parse_args(argv)
     try:
+        if args.command == "validate":
+            return run_validate(args)
         if args.command == "simulate":
             return run_simulate(
                 args.config,

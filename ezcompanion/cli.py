@@ -2,19 +2,21 @@
 
 Exit codes: 0 done, 1 the job ran but its outcome failed (no interception, a zone entered),
 2 bad input.
+
+Imports are made inside the commands: ``run`` must decide before the law is imported that
+the service interprets the law's kernels instead of compiling them (see
+``ezcompanion.guidance._jit``), and no command should pay for another's imports.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from ezcompanion.config import load_scenario
 from ezcompanion.errors import EzCompanionError
-from ezcompanion.guidance import LawName
-from ezcompanion.validation.cli import add_validate_parser, run_validate
 
 __all__ = ["main", "run_demo", "run_reference_demo", "run_service", "run_simulate"]
 
@@ -22,18 +24,23 @@ CONFIG_DIR = Path(__file__).resolve().parents[1] / "config"
 PAPER_SCENARIOS = {1: "paper_scenario1.yaml", 2: "paper_scenario2.yaml"}
 
 
+LAWS = ("paper", "robust")
+
+
 def run_simulate(
     config: Path,
     *,
-    law: LawName | None = None,
+    law: str | None = None,
     out_csv: Path | None = None,
     plot_png: Path | None = None,
 ) -> int:
     """Simulate one scenario in the reference simulator and print its outcome."""
+    from ezcompanion.config import load_scenario
+    from ezcompanion.guidance import LawName
     from ezcompanion.sim.engine import simulate
     from ezcompanion.sim.output import write_result_csv
 
-    run = simulate(load_scenario(config), law)
+    run = simulate(load_scenario(config), LawName(law) if law else None)
     print(run.summary())
     if out_csv is not None:
         print(f"  wrote {write_result_csv(run, out_csv)}")
@@ -47,7 +54,7 @@ def run_simulate(
 def run_service(
     config: Path,
     *,
-    law: LawName | None,
+    law: str | None,
     max_time_s: float | None,
     track_csv: Path | None,
     **overrides: object,
@@ -55,6 +62,8 @@ def run_service(
     """Steer a vehicle through one engagement; 0 if intercepted, 1 if it ended otherwise."""
     import signal
 
+    from ezcompanion.config import load_scenario
+    from ezcompanion.guidance import LawName
     from ezcompanion.service.events import EventLog
     from ezcompanion.service.runner import CompanionService
     from ezcompanion.service.settings import companion_settings
@@ -62,7 +71,9 @@ def run_service(
     scenario = load_scenario(config)
     settings = companion_settings(scenario, **overrides)
     events = EventLog(lambda event: print(event.line(), flush=True))
-    service = CompanionService(scenario, settings, law=law, events=events, track_csv=track_csv)
+    service = CompanionService(
+        scenario, settings, law=LawName(law) if law else None, events=events, track_csv=track_csv
+    )
     previous = {
         sig: signal.signal(sig, lambda *_: service.stop())
         for sig in (signal.SIGINT, signal.SIGTERM)
@@ -80,6 +91,7 @@ def run_demo(*, scenarios: Sequence[int], out_dir: Path, speedup: float, profile
 
     Returns 1 if any engagement fails to intercept or enters an engagement zone.
     """
+    from ezcompanion.config import load_scenario
     from ezcompanion.service.demo import run_loopback
     from ezcompanion.sim.output import read_track_csv
     from ezcompanion.sim.plot import plot_result
@@ -108,6 +120,8 @@ def run_reference_demo(*, scenarios: Sequence[int], out_dir: Path) -> int:
 
     Returns 1 if the robust law fails to intercept or enters an engagement zone.
     """
+    from ezcompanion.config import load_scenario
+    from ezcompanion.guidance import LawName
     from ezcompanion.sim.engine import simulate
     from ezcompanion.sim.output import write_result_csv
     from ezcompanion.sim.plot import plot_result
@@ -136,7 +150,7 @@ def _parser() -> argparse.ArgumentParser:
     sim = commands.add_parser("simulate", help="run one scenario in the reference simulator")
     sim.add_argument("config", type=Path, help="scenario YAML file")
     sim.add_argument(
-        "--law", choices=[m.value for m in LawName], help="override the scenario's law"
+        "--law", choices=LAWS, help="override the scenario's law"
     )
     sim.add_argument("--out", type=Path, help="write the time series to this CSV file")
     sim.add_argument("--plot", type=Path, help="write the four-panel figure to this PNG file")
@@ -145,7 +159,7 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--config", type=Path, required=True, help="scenario YAML file")
     run.add_argument("--connect", help="pymavlink URL (default udpin:0.0.0.0:14550)")
     run.add_argument(
-        "--law", choices=[m.value for m in LawName], help="override the scenario's law"
+        "--law", choices=LAWS, help="override the scenario's law"
     )
     run.add_argument(
         "--engage",
@@ -171,27 +185,36 @@ def _parser() -> argparse.ArgumentParser:
         help="the reference simulator instead, both laws side by side",
     )
 
+    from ezcompanion.validation.cli import add_validate_parser
+
     add_validate_parser(commands)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``ezcompanion`` console script."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["run"]:
+        # The service interprets the law (0.1 ms a step) rather than load numba's LLVM
+        # (about 110 MB); set EZCOMPANION_JIT=1 to compile it anyway.
+        os.environ.setdefault("EZCOMPANION_JIT", "0")
     args = _parser().parse_args(argv)
     try:
         if args.command == "validate":
+            from ezcompanion.validation.cli import run_validate
+
             return run_validate(args)
         if args.command == "simulate":
             return run_simulate(
                 args.config,
-                law=LawName(args.law) if args.law else None,
+                law=args.law,
                 out_csv=args.out,
                 plot_png=args.plot,
             )
         if args.command == "run":
             return run_service(
                 args.config,
-                law=LawName(args.law) if args.law else None,
+                law=args.law,
                 max_time_s=args.max_time,
                 track_csv=args.track,
                 connect=args.connect,

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -308,3 +310,44 @@ def test_a_batch_gives_what_each_vehicle_gives_alone() -> None:
             one = law_at(north[k], east[k], course[k], accel[k], law=law)
             assert float(one.accel_command_m_s2) == float(batch.accel_command_m_s2[k])
             np.testing.assert_array_equal(one.clearance_m, batch.clearance_m[k])
+
+
+def test_the_interpreted_kernel_gives_what_the_compiled_one_gives() -> None:
+    # The service runs the same kernel source uncompiled (EZCOMPANION_JIT=0, no numba).
+    import json
+    import subprocess
+    import sys
+
+    rng = np.random.default_rng(3)
+    states = rng.uniform([-1, -7, -4, -0.9], [9, 6, 4, 0.9], size=(20, 4))
+    script = (
+        "import json, sys, numpy as np\n"
+        "from ezcompanion.guidance import LawName, GuidanceParams, evaluate_law\n"
+        "from ezcompanion.guidance._jit import JIT_ENABLED\n"
+        "sys.path.insert(0, 'tests')\n"
+        "from test_guidance_law import ZONES\n"
+        "s = np.array(json.loads(sys.stdin.read()))\n"
+        "out = {}\n"
+        "for law in LawName:\n"
+        "    o = evaluate_law(law, GuidanceParams(), ZONES, target_north_m=2.0, target_east_m=0.0,"
+        " north_m=s[:, 0], east_m=s[:, 1], course_rad=s[:, 2], speed_m_s=1.0, accel_m_s2=s[:, 3])\n"
+        "    out[law.value] = [o.accel_command_m_s2.tolist(), o.h_m.tolist()]\n"
+        "print(json.dumps({'jit': JIT_ENABLED, 'out': out, 'numba': 'numba' in sys.modules}))\n"
+    )
+    root = Path(__file__).resolve().parents[1]
+    done = subprocess.run(
+        [sys.executable, "-c", script],
+        input=json.dumps(states.tolist()),
+        text=True,
+        capture_output=True,
+        check=True,
+        cwd=root,
+        env={**os.environ, "EZCOMPANION_JIT": "0"},
+    )
+    interpreted = json.loads(done.stdout)
+    assert interpreted["jit"] is False and interpreted["numba"] is False
+    for law in LawName:
+        compiled = law_at(states[:, 0], states[:, 1], states[:, 2], states[:, 3], law=law)  # type: ignore[arg-type]
+        a_c, h = interpreted["out"][law.value]
+        np.testing.assert_allclose(a_c, compiled.accel_command_m_s2, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(h, compiled.h_m, rtol=1e-12, atol=1e-12)

@@ -225,7 +225,7 @@ def test_link_loss_and_recovery(tmp_path: Path) -> None:
                     break
                 threading.Event().wait(0.05)
 
-    flight = fly(config, tmp_path, during=cut_and_restore)
+    flight = fly(config, tmp_path, during=cut_and_restore, max_time_s=60.0)
     kinds = [e.kind for e in flight.events.events]
     lost_at = kinds.index(EventKind.LINK_LOST)
     assert EventKind.LINK_RESTORED in kinds[lost_at:]

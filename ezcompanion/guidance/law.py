@@ -58,9 +58,8 @@ import math
 
 import numpy as np
 import numpy.typing as npt
-from numba import get_num_threads, prange
 
-from ezcompanion.guidance._jit import jit, jit_inline, jit_parallel
+from ezcompanion.guidance._jit import get_num_threads, jit, jit_inline, jit_parallel, prange
 from ezcompanion.guidance.params import BlendMode, GuidanceParams, LawName
 from ezcompanion.guidance.zones import ZoneSet, ez_boundary_point
 

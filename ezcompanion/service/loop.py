@@ -78,8 +78,8 @@ class GuidanceLoop:
         self.captured = False
         self.miss_distance_m = math.inf
         self._last_tick_s: float | None = None
-        # Load the compiled law now (from numba's disk cache, or compiling it on a first
-        # run), not on the first tick, where it would stall the link for a second or more.
+        # Run the law once now: compiled, this loads it from numba's disk cache (or compiles
+        # it on a first run), which must not happen on the first tick and stall the link.
         start = scenario.start
         self.controller.reset()
         self.controller.step(

@@ -20,9 +20,9 @@ import math
 
 import numpy as np
 import numpy.typing as npt
-from numba import njit
 
 from ezcompanion.guidance import GuidanceParams
+from ezcompanion.guidance._jit import jit
 from ezcompanion.validation.scenarios import PAD_M, ScenarioBatch
 
 __all__ = ["escape_margin_m"]
@@ -32,7 +32,7 @@ FloatArray = npt.NDArray[np.float64]
 _TURNS = 11  # hard-turn durations from 0 to half a circle
 
 
-@njit(cache=True, error_model="numpy")
+@jit
 def _escape_kernel(
     start: FloatArray,
     speed: FloatArray,

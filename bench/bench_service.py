@@ -26,7 +26,7 @@ from pathlib import Path
 
 import yaml
 
-from ezcompanion.service.demo import free_udp_port
+from ezcompanion.service.demo import free_udp_port, wait_for_line
 from ezcompanion.wire import mavlink, open_link
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "paper_scenario1.yaml"
@@ -76,9 +76,7 @@ def run_rate(rate_hz: float, seconds: float) -> dict[str, float]:
             text=True,
         )
         assert companion.stdout is not None
-        for line in companion.stdout:
-            if "listening:" in line:
-                break
+        wait_for_line(companion.stdout, "listening:")
         try:
             return _fly(port, rate_hz, seconds, companion.pid)
         finally:

@@ -24,7 +24,7 @@ import numpy as np
 from ezcompanion.config import Scenario, load_scenario
 from ezcompanion.guidance import LawName, evaluate_law
 
-__all__ = ["DemoResult", "free_udp_port", "judge_truth", "run_loopback"]
+__all__ = ["DemoResult", "free_udp_port", "judge_truth", "run_loopback", "wait_for_line"]
 
 # wall seconds to wait for the companion beyond the scenario's own length
 _GRACE_WALL_S = 20.0
@@ -66,13 +66,14 @@ class DemoResult:
         )
 
 
-def _wait_for_line(stream: IO[str], marker: str, quiet: bool) -> None:
+def wait_for_line(stream: IO[str], marker: str, quiet: bool = True) -> None:
+    """Read ``stream`` (echoing it unless ``quiet``) up to a line containing ``marker``."""
     for line in stream:
         if not quiet:
             print(line, end="", flush=True)
         if marker in line:
             return
-    raise RuntimeError("the companion ended before opening its link")
+    raise RuntimeError(f"the process ended before printing {marker!r}")
 
 
 def _forward(stream: IO[str], quiet: bool) -> None:
@@ -192,7 +193,7 @@ def run_loopback(
     # started first would fly on in AUTO while the companion loads.
     companion = subprocess.Popen(companion_cmd, stdout=subprocess.PIPE, text=True, bufsize=1)
     assert companion.stdout is not None
-    _wait_for_line(companion.stdout, "listening:", quiet)
+    wait_for_line(companion.stdout, "listening:", quiet)
     forward = threading.Thread(target=_forward, args=(companion.stdout, quiet), daemon=True)
     forward.start()
     stub = subprocess.Popen(stub_cmd, stdout=subprocess.DEVNULL if quiet else None)

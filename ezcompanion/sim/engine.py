@@ -20,7 +20,7 @@ from ezcompanion.frames import wrap_pi
 from ezcompanion.guidance import GuidanceController, KinematicState, LawName
 from ezcompanion.sim.kinematics import rk4_step, unicycle_rates
 
-__all__ = ["Outcome", "SimResult", "simulate"]
+__all__ = ["LAW_SERIES", "TRACK_SERIES", "Outcome", "SimResult", "simulate"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -169,12 +169,9 @@ def simulate(scenario: Scenario, law: LawName | None = None) -> SimResult:
     )
 
 
-_SERIES = (
-    "t_s",
-    "north_m",
-    "east_m",
-    "heading_rad",
-    "accel_lat_m_s2",
+# Per-step series of a run, in the order of the track files (``ezcompanion.sim.output``).
+TRACK_SERIES = ("t_s", "north_m", "east_m", "heading_rad", "accel_lat_m_s2")
+LAW_SERIES = (
     "h_m",
     "alpha",
     "accel_safety_m_s2",
@@ -184,6 +181,5 @@ _SERIES = (
     "range_to_target_m",
     "lead_angle_target_rad",
     "bearing_to_target_rad",
-    "margin_m",
-    "clearance_m",
 )
+_SERIES = (*TRACK_SERIES, *LAW_SERIES, "margin_m", "clearance_m")

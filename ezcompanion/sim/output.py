@@ -16,7 +16,7 @@ import numpy as np
 
 from ezcompanion.config import Scenario
 from ezcompanion.guidance import GuidanceStep, LawName
-from ezcompanion.sim.engine import SimResult
+from ezcompanion.sim.engine import LAW_SERIES, TRACK_SERIES, SimResult
 
 __all__ = [
     "TRACK_COLUMNS",
@@ -28,20 +28,9 @@ __all__ = [
     "write_result_csv",
 ]
 
-TRACK_COLUMNS = ("t_s", "north_m", "east_m", "heading_rad", "accel_lat_m_s2")
-
+TRACK_COLUMNS = TRACK_SERIES
 # Law diagnostics after the track columns: names of ``LawOutput`` and ``SimResult`` fields.
-_LAW_COLUMNS = (
-    "h_m",
-    "alpha",
-    "accel_safety_m_s2",
-    "accel_intercept_m_s2",
-    "accel_desired_m_s2",
-    "accel_command_m_s2",
-    "range_to_target_m",
-    "lead_angle_target_rad",
-    "bearing_to_target_rad",
-)
+_LAW_COLUMNS = LAW_SERIES
 
 
 def track_header(zone_names: Sequence[str]) -> list[str]:

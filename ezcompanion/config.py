@@ -52,6 +52,7 @@ __all__ = [
     "build_dataclass",
     "load_scenario",
     "scenario_from_dict",
+    "scenario_update",
 ]
 
 # Top-level sections owned and validated by other components; kept raw in ``Scenario.sections``.
@@ -228,6 +229,28 @@ def scenario_from_dict(data: object) -> Scenario:
         origin=origin,
         sections=sections,
     )
+
+
+def scenario_update(current: Scenario, data: object) -> Scenario:
+    """``current`` with new defenders and target from ``data`` (a mapping as JSON gives it).
+
+    ``data`` holds ``defenders`` and ``target`` in the scenario file's layout, and may hold
+    ``name``; everything else (the vehicle, the gains) stays as it is. Errors name the key.
+    """
+    top = _mapping("scenario", data)
+    _only("", top, required={"defenders", "target"}, optional={"name"})
+    defenders_raw = top["defenders"]
+    if not isinstance(defenders_raw, list) or not defenders_raw:
+        raise ConfigError("defenders", defenders_raw, "must be a non-empty list")
+    defenders = tuple(
+        build_dataclass(f"defenders[{i}]", Defender, _mapping(f"defenders[{i}]", item))
+        for i, item in enumerate(defenders_raw)
+    )
+    target = build_dataclass("target", Target, _mapping("target", top["target"]))
+    name = top.get("name", current.name)
+    if not isinstance(name, str) or not name:
+        raise ConfigError("name", name, "must be a non-empty string")
+    return dataclasses.replace(current, name=name, defenders=defenders, target=target)
 
 
 def _mapping(path: str, value: object) -> Mapping[str, Any]:

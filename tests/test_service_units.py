@@ -162,3 +162,36 @@ def test_settings_errors_name_the_field() -> None:
         companion_settings(scenario, connect="serial:/dev/ttyS0")
     with pytest.raises(ConfigError, match=r"^companion\.stale_after_s"):
         companion_settings(scenario, stale_after_s=0.01)
+
+
+def test_a_scenario_update_is_checked_and_keeps_the_turn() -> None:
+    from ezcompanion.config import scenario_update
+
+    scenario = load_scenario(CONFIG)
+    moved = {
+        "defenders": [
+            {
+                "name": "D9",
+                "north_m": 6.0,
+                "east_m": -3.0,
+                "range_m": 1.5,
+                "capture_radius_m": 0.5,
+                "speed_ratio": 0.7,
+            }
+        ],
+        "target": {"north_m": 2.0, "east_m": 0.0},
+    }
+    bad = {**moved, "defenders": [{**moved["defenders"][0], "speed_ratio": 1.5}]}  # type: ignore[dict-item]
+    with pytest.raises(ConfigError, match=r"^defenders\[0\]\.speed_ratio"):
+        scenario_update(scenario, bad)
+    with pytest.raises(ConfigError, match=r"^target: is required"):
+        scenario_update(scenario, {"defenders": moved["defenders"]})
+    updated = scenario_update(scenario, moved)
+    assert [d.name for d in updated.defenders] == ["D9"] and updated.start == scenario.start
+    loop = GuidanceLoop(scenario, loop_rate_hz=50.0, stale_after_s=0.25)
+    before = _command(loop, 8.0, -4.0, -0.832, 0.555, 1.0)
+    accel = float(loop.controller.accel_m_s2)
+    loop.update_scenario(updated)
+    assert float(loop.controller.accel_m_s2) == accel  # mid-turn: the actuator state stays
+    after = _command(loop, 7.98, -3.99, -0.832, 0.555, 1.02)
+    assert before.step.law.margin_m.shape == (3,) and after.step.law.margin_m.shape == (1,)

@@ -33,6 +33,7 @@ class EventKind(StrEnum):
     COMMAND_ACK = "command_ack"
     STATUSTEXT = "statustext"
     WARNING = "warning"
+    SCENARIO = "scenario"
     INTERCEPTED = "intercepted"
     ENDED = "ended"
 

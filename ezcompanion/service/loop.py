@@ -88,6 +88,20 @@ class GuidanceLoop:
         )
         self.controller.reset()
 
+    def update_scenario(self, scenario: Scenario) -> None:
+        """Fly against new defenders and target from the next tick on, keeping the actuator
+        state (the vehicle is mid-turn) and the timing."""
+        accel = self.controller.accel_m_s2
+        self.scenario = scenario
+        self.controller = GuidanceController(
+            zones=scenario.zones(),
+            target=scenario.target,
+            params=scenario.guidance,
+            law=self.controller.law,
+        )
+        self.controller.reset(accel)
+        self.captured = False
+
     def reset(self) -> None:
         """Forget the actuator state and the timing (after a gap: link loss, failsafe)."""
         self.controller.reset()

@@ -28,13 +28,17 @@ guidance resumes only after the vehicle is heard again and fresh telemetry arriv
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import threading
 from dataclasses import dataclass
-from enum import StrEnum
+from enum import Enum, StrEnum
 from pathlib import Path
+from typing import Any
 
-from ezcompanion.config import Scenario
+from ezcompanion import __version__
+from ezcompanion.config import Scenario, scenario_update
+from ezcompanion.errors import ConfigError
 from ezcompanion.guidance import LawName
 from ezcompanion.service.clock import ScaledClock
 from ezcompanion.service.events import EventKind, EventLog
@@ -111,6 +115,8 @@ class CompanionService:
         self.telemetry = TelemetryState(origin=scenario.origin)
         self.phase = Phase.SEARCHING
         self._stop = threading.Event()
+        self._pending_lock = threading.Lock()
+        self._pending_scenario: Scenario | None = None
         self._track_csv = track_csv
         self._target: tuple[int, int] | None = None
         self._fixed_wing = False
@@ -141,6 +147,51 @@ class CompanionService:
     def stop(self) -> None:
         """Ask ``run`` to return (thread-safe)."""
         self._stop.set()
+
+    def offer_scenario(self, data: object) -> str | None:
+        """Validate new defenders and target (``config.scenario_update``) and queue them for
+        the loop, which takes them between two ticks. Thread-safe; never blocks on the loop.
+        Returns None when accepted, else the error, and then nothing changes."""
+        try:
+            scenario = scenario_update(self.scenario, data)
+        except ConfigError as exc:
+            return str(exc)
+        with self._pending_lock:
+            self._pending_scenario = scenario
+        return None
+
+    def status(self) -> dict[str, Any]:
+        """What the service is doing, for a status query (plain data, JSON-ready)."""
+        last = self.last_command
+        scenario = self.scenario
+        return {
+            "version": __version__,
+            "phase": self.phase.value,
+            "mode": self._mode,
+            "law": self.loop.controller.law.value,
+            "scenario": {
+                "name": scenario.name,
+                "target": dataclasses.asdict(scenario.target),
+                "defenders": [dataclasses.asdict(d) for d in scenario.defenders],
+            },
+            "config": {
+                k: (v.value if isinstance(v, Enum) else v)
+                for k, v in dataclasses.asdict(self.settings).items()
+                if k != "signing_key_hex"
+            },
+            "ticks": self.ticks,
+            "setpoints_sent": self.setpoints_sent,
+            "failsafes": self.failsafes,
+            "last_state": None
+            if last is None
+            else {
+                "time_s": last.time_s,
+                "north_m": last.state.north_m,
+                "east_m": last.state.east_m,
+                "course_rad": last.course_rad,
+                "speed_m_s": last.speed_m_s,
+            },
+        }
 
     def run(self, *, max_time_s: float | None = None) -> EngagementOutcome:
         """Guide until interception, ``stop()`` or ``max_time_s`` of clock time."""
@@ -176,6 +227,7 @@ class CompanionService:
                 now + 0.1 * clock.speedup,
             )
             self._link.wait_readable(clock.wall_s(due - now))
+            self._take_pending_scenario(clock.now_s())
             for msg in self._link.recv_messages():
                 self._on_message(msg, clock.now_s())
             now = clock.now_s()
@@ -273,6 +325,21 @@ class CompanionService:
             and self.settings.engage
             and mode is not None
             and mode[0] == "OFFBOARD"
+        )
+
+    def _take_pending_scenario(self, now: float) -> None:
+        with self._pending_lock:
+            scenario, self._pending_scenario = self._pending_scenario, None
+        if scenario is None:
+            return
+        self.scenario = scenario
+        self.loop.update_scenario(scenario)
+        self.events.emit(
+            EventKind.SCENARIO,
+            now,
+            f"new scenario {scenario.name}: {len(scenario.defenders)} defenders, target "
+            f"({scenario.target.north_m:g}, {scenario.target.east_m:g}) m",
+            defenders=len(scenario.defenders),
         )
 
     # --- periodic work --------------------------------------------------------------------

@@ -26,7 +26,7 @@ from ezcompanion.service.runner import CompanionService, EngagementOutcome
 from ezcompanion.service.settings import companion_settings
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
-SPEEDUP = 10.0
+SPEEDUP = 5.0  # fast, with room for a loaded machine: budgets are in vehicle time
 KEY_A = "11" * 32
 KEY_B = "22" * 32
 

@@ -57,6 +57,7 @@ def run_service(
     law: str | None,
     max_time_s: float | None,
     track_csv: Path | None,
+    telemetry: dict[str, object] | None = None,
     **overrides: object,
 ) -> int:
     """Steer a vehicle through one engagement; 0 if intercepted, 1 if it ended otherwise."""
@@ -67,12 +68,19 @@ def run_service(
     from ezcompanion.service.events import EventLog
     from ezcompanion.service.runner import CompanionService
     from ezcompanion.service.settings import companion_settings
+    from ezcompanion.telemetry import telemetry_settings
 
     scenario = load_scenario(config)
     settings = companion_settings(scenario, **overrides)
+    zenoh = telemetry_settings(scenario.sections.get("telemetry", {}), **(telemetry or {}))
     events = EventLog(lambda event: print(event.line(), flush=True))
     service = CompanionService(
-        scenario, settings, law=LawName(law) if law else None, events=events, track_csv=track_csv
+        scenario,
+        settings,
+        law=LawName(law) if law else None,
+        events=events,
+        track_csv=track_csv,
+        telemetry=zenoh,
     )
     previous = {
         sig: signal.signal(sig, lambda *_: service.stop())
@@ -92,7 +100,7 @@ def run_demo(*, scenarios: Sequence[int], out_dir: Path, speedup: float, profile
     Returns 1 if any engagement fails to intercept or enters an engagement zone.
     """
     from ezcompanion.config import load_scenario
-    from ezcompanion.service.demo import run_loopback
+    from ezcompanion.service.demo import run_loopback, telemetry_endpoint
     from ezcompanion.sim.output import read_track_csv
     from ezcompanion.sim.plot import plot_result
 
@@ -106,7 +114,9 @@ def run_demo(*, scenarios: Sequence[int], out_dir: Path, speedup: float, profile
             f"{speedup:g}x speed-up",
             flush=True,
         )
-        result = run_loopback(config, where, speedup=speedup, profile=profile)
+        endpoint = telemetry_endpoint()
+        print(f"    telemetry on {endpoint}: watch with `ezcompanion monitor --connect {endpoint}`")
+        result = run_loopback(config, where, speedup=speedup, profile=profile, telemetry=endpoint)
         print(result.summary(scenario))
         view = read_track_csv(where / "companion.csv", scenario, scenario.law)
         print(f"  wrote {plot_result(view, where / 'engagement.png')}")
@@ -144,23 +154,22 @@ def run_reference_demo(*, scenarios: Sequence[int], out_dir: Path) -> int:
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="ezcompanion", description=__doc__)
+    parser = argparse.ArgumentParser(
+        prog="ezcompanion",
+        description="A MAVLink guidance companion: intercept guidance among engagement zones.",
+    )
     commands = parser.add_subparsers(dest="command", required=True)
 
     sim = commands.add_parser("simulate", help="run one scenario in the reference simulator")
     sim.add_argument("config", type=Path, help="scenario YAML file")
-    sim.add_argument(
-        "--law", choices=LAWS, help="override the scenario's law"
-    )
+    sim.add_argument("--law", choices=LAWS, help="override the scenario's law")
     sim.add_argument("--out", type=Path, help="write the time series to this CSV file")
     sim.add_argument("--plot", type=Path, help="write the four-panel figure to this PNG file")
 
     run = commands.add_parser("run", help="steer a vehicle over MAVLink (the companion service)")
     run.add_argument("--config", type=Path, required=True, help="scenario YAML file")
     run.add_argument("--connect", help="pymavlink URL (default udpin:0.0.0.0:14550)")
-    run.add_argument(
-        "--law", choices=LAWS, help="override the scenario's law"
-    )
+    run.add_argument("--law", choices=LAWS, help="override the scenario's law")
     run.add_argument(
         "--engage",
         action="store_true",
@@ -173,6 +182,18 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--track", type=Path, help="write the companion's view to this CSV")
     run.add_argument("--speedup", type=float, help="clock speed-up, to match a loopback vehicle")
     run.add_argument("--max-time", type=float, help="give up after this many seconds")
+    run.add_argument(
+        "--zenoh-listen", action="append", help="telemetry endpoint (default tcp/127.0.0.1:7447)"
+    )
+    run.add_argument("--zenoh-connect", action="append", help="zenoh router or peer to join")
+    run.add_argument("--vehicle-id", help="the <vehicle> of the telemetry keys")
+    run.add_argument(
+        "--no-telemetry",
+        action="store_const",
+        const=False,
+        dest="telemetry_enabled",
+        help="do not publish over zenoh",
+    )
 
     demo = commands.add_parser("demo", help="fly the paper's scenarios on the loopback vehicle")
     demo.add_argument("--scenario", type=int, choices=sorted(PAPER_SCENARIOS), help="just one")
@@ -185,9 +206,11 @@ def _parser() -> argparse.ArgumentParser:
         help="the reference simulator instead, both laws side by side",
     )
 
+    from ezcompanion.telemetry.cli import add_telemetry_parsers
     from ezcompanion.validation.cli import add_validate_parser
 
     add_validate_parser(commands)
+    add_telemetry_parsers(commands)
     return parser
 
 
@@ -204,6 +227,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             from ezcompanion.validation.cli import run_validate
 
             return run_validate(args)
+        from ezcompanion.telemetry.cli import run_telemetry_command
+
+        code = run_telemetry_command(args)
+        if code is not None:
+            return code
         if args.command == "simulate":
             return run_simulate(
                 args.config,
@@ -223,6 +251,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                 signing_key_hex=args.signing_key_hex,
                 tlog=str(args.tlog) if args.tlog else None,
                 speedup=args.speedup,
+                telemetry={
+                    "listen": args.zenoh_listen,
+                    "connect": args.zenoh_connect,
+                    "vehicle_id": args.vehicle_id,
+                    "enabled": args.telemetry_enabled,
+                },
             )
         scenarios = [args.scenario] if args.scenario else sorted(PAPER_SCENARIOS)
         if args.reference:

@@ -19,6 +19,7 @@ Layout (see ``config/paper_scenario1.yaml`` for a commented example)::
     origin: {lat_deg, lon_deg, alt_m}    # optional: where local NED (0, 0) is on Earth
     sitl_stub: {...}                     # optional: validated by sitl_stub, kept raw here
     companion: {...}                     # optional: validated by ezcompanion.service
+    telemetry: {...}                     # optional: validated by ezcompanion.telemetry
 """
 
 from __future__ import annotations
@@ -52,11 +53,12 @@ __all__ = [
     "build_dataclass",
     "load_scenario",
     "scenario_from_dict",
+    "scenario_to_dict",
     "scenario_update",
 ]
 
 # Top-level sections owned and validated by other components; kept raw in ``Scenario.sections``.
-COMPONENT_SECTIONS = frozenset({"sitl_stub", "companion"})
+COMPONENT_SECTIONS = frozenset({"sitl_stub", "companion", "telemetry"})
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -231,25 +233,58 @@ def scenario_from_dict(data: object) -> Scenario:
     )
 
 
-def scenario_update(current: Scenario, data: object) -> Scenario:
-    """``current`` with new defenders and target from ``data`` (a mapping as JSON gives it).
+def scenario_to_dict(scenario: Scenario) -> dict[str, Any]:
+    """``scenario`` in the scenario file's layout (JSON-ready): ``scenario_from_dict`` of it
+    gives it back. The component sections are left out."""
+    start = scenario.start
+    guidance = {
+        f.name: getattr(scenario.guidance, f.name)
+        for f in dataclasses.fields(scenario.guidance)
+        if f.name != "accel_max_m_s2"
+    }
+    guidance["blend"] = scenario.guidance.blend.value
+    return {
+        "name": scenario.name,
+        "law": scenario.law.value,
+        "vehicle": {
+            "north_m": start.north_m,
+            "east_m": start.east_m,
+            "course_deg": math.degrees(start.course_rad),
+            "speed_m_s": start.speed_m_s,
+            "accel_max_m_s2": scenario.guidance.accel_max_m_s2,
+        },
+        "target": dataclasses.asdict(scenario.target),
+        "defenders": [dataclasses.asdict(d) for d in scenario.defenders],
+        "guidance": guidance,
+        "simulation": dataclasses.asdict(scenario.simulation),
+        "origin": dataclasses.asdict(scenario.origin),
+    }
 
-    ``data`` holds ``defenders`` and ``target`` in the scenario file's layout, and may hold
-    ``name``; everything else (the vehicle, the gains) stays as it is. Errors name the key.
+
+def scenario_update(current: Scenario, data: object) -> Scenario:
+    """``current`` with the defenders and target (and name) of ``data``.
+
+    ``data`` is a mapping as JSON gives it: either a whole scenario in the scenario file's
+    layout, or just ``defenders`` and ``target`` (and optionally ``name``) in that layout.
+    Everything else (the vehicle, the gains) stays as it is. Errors name the key.
     """
     top = _mapping("scenario", data)
-    _only("", top, required={"defenders", "target"}, optional={"name"})
-    defenders_raw = top["defenders"]
-    if not isinstance(defenders_raw, list) or not defenders_raw:
-        raise ConfigError("defenders", defenders_raw, "must be a non-empty list")
-    defenders = tuple(
-        build_dataclass(f"defenders[{i}]", Defender, _mapping(f"defenders[{i}]", item))
-        for i, item in enumerate(defenders_raw)
-    )
-    target = build_dataclass("target", Target, _mapping("target", top["target"]))
-    name = top.get("name", current.name)
-    if not isinstance(name, str) or not name:
-        raise ConfigError("name", name, "must be a non-empty string")
+    if "vehicle" in top:
+        whole = scenario_from_dict(top)
+        defenders, target, name = whole.defenders, whole.target, whole.name
+    else:
+        _only("", top, required={"defenders", "target"}, optional={"name"})
+        defenders_raw = top["defenders"]
+        if not isinstance(defenders_raw, list) or not defenders_raw:
+            raise ConfigError("defenders", defenders_raw, "must be a non-empty list")
+        defenders = tuple(
+            build_dataclass(f"defenders[{i}]", Defender, _mapping(f"defenders[{i}]", item))
+            for i, item in enumerate(defenders_raw)
+        )
+        target = build_dataclass("target", Target, _mapping("target", top["target"]))
+        name = top.get("name", current.name)
+        if not isinstance(name, str) or not name:
+            raise ConfigError("name", name, "must be a non-empty string")
     return dataclasses.replace(current, name=name, defenders=defenders, target=target)
 
 

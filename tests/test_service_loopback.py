@@ -90,6 +90,7 @@ def fly(
     start_mode: str | None = "GUIDED",
     max_time_s: float = 30.0,
     during: Any = None,
+    telemetry: Any = None,
     **companion: Any,
 ) -> Flight:
     """The companion in a thread, the vehicle in a process, until the engagement ends."""
@@ -106,7 +107,7 @@ def fly(
     events = EventLog()
     listening = threading.Event()
     events.add_sink(lambda e: listening.set() if e.kind is EventKind.LISTENING else None)
-    service = CompanionService(scenario, settings, events=events)
+    service = CompanionService(scenario, settings, events=events, telemetry=telemetry)
     result: list[EngagementOutcome] = []
     thread = threading.Thread(target=lambda: result.append(service.run(max_time_s=max_time_s)))
     thread.start()

@@ -24,7 +24,14 @@ import numpy as np
 from ezcompanion.config import Scenario, load_scenario
 from ezcompanion.guidance import LawName, evaluate_law
 
-__all__ = ["DemoResult", "free_udp_port", "judge_truth", "run_loopback", "wait_for_line"]
+__all__ = [
+    "DemoResult",
+    "free_udp_port",
+    "judge_truth",
+    "run_loopback",
+    "telemetry_endpoint",
+    "wait_for_line",
+]
 
 # wall seconds to wait for the companion beyond the scenario's own length
 _GRACE_WALL_S = 20.0
@@ -90,6 +97,17 @@ def _initial_mode(profile: str) -> list[str]:
     return ["--initial-mode", "AUTO.LOITER" if profile == "px4" else "GUIDED"]
 
 
+def telemetry_endpoint() -> str:
+    """tcp/127.0.0.1:7447, where ``ezcompanion monitor`` looks by default, if it is free;
+    else a free port (a monitor then needs ``--connect``)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        try:
+            sock.bind(("127.0.0.1", 7447))
+        except OSError:
+            sock.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{sock.getsockname()[1]}"
+
+
 def free_udp_port() -> int:
     """A UDP port on 127.0.0.1 that nothing holds right now."""
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
@@ -143,8 +161,12 @@ def run_loopback(
     profile: str = "copter",
     law: LawName | None = None,
     quiet: bool = False,
+    telemetry: str | None = None,
 ) -> DemoResult:
-    """Fly ``config`` with the stub and the companion as two processes; judge the truth."""
+    """Fly ``config`` with the stub and the companion as two processes; judge the truth.
+
+    ``telemetry``: the zenoh endpoint the companion listens on (None: no telemetry).
+    """
     scenario = load_scenario(config)
     out_dir.mkdir(parents=True, exist_ok=True)
     port = free_udp_port()
@@ -189,6 +211,7 @@ def run_loopback(
     ]
     if law is not None:
         companion_cmd += ["--law", law.value]
+    companion_cmd += ["--zenoh-listen", telemetry] if telemetry else ["--no-telemetry"]
     # The companion first, and the vehicle only once the companion's link is open: a vehicle
     # started first would fly on in AUTO while the companion loads.
     companion = subprocess.Popen(companion_cmd, stdout=subprocess.PIPE, text=True, bufsize=1)

@@ -34,14 +34,15 @@ import threading
 from dataclasses import dataclass
 from enum import Enum, StrEnum
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ezcompanion import __version__
-from ezcompanion.config import Scenario, scenario_update
+from ezcompanion.config import Scenario, scenario_to_dict, scenario_update
 from ezcompanion.errors import ConfigError
 from ezcompanion.guidance import LawName
 from ezcompanion.service.clock import ScaledClock
 from ezcompanion.service.events import EventKind, EventLog
+from ezcompanion.service.inbox import ScenarioInbox
 from ezcompanion.service.loop import GuidanceLoop, Hold, TickCommand
 from ezcompanion.service.setpoints import Setpoints, make_setpoints
 from ezcompanion.service.settings import CompanionSettings, SetpointKind
@@ -57,6 +58,9 @@ from ezcompanion.wire import (
     open_link,
     signing_key_from_hex,
 )
+
+if TYPE_CHECKING:
+    from ezcompanion.telemetry import TelemetryPublisher, TelemetrySettings
 
 __all__ = ["CompanionService", "EngagementOutcome", "Phase"]
 
@@ -101,7 +105,10 @@ class CompanionService:
         law: LawName | None = None,
         events: EventLog | None = None,
         track_csv: str | Path | None = None,
+        telemetry: TelemetrySettings | None = None,
     ) -> None:
+        """``telemetry``: publish over zenoh (``ezcompanion.telemetry``) when given and
+        enabled."""
         self.scenario = scenario
         self.settings = settings
         self.events = events if events is not None else EventLog()
@@ -115,9 +122,10 @@ class CompanionService:
         self.telemetry = TelemetryState(origin=scenario.origin)
         self.phase = Phase.SEARCHING
         self._stop = threading.Event()
-        self._pending_lock = threading.Lock()
-        self._pending_scenario: Scenario | None = None
+        self.scenario_inbox = ScenarioInbox(self._checked_update)
         self._track_csv = track_csv
+        self._telemetry = telemetry
+        self._publisher: TelemetryPublisher | None = None
         self._target: tuple[int, int] | None = None
         self._fixed_wing = False
         self._setpoints: Setpoints | None = None
@@ -149,16 +157,21 @@ class CompanionService:
         self._stop.set()
 
     def offer_scenario(self, data: object) -> str | None:
-        """Validate new defenders and target (``config.scenario_update``) and queue them for
-        the loop, which takes them between two ticks. Thread-safe; never blocks on the loop.
-        Returns None when accepted, else the error, and then nothing changes."""
-        try:
-            scenario = scenario_update(self.scenario, data)
-        except ConfigError as exc:
-            return str(exc)
-        with self._pending_lock:
-            self._pending_scenario = scenario
-        return None
+        """Queue new defenders and target for the loop, which takes them between two ticks
+        (thread-safe, never waits on the loop). None when accepted, else the error, and then
+        nothing changes. See ``_checked_update`` for what is accepted."""
+        return self.scenario_inbox.offer(data)
+
+    def _checked_update(self, data: object) -> Scenario:
+        update = scenario_update(self.scenario, data)
+        if len(update.defenders) != len(self.scenario.defenders):
+            raise ConfigError(
+                "defenders",
+                len(update.defenders),
+                f"must stay {len(self.scenario.defenders)} (the telemetry and track columns "
+                "follow the defenders by position)",
+            )
+        return update
 
     def status(self) -> dict[str, Any]:
         """What the service is doing, for a status query (plain data, JSON-ready)."""
@@ -169,11 +182,7 @@ class CompanionService:
             "phase": self.phase.value,
             "mode": self._mode,
             "law": self.loop.controller.law.value,
-            "scenario": {
-                "name": scenario.name,
-                "target": dataclasses.asdict(scenario.target),
-                "defenders": [dataclasses.asdict(d) for d in scenario.defenders],
-            },
+            "scenario": scenario_to_dict(scenario),
             "config": {
                 k: (v.value if isinstance(v, Enum) else v)
                 for k, v in dataclasses.asdict(self.settings).items()
@@ -207,6 +216,18 @@ class CompanionService:
             )
             if s.signing_key_hex:
                 link.enable_signing(signing_key_from_hex(s.signing_key_hex))
+            if self._telemetry is not None and self._telemetry.enabled:
+                from ezcompanion.telemetry import TelemetryPublisher
+
+                self._publisher = stack.enter_context(
+                    TelemetryPublisher(
+                        self._telemetry,
+                        status=self.status,
+                        on_scenario=self.offer_scenario,
+                        zone_names=self.loop.controller.zones.names,
+                    )
+                )
+                self.events.add_sink(self._publisher.publish_event)
             self._link, self._tlog, self._track = link, tlog, track
             self.events.emit(EventKind.LISTENING, self.clock.now_s(), f"link open on {s.connect}")
             self._serve(max_time_s)
@@ -328,12 +349,13 @@ class CompanionService:
         )
 
     def _take_pending_scenario(self, now: float) -> None:
-        with self._pending_lock:
-            scenario, self._pending_scenario = self._pending_scenario, None
+        scenario = self.scenario_inbox.take()
         if scenario is None:
             return
         self.scenario = scenario
         self.loop.update_scenario(scenario)
+        if self._publisher is not None:
+            self._publisher.set_zone_names(scenario.zones().names)
         self.events.emit(
             EventKind.SCENARIO,
             now,
@@ -464,6 +486,8 @@ class CompanionService:
                 self._track.write(now, state.north_m, state.east_m, result.course_rad, result.step)
             self.last_command = result
             if result.captured:
+                if self._publisher is not None:
+                    self._publisher.publish_tick(result)
                 self.events.emit(
                     EventKind.INTERCEPTED,
                     now,
@@ -487,6 +511,8 @@ class CompanionService:
             if message is not None:
                 self._send(message)
                 self.setpoints_sent += 1
+            if self._publisher is not None:  # after the setpoint has left
+                self._publisher.publish_tick(result)
             return
         if result is Hold.NO_TELEMETRY:
             return  # nothing to stop yet: no position has arrived since (re)connecting

@@ -1,0 +1,24 @@
+"""Eclipse Zenoh telemetry: live engagement data, presence, status and scenario updates.
+
+The only package of the project that imports ``zenoh``. Keys and payloads are in
+:mod:`ezcompanion.telemetry.schema` and docs/telemetry.md.
+"""
+
+from ezcompanion.telemetry.publisher import TelemetryPublisher
+from ezcompanion.telemetry.schema import SCHEMAS, key
+from ezcompanion.telemetry.settings import (
+    DEFAULT_ENDPOINT,
+    TelemetrySettings,
+    session_config,
+    telemetry_settings,
+)
+
+__all__ = [
+    "DEFAULT_ENDPOINT",
+    "SCHEMAS",
+    "TelemetryPublisher",
+    "TelemetrySettings",
+    "key",
+    "session_config",
+    "telemetry_settings",
+]

@@ -1,0 +1,187 @@
+"""The ``monitor`` and ``router`` commands: argparse here, typed functions underneath.
+
+``ezcompanion.cli`` adds them with ``add_telemetry_parsers(subparsers)`` and dispatches with
+``run_telemetry_command(args)`` (None when the command is not one of these).
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import threading
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+
+import zenoh
+
+from ezcompanion.config import load_scenario
+from ezcompanion.telemetry.monitor import MonitorView, run_monitor
+from ezcompanion.telemetry.recording import iter_recording, plot_recording, read_recording
+from ezcompanion.telemetry.schema import vehicle_of
+from ezcompanion.telemetry.settings import (
+    DEFAULT_ENDPOINT,
+    open_session,
+    session_config,
+    telemetry_settings,
+)
+
+__all__ = [
+    "add_telemetry_parsers",
+    "monitor_config",
+    "replay",
+    "router_config",
+    "run_router",
+    "run_telemetry_command",
+]
+
+
+def monitor_config(
+    *, connect: Sequence[str], mode: str = "peer", config_file: str | None = None,
+    multicast_scouting: bool = False,
+) -> zenoh.Config:  # fmt: skip
+    """A monitor's session: it connects and never listens (the vehicle owns the port)."""
+    settings = telemetry_settings(
+        {},
+        mode=mode,
+        listen=(),
+        connect=tuple(connect),
+        config_file=config_file,
+        multicast_scouting=multicast_scouting,
+    )
+    return session_config(settings)
+
+
+def router_config(
+    *, listen: Sequence[str], connect: Sequence[str] = (), config_file: str | None = None,
+    multicast_scouting: bool = False,
+) -> zenoh.Config:  # fmt: skip
+    """A router's session: listens on ``listen``, joins other routers on ``connect``."""
+    settings = telemetry_settings(
+        {},
+        mode="router",
+        listen=tuple(listen),
+        connect=tuple(connect),
+        config_file=config_file,
+        multicast_scouting=multicast_scouting,
+    )
+    return session_config(settings)
+
+
+def run_router(
+    conf: zenoh.Config, *, stop: threading.Event | None = None, duration_s: float | None = None
+) -> int:
+    """Route until ``stop`` is set (or SIGINT/SIGTERM, or ``duration_s``); returns 0."""
+    stop = stop if stop is not None else threading.Event()
+    with open_session(conf, what="router") as session, _stop_on_signals(stop):
+        listen = conf.get_json("listen/endpoints")
+        print(f"zenoh router {session.zid()} listening on {listen}; Ctrl-C to stop", flush=True)
+        stop.wait(duration_s)
+    return 0
+
+
+def replay(
+    path: Path, *, scenario_yaml: Path | None, plot_png: Path | None, track_csv: Path | None,
+    vehicle: str | None,
+) -> int:  # fmt: skip
+    """Show the end of a recording; with ``plot_png``/``track_csv``, draw or convert it."""
+    view = MonitorView()
+    for line in iter_recording(path):
+        if vehicle is None or vehicle_of(line["key"])[0] == vehicle:
+            view.update(line["key"], line["payload"])
+    print(view.render())
+    scenario = load_scenario(scenario_yaml) if scenario_yaml is not None else None
+    if track_csv is not None:
+        run = read_recording(path, scenario, vehicle=vehicle, track_csv=track_csv)
+        print(f"  wrote {track_csv} ({run.t_s.size} rows)")
+    if plot_png is not None:
+        print(f"  wrote {plot_recording(path, plot_png, scenario, vehicle=vehicle)}")
+    return 0
+
+
+@contextmanager
+def _stop_on_signals(stop: threading.Event) -> Iterator[None]:
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {
+        sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)
+    }
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def add_telemetry_parsers(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add ``monitor`` and ``router`` to ``ezcompanion``'s subcommands."""
+    mon = subparsers.add_parser("monitor", help="watch the engagements live over zenoh")
+    mon.add_argument(
+        "--connect",
+        action="append",
+        help=f"zenoh endpoint of a vehicle or router (repeatable; default {DEFAULT_ENDPOINT})",
+    )
+    mon.add_argument("--vehicle", default="*", help="only this vehicle id (default: all)")
+    mon.add_argument("--json", action="store_true", help="print raw JSON lines, no table")
+    mon.add_argument("--record", type=Path, help="append every sample to this JSON-lines file")
+    mon.add_argument("--duration", type=float, help="stop after this many seconds")
+    mon.add_argument("--mode", choices=["peer", "client"], default="peer")
+    mon.add_argument("--zenoh-config", help="a zenoh json5 config file instead of the flags")
+    mon.add_argument("--multicast-scouting", action="store_true", help="find peers on the LAN")
+    mon.add_argument("--replay", type=Path, help="read this recording instead of listening")
+    mon.add_argument("--scenario", type=Path, help="with --replay: the scenario YAML flown")
+    mon.add_argument("--plot", type=Path, help="with --replay: write the figure to this PNG")
+    mon.add_argument("--track", type=Path, help="with --replay: write the track CSV here")
+
+    rtr = subparsers.add_parser("router", help="run a zenoh router for vehicles and monitors")
+    rtr.add_argument(
+        "--listen",
+        action="append",
+        help=f"endpoint to listen on (repeatable; default {DEFAULT_ENDPOINT}, "
+        "e.g. tcp/0.0.0.0:7447 for the network)",
+    )
+    rtr.add_argument("--connect", action="append", default=[], help="other routers to join")
+    rtr.add_argument("--zenoh-config", help="a zenoh json5 config file instead of the flags")
+    rtr.add_argument("--multicast-scouting", action="store_true", help="find peers on the LAN")
+    rtr.add_argument("--duration", type=float, help="stop after this many seconds")
+
+
+def run_telemetry_command(args: argparse.Namespace) -> int | None:
+    """Run ``monitor`` or ``router``; None if ``args.command`` is neither."""
+    if args.command == "router":
+        conf = router_config(
+            listen=args.listen or [DEFAULT_ENDPOINT],
+            connect=args.connect,
+            config_file=args.zenoh_config,
+            multicast_scouting=args.multicast_scouting,
+        )
+        return run_router(conf, duration_s=args.duration)
+    if args.command != "monitor":
+        return None
+    vehicle = None if args.vehicle == "*" else args.vehicle
+    if args.replay is not None:
+        return replay(
+            args.replay,
+            scenario_yaml=args.scenario,
+            plot_png=args.plot,
+            track_csv=args.track,
+            vehicle=vehicle,
+        )
+    conf = monitor_config(
+        connect=args.connect or [DEFAULT_ENDPOINT],
+        mode=args.mode,
+        config_file=args.zenoh_config,
+        multicast_scouting=args.multicast_scouting,
+    )
+    stop = threading.Event()
+    with _stop_on_signals(stop):
+        run_monitor(
+            conf,
+            vehicle=args.vehicle,
+            json_lines=args.json,
+            record=args.record,
+            duration_s=args.duration,
+            stop=stop,
+        )
+    return 0

@@ -1,0 +1,150 @@
+"""Telemetry settings: the optional ``telemetry:`` section of a scenario file, then flags.
+
+Layout (every key optional)::
+
+    telemetry:
+      enabled: true
+      mode: peer                      # peer | client | router
+      listen: [tcp/127.0.0.1:7447]    # where monitors find us (peer, router; never client)
+      connect: []                     # routers or peers to join, e.g. [tcp/10.0.0.2:7447]
+      multicast_scouting: false       # find peers on the LAN by UDP multicast
+      config_file: null               # any zenoh json5 config instead of the keys above
+      vehicle_id: vehicle1            # the <vehicle> chunk of every key
+
+A client cannot listen: in client mode ``listen`` defaults to nothing, and giving it is an
+error. With ``config_file`` the file is the whole session configuration (zenoh's own
+format); ``mode``, ``listen``, ``connect`` and ``multicast_scouting`` are then not applied.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from ezcompanion.config import build_dataclass
+from ezcompanion.errors import ConfigError
+
+__all__ = [
+    "DEFAULT_ENDPOINT",
+    "TelemetrySettings",
+    "open_session",
+    "release",
+    "session_config",
+    "telemetry_settings",
+]
+
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+_MODES = ("peer", "client", "router")
+# A key chunk: no separators or wildcards (zenoh reserves / * $ ? #).
+_CHUNK = re.compile(r"^[A-Za-z0-9_.\-]+$")
+# A zenoh locator: protocol/address, e.g. tcp/127.0.0.1:7447, udp/[::1]:7447, unixsock-stream/x
+_ENDPOINT = re.compile(r"^[a-z][a-z0-9\-]*/\S+$")
+
+
+@dataclass(frozen=True, kw_only=True)
+class TelemetrySettings:
+    """Validated telemetry settings; see the module docstring for each key."""
+
+    enabled: bool = True
+    mode: str = "peer"
+    listen: tuple[str, ...] = (DEFAULT_ENDPOINT,)
+    connect: tuple[str, ...] = ()
+    multicast_scouting: bool = False
+    config_file: str | None = None
+    vehicle_id: str = "vehicle1"
+
+    def __post_init__(self) -> None:
+        for name in ("enabled", "multicast_scouting"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(name, getattr(self, name), "must be true or false")
+        if self.mode not in _MODES:
+            raise ConfigError("mode", self.mode, f"must be one of {', '.join(_MODES)}")
+        for name in ("listen", "connect"):
+            endpoints = getattr(self, name)
+            if not isinstance(endpoints, tuple):
+                raise ConfigError(name, endpoints, "must be a list of endpoints")
+            for endpoint in endpoints:
+                if not isinstance(endpoint, str) or not _ENDPOINT.match(endpoint):
+                    raise ConfigError(
+                        name, endpoint, "must be zenoh endpoints such as tcp/127.0.0.1:7447"
+                    )
+        if self.mode == "client" and self.listen:
+            raise ConfigError("listen", list(self.listen), "a client cannot listen")
+        if self.mode == "client" and not self.connect and self.config_file is None:
+            raise ConfigError("connect", [], "a client needs a router or peer to connect to")
+        if self.config_file is not None and not (
+            isinstance(self.config_file, str) and Path(self.config_file).is_file()
+        ):
+            raise ConfigError("config_file", self.config_file, "must be an existing file")
+        if not isinstance(self.vehicle_id, str) or not _CHUNK.match(self.vehicle_id):
+            raise ConfigError(
+                "vehicle_id", self.vehicle_id, "must be letters, digits, '_', '.' or '-'"
+            )
+
+
+def telemetry_settings(raw: Mapping[str, Any], **overrides: Any) -> TelemetrySettings:
+    """The ``telemetry:`` section ``raw`` with command-line ``overrides`` (None = unset).
+
+    Lists become tuples; a single endpoint string is taken as a list of one.
+    """
+    values = dict(raw)
+    values.update({key: value for key, value in overrides.items() if value is not None})
+    for name in ("listen", "connect"):
+        if name in values:
+            given = values[name]
+            if isinstance(given, str):
+                values[name] = (given,)
+            elif isinstance(given, Sequence):
+                values[name] = tuple(given)
+    if values.get("mode") == "client" and "listen" not in values:
+        values["listen"] = ()
+    settings: TelemetrySettings = build_dataclass("telemetry", TelemetrySettings, values)
+    return settings
+
+
+def session_config(settings: TelemetrySettings) -> zenoh.Config:
+    """The zenoh configuration for ``settings``: its file, or mode, endpoints and scouting."""
+    if settings.config_file is not None:
+        try:
+            return zenoh.Config.from_file(settings.config_file)
+        except zenoh.ZError as exc:
+            raise ConfigError("telemetry.config_file", settings.config_file, str(exc)) from None
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps(settings.mode))
+    conf.insert_json5("listen/endpoints", json.dumps(list(settings.listen)))
+    conf.insert_json5("connect/endpoints", json.dumps(list(settings.connect)))
+    conf.insert_json5("scouting/multicast/enabled", json.dumps(settings.multicast_scouting))
+    return conf
+
+
+def open_session(conf: zenoh.Config, *, what: str = "telemetry") -> zenoh.Session:
+    """``zenoh.open(conf)``, its failure (a port in use, a bad endpoint) as a ConfigError."""
+    try:
+        return zenoh.open(conf)
+    except zenoh.ZError as exc:
+        raise ConfigError(what, _endpoints(conf), f"cannot open a zenoh session: {exc}") from None
+
+
+def _endpoints(conf: zenoh.Config) -> str:
+    try:
+        listen = conf.get_json("listen/endpoints")
+        connect = conf.get_json("connect/endpoints")
+    except zenoh.ZError:
+        return "?"
+    return f"listen {listen}, connect {connect}"
+
+
+def release(*entities: Any) -> None:
+    """Undeclare zenoh entities (publishers, queryables, tokens, subscribers) or close
+    sessions, in the order given (zenoh's stubs leave these calls untyped)."""
+    for entity in entities:
+        if isinstance(entity, zenoh.Session):
+            entity.close()  # type: ignore[no-untyped-call]
+        else:
+            entity.undeclare()

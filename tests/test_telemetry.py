@@ -1,0 +1,463 @@
+"""Zenoh telemetry over real sessions on loopback (a fresh port each, no multicast scouting).
+
+The engagements are driven by the guidance loop itself on synthetic vehicle states: each
+tick's ``TickCommand`` is published and the test compares what a subscriber receives with
+the command's own numbers.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import socket
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+import zenoh
+
+from ezcompanion.config import Scenario, load_scenario, scenario_from_dict, scenario_update
+from ezcompanion.errors import ConfigError
+from ezcompanion.service.events import Event, EventKind
+from ezcompanion.service.inbox import ScenarioInbox
+from ezcompanion.service.loop import GuidanceLoop, TickCommand
+from ezcompanion.service.state import VehicleState
+from ezcompanion.telemetry import (
+    SCHEMAS,
+    TelemetryPublisher,
+    TelemetrySettings,
+    key,
+    session_config,
+    telemetry_settings,
+)
+from ezcompanion.telemetry.settings import release
+
+CONFIG = Path(__file__).resolve().parents[1] / "config" / "paper_scenario1.yaml"
+SCENARIO_RAW: dict[str, Any] = yaml.safe_load(CONFIG.read_text())
+NAMES = ("D1", "D2", "D3")
+
+
+# --- helpers ------------------------------------------------------------------------------
+
+
+def free_endpoint() -> str:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{sock.getsockname()[1]}"
+
+
+def peer(connect: str) -> zenoh.Config:
+    """A subscriber's session: connects to ``connect``, never listens, no multicast."""
+    return session_config(TelemetrySettings(listen=(), connect=(connect,)))
+
+
+def wait_for(condition: Callable[[], bool], timeout_s: float = 5.0) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.005)
+    return True
+
+
+def engagement(ticks: int, scenario_raw: dict[str, Any] | None = None) -> Iterator[TickCommand]:
+    """The loop's commands along a straight flight from the scenario's start (50 Hz)."""
+    scenario = scenario_from_dict(scenario_raw or SCENARIO_RAW)
+    loop = GuidanceLoop(scenario, loop_rate_hz=50.0, stale_after_s=0.25)
+    vn, ve = math.cos(scenario.start.course_rad), math.sin(scenario.start.course_rad)
+    for k in range(ticks):
+        t = 1.0 + 0.02 * k
+        state = VehicleState(
+            north_m=scenario.start.north_m + vn * 0.02 * k,
+            east_m=scenario.start.east_m + ve * 0.02 * k,
+            down_m=-20.0,
+            velocity_north_m_s=vn,
+            velocity_east_m_s=ve,
+            yaw_rad=0.3,
+            position_time_s=t - 0.005,
+            attitude_time_s=t - 0.01,
+            position_source="local",
+        )
+        command = loop.tick(state, t)
+        assert isinstance(command, TickCommand)
+        yield command
+
+
+class Collector:
+    """A subscriber callback that keeps (key, encoding, payload) of every sample."""
+
+    def __init__(self, sleep_s: float = 0.0) -> None:
+        self.samples: list[tuple[str, str, dict[str, Any]]] = []
+        self.sleep_s = sleep_s
+
+    def __call__(self, sample: zenoh.Sample) -> None:
+        self.samples.append(
+            (str(sample.key_expr), str(sample.encoding), json.loads(sample.payload.to_bytes()))
+        )
+        if self.sleep_s:
+            time.sleep(self.sleep_s)  # a deliberately slow subscriber
+
+    def of(self, leaf: str) -> list[dict[str, Any]]:
+        return [p for k, _, p in self.samples if k.endswith("/" + leaf)]
+
+
+@pytest.fixture
+def endpoint() -> str:
+    return free_endpoint()
+
+
+def publisher(
+    endpoint: str,
+    *,
+    vehicle_id: str = "vehicle1",
+    status: Callable[[], dict[str, Any]] | None = None,
+    on_scenario: Callable[[dict[str, Any]], str | None] | None = None,
+    **settings: Any,
+) -> TelemetryPublisher:
+    if "connect" not in settings:
+        settings["listen"] = (endpoint,)
+    return TelemetryPublisher(
+        telemetry_settings({"vehicle_id": vehicle_id}, **settings),
+        status=status or (lambda: {"phase": "guiding"}),
+        on_scenario=on_scenario or (lambda data: None),
+        zone_names=NAMES,
+    )
+
+
+# --- settings -----------------------------------------------------------------------------
+
+
+def test_settings_default_to_a_loopback_peer_without_multicast() -> None:
+    s = telemetry_settings({})
+    assert (s.mode, s.listen, s.connect, s.multicast_scouting) == (
+        "peer",
+        ("tcp/127.0.0.1:7447",),
+        (),
+        False,
+    )
+    conf = session_config(s)
+    assert json.loads(conf.get_json("scouting/multicast/enabled")) is False
+    assert json.loads(conf.get_json("listen/endpoints")) == ["tcp/127.0.0.1:7447"]
+    client = telemetry_settings({"mode": "client", "connect": "tcp/10.0.0.2:7447"})
+    assert client.listen == () and client.connect == ("tcp/10.0.0.2:7447",)
+
+
+@pytest.mark.parametrize(
+    ("raw", "field"),
+    [
+        ({"mode": "server"}, "telemetry.mode"),
+        ({"listen": ["127.0.0.1:7447"]}, "telemetry.listen"),
+        ({"mode": "client", "connect": ["tcp/h:1"], "listen": ["tcp/h:2"]}, "telemetry.listen"),
+        ({"mode": "client"}, "telemetry.connect"),
+        ({"vehicle_id": "a/b"}, "telemetry.vehicle_id"),
+        ({"vehicle_id": "*"}, "telemetry.vehicle_id"),
+        ({"config_file": "/nonexistent.json5"}, "telemetry.config_file"),
+        ({"enabled": "yes"}, "telemetry.enabled"),
+        ({"listn": []}, "telemetry.listn"),
+    ],
+)
+def test_bad_settings_name_the_key(raw: dict[str, Any], field: str) -> None:
+    with pytest.raises(ConfigError) as info:
+        telemetry_settings(raw)
+    assert info.value.field == field
+
+
+def test_a_port_in_use_is_a_clear_error(endpoint: str) -> None:
+    with publisher(endpoint), pytest.raises(ConfigError, match="cannot open a zenoh session"):
+        publisher(endpoint)
+
+
+# --- samples ------------------------------------------------------------------------------
+
+
+def test_a_subscriber_sees_every_tick_as_the_loop_computed_it(endpoint: str) -> None:
+    commands = list(engagement(60))
+    got = Collector()
+    with publisher(endpoint) as pub, zenoh.open(peer(endpoint)) as session:
+        sub = session.declare_subscriber(key("*", "*"), got)
+        assert wait_for(lambda: pub.has_subscribers("guidance") and pub.has_subscribers("state"))
+        for sent, command in enumerate(commands, start=1):
+            pub.publish_tick(command)  # at the loop's pace: each tick out before the next
+            assert wait_for(lambda sent=sent: pub.samples_published == 2 * sent)  # type: ignore[misc]
+        assert wait_for(lambda: len(got.samples) == 2 * len(commands))
+        release(sub)
+    assert pub.ticks_dropped == 0
+    encodings = {k.rsplit("/", 1)[1]: e for k, e, _ in got.samples}
+    assert encodings == {
+        "state": "application/json;ezcompanion.state.v1",
+        "guidance": "application/json;ezcompanion.guidance.v1",
+    }
+    states, guidance = got.of("state"), got.of("guidance")
+    assert [g["seq"] for g in guidance] == [s["seq"] for s in states]
+    assert [g["seq"] for g in guidance] == sorted({g["seq"] for g in guidance})  # in order
+    for command, state, g in zip(commands, states, guidance, strict=True):
+        law = command.step.law
+        assert state["vehicle_id"] == g["vehicle_id"] == "vehicle1"
+        assert state["north_m"] == command.state.north_m
+        assert state["position_age_s"] == pytest.approx(0.005)
+        assert state["course_rad"] == command.course_rad
+        assert g["time_s"] == command.time_s
+        assert g["h_m"] == float(law.h_m)
+        assert g["alpha"] == float(law.alpha)
+        assert g["accel_safety_m_s2"] == float(law.accel_safety_m_s2)
+        assert g["accel_intercept_m_s2"] == float(law.accel_intercept_m_s2)
+        assert g["accel_desired_m_s2"] == float(law.accel_desired_m_s2)
+        assert g["accel_command_m_s2"] == float(law.accel_command_m_s2)
+        assert g["accel_lat_m_s2"] == float(command.step.accel_lat_m_s2)
+        assert g["accel_lat_cmd_m_s2"] == command.accel_lat_m_s2
+        assert g["range_to_target_m"] == float(law.range_to_target_m)
+        assert g["bearing_to_target_rad"] == float(law.bearing_to_target_rad)
+        assert g["reference_saturated"] == bool(law.reference_saturated)
+        assert [z["name"] for z in g["zones"]] == list(NAMES)
+        assert [z["margin_m"] for z in g["zones"]] == law.margin_m.tolist()
+        # b_i = clearance - eps: the margin is the clearance less the scenario's epsilon
+        for zone in g["zones"]:
+            assert zone["clearance_m"] - zone["margin_m"] == pytest.approx(0.2)
+        assert sum(z["softmin_weight"] for z in g["zones"]) == pytest.approx(1.0)
+    assert {g["mode"] for g in guidance} <= {"intercept", "blend", "safety", "captured"}
+
+
+def test_events_are_published_in_order_with_their_data(endpoint: str) -> None:
+    got = Collector()
+    with publisher(endpoint) as pub, zenoh.open(peer(endpoint)) as session:
+        sub = session.declare_subscriber(key("vehicle1", "event"), got)
+        assert wait_for(lambda: pub.has_subscribers("event"))
+        pub.publish_event(Event(EventKind.ENGAGED, 3.0, "guiding in GUIDED", {"setpoints": 0}))
+        pub.publish_event(Event(EventKind.INTERCEPTED, 9.5, "done", {"miss_distance_m": 0.07}))
+        assert wait_for(lambda: len(got.samples) == 2)
+        release(sub)
+    first, second = got.of("event")
+    assert got.samples[0][1] == "application/json;ezcompanion.event.v1"
+    assert (first["kind"], first["time_s"], first["data"]) == ("engaged", 3.0, {"setpoints": 0})
+    assert (second["kind"], second["data"]["miss_distance_m"]) == ("intercepted", 0.07)
+    assert second["seq"] > first["seq"]
+
+
+def test_a_slow_subscriber_does_not_hold_the_publisher_back(endpoint: str) -> None:
+    """The subscriber sleeps 20 ms a sample: it takes at most 50 a second. The publisher still
+    sends every tick as soon as it is queued (congestion control DROP: zenoh drops what the
+    subscriber cannot take, nothing waits for it), so it is done long before the subscriber."""
+    commands = list(engagement(40))
+    slow = Collector(sleep_s=0.02)
+    ticks = 1000
+    with publisher(endpoint) as pub, zenoh.open(peer(endpoint)) as session:
+        sub = session.declare_subscriber(key("vehicle1", "*"), slow)
+        assert wait_for(lambda: pub.has_subscribers("guidance"))
+        for k in range(ticks):
+            pub.publish_tick(commands[k % len(commands)])
+            while pub.samples_published < 2 * (k + 1):  # the loop's next tick comes later
+                time.sleep(0.0002)
+        received_when_done = len(slow.samples)
+        release(sub)
+    assert pub.ticks_dropped == 0 and pub.samples_published == 2 * ticks
+    # everything left the publisher while the subscriber had taken only a fraction of it
+    assert received_when_done < ticks / 2
+
+
+# --- presence, status, scenario updates -------------------------------------------------
+
+
+def test_the_liveliness_token_comes_and_goes_with_the_publisher(endpoint: str) -> None:
+    seen: list[tuple[str, str]] = []
+
+    def on_alive(sample: zenoh.Sample) -> None:
+        seen.append((str(sample.key_expr), str(sample.kind)))
+
+    # the monitor joins after the token exists: it learns of it from the history
+    with publisher(endpoint) as pub, zenoh.open(peer(endpoint)) as session:
+        live = session.liveliness().declare_subscriber(key("*", "alive"), on_alive, history=True)
+        assert wait_for(lambda: len(seen) == 1)
+        pub.close()
+        assert wait_for(lambda: len(seen) == 2)
+        release(live)
+    assert seen == [
+        ("ezcompanion/vehicle1/alive", "SampleKind.PUT"),
+        ("ezcompanion/vehicle1/alive", "SampleKind.DELETE"),
+    ]
+
+
+def _query(session: zenoh.Session, key_expr: str, payload: bytes | None = None) -> Any:
+    replies = list(session.get(key_expr, payload=payload, timeout=5.0))
+    assert len(replies) == 1 and replies[0].ok is not None, [
+        (r.replier_id, r.ok and r.ok.payload.to_string()[:200], r.err and r.err.payload.to_string())
+        for r in replies
+    ]
+    return str(replies[0].ok.encoding), json.loads(replies[0].ok.payload.to_bytes())
+
+
+def test_status_gives_version_provider_and_last_state(endpoint: str) -> None:
+    command = next(engagement(1))
+    with (
+        publisher(endpoint, status=lambda: {"phase": "guiding", "scenario": {"name": "x"}}) as pub,
+        zenoh.open(peer(endpoint)) as session,
+    ):
+        pub.publish_tick(command)
+        pub.publish_event(Event(EventKind.ENGAGED, 1.0, "guiding"))
+        assert wait_for(lambda: pub.samples_published == 3)
+        encoding, status = _query(session, key("vehicle1", "status"))
+    assert encoding == f"application/json;{SCHEMAS['status']}"
+    assert status["version"] and status["vehicle_id"] == "vehicle1"
+    assert (status["phase"], status["scenario"]) == ("guiding", {"name": "x"})
+    assert status["last_state"]["north_m"] == command.state.north_m
+    assert status["recent_events"][0]["kind"] == "engaged"
+
+
+def test_a_failing_status_provider_still_replies(endpoint: str) -> None:
+    def broken() -> dict[str, Any]:
+        raise RuntimeError("no status yet")
+
+    with publisher(endpoint, status=broken), zenoh.open(peer(endpoint)) as session:
+        _, status = _query(session, key("vehicle1", "status"))
+    assert status["status_error"] == "RuntimeError: no status yet"
+
+
+def inbox_for(base: Scenario) -> ScenarioInbox:
+    """The service's inbox: updates validated against the running scenario."""
+    return ScenarioInbox(lambda data: scenario_update(base, data))
+
+
+def test_a_scenario_update_moves_a_defender_and_the_guidance_follows(endpoint: str) -> None:
+    inbox = inbox_for(load_scenario(CONFIG))
+    moved = copy.deepcopy(SCENARIO_RAW)
+    moved["defenders"][1]["east_m"] = -1.0  # D2 one metre closer to the flight path
+    got = Collector()
+    with (
+        publisher(endpoint, on_scenario=inbox.offer) as pub,
+        zenoh.open(peer(endpoint)) as session,
+    ):
+        sub = session.declare_subscriber(key("vehicle1", "guidance"), got)
+        assert wait_for(lambda: pub.has_subscribers("guidance"))
+        before = list(engagement(30))
+        for command in before[:15]:
+            pub.publish_tick(command)
+            time.sleep(0.002)
+        _, reply = _query(session, key("vehicle1", "scenario"), json.dumps(moved).encode())
+        assert reply == {"ok": True}
+        update = inbox.take()  # what the loop does between ticks
+        assert update is not None and inbox.take() is None
+        assert update.defenders[1].east_m == -1.0
+        after = list(engagement(30, moved))  # the loop rebuilt on the new scenario
+        for command in after[15:]:
+            pub.publish_tick(command)
+            time.sleep(0.002)
+        assert wait_for(lambda: len(got.samples) == 30)
+        release(sub)
+    guidance = got.of("guidance")
+    d2_before = [g["zones"][1]["clearance_m"] for g in guidance[:15]]
+    d2_after = [g["zones"][1]["clearance_m"] for g in guidance[15:]]
+    d1_after = [g["zones"][0]["clearance_m"] for g in guidance[15:]]
+    # the same positions, D2 one metre further east: its clearance changed, D1's did not
+    expected = [float(c.step.law.clearance_m[1]) for c in after[15:]]
+    assert d2_after == expected
+    assert d2_after != [float(c.step.law.clearance_m[1]) for c in before[15:]]
+    assert d1_after == [float(c.step.law.clearance_m[0]) for c in before[15:]]
+    assert len(d2_before) == 15
+
+
+@pytest.mark.parametrize(
+    ("given", "error"),
+    [
+        (b"{not json", "not JSON"),
+        (b"[1, 2]", "must be a JSON object"),
+        (None, "send the scenario"),
+        ("speed_ratio", "defenders[1].speed_ratio"),
+        ("no_target", "target: is required"),
+    ],
+)
+def test_a_bad_scenario_update_is_refused_and_changes_nothing(
+    endpoint: str, given: bytes | str | None, error: str
+) -> None:
+    bad = copy.deepcopy(SCENARIO_RAW)
+    if given == "speed_ratio":
+        bad["defenders"][1]["speed_ratio"] = 1.2
+    elif given == "no_target":
+        del bad["target"]
+    payload = json.dumps(bad).encode() if isinstance(given, str) else given
+    offered: list[dict[str, Any]] = []
+    inbox = inbox_for(load_scenario(CONFIG))
+
+    def on_scenario(data: dict[str, Any]) -> str | None:
+        offered.append(data)
+        return inbox.offer(data)
+
+    with (
+        publisher(endpoint, on_scenario=on_scenario),
+        zenoh.open(peer(endpoint)) as session,
+    ):
+        encoding, reply = _query(session, key("vehicle1", "scenario"), payload)
+    assert encoding == f"application/json;{SCHEMAS['scenario']}"
+    assert reply["ok"] is False and error in reply["error"]
+    assert inbox.take() is None and inbox.accepted == 0
+    # undecodable payloads never reach on_scenario; a decoded one is refused by validation
+    assert len(offered) == (1 if isinstance(given, str) else 0)
+
+
+def test_the_inbox_takes_the_newest_valid_update_once() -> None:
+    inbox = inbox_for(load_scenario(CONFIG))
+    more = copy.deepcopy(SCENARIO_RAW)
+    more["defenders"][0]["north_m"] = 5.0
+    assert inbox.offer(copy.deepcopy(SCENARIO_RAW)) is None
+    assert inbox.offer(more) is None
+    taken = inbox.take()
+    assert taken is not None and taken.defenders[0].north_m == 5.0 and inbox.take() is None
+    assert inbox.accepted == 2
+
+
+# --- many vehicles ------------------------------------------------------------------------
+
+
+def test_two_vehicles_through_one_router_are_told_apart(endpoint: str) -> None:
+    router = session_config(TelemetrySettings(mode="router", listen=(endpoint,)))
+    commands = list(engagement(5))
+    got = Collector()
+    seen: list[str] = []
+    with zenoh.open(router):
+        client = session_config(TelemetrySettings(mode="client", listen=(), connect=(endpoint,)))
+        with (
+            zenoh.open(client) as session,
+            publisher(endpoint, vehicle_id="alpha", mode="client", connect=[endpoint]) as a,
+            publisher(endpoint, vehicle_id="bravo", mode="client", connect=[endpoint]) as b,
+        ):
+            sub = session.declare_subscriber(key("*", "guidance"), got)
+            live = session.liveliness().declare_subscriber(
+                key("*", "alive"), lambda s: seen.append(str(s.key_expr)), history=True
+            )
+            assert wait_for(lambda: a.has_subscribers() and b.has_subscribers())
+            for command in commands:
+                a.publish_tick(command)
+            b.publish_tick(commands[-1])
+            assert wait_for(lambda: len(got.samples) == len(commands) + 1)
+            assert wait_for(lambda: len(seen) == 2)
+            _, status_b = _query(session, key("bravo", "status"))
+            release(sub)
+            release(live)
+    by_key: dict[str, list[dict[str, Any]]] = {}
+    for k, _, payload in got.samples:
+        by_key.setdefault(k, []).append(payload)
+    assert sorted(by_key) == ["ezcompanion/alpha/guidance", "ezcompanion/bravo/guidance"]
+    assert {p["vehicle_id"] for p in by_key["ezcompanion/alpha/guidance"]} == {"alpha"}
+    assert len(by_key["ezcompanion/alpha/guidance"]) == len(commands)
+    assert by_key["ezcompanion/bravo/guidance"][0]["time_s"] == commands[-1].time_s
+    assert sorted(seen) == ["ezcompanion/alpha/alive", "ezcompanion/bravo/alive"]
+    assert status_b["vehicle_id"] == "bravo"
+
+
+def test_close_is_idempotent_and_later_samples_are_ignored(endpoint: str) -> None:
+    pub = publisher(endpoint)
+    pub.close()
+    pub.close()
+    pub.publish_tick(next(engagement(1)))
+    pub.publish_event(Event(EventKind.ENDED, 1.0, "over"))
+    assert pub.samples_published == 0
+
+
+def test_threads_do_not_leak(endpoint: str) -> None:
+    before = {t.name for t in threading.enumerate()}
+    with publisher(endpoint):
+        pass
+    assert not {t.name for t in threading.enumerate()} - before

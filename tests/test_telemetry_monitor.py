@@ -1,0 +1,198 @@
+"""The monitor (live table, JSON lines, recording), recordings back to tracks, the CLI."""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from test_telemetry import (  # type: ignore[import-not-found]
+    CONFIG,
+    SCENARIO_RAW,
+    engagement,
+    free_endpoint,
+    publisher,
+    wait_for,
+)
+
+from ezcompanion.config import load_scenario
+from ezcompanion.errors import ConfigError
+from ezcompanion.service.events import Event, EventKind
+from ezcompanion.sim.output import track_header
+from ezcompanion.telemetry.cli import (
+    add_telemetry_parsers,
+    monitor_config,
+    router_config,
+    run_router,
+    run_telemetry_command,
+)
+from ezcompanion.telemetry.monitor import MonitorView, run_monitor
+from ezcompanion.telemetry.recording import read_recording, recorded_scenario
+
+
+class Monitor:
+    """``run_monitor`` on a thread, printing into a string."""
+
+    def __init__(self, connect: str, **options: Any) -> None:
+        self.out = io.StringIO()
+        self.stop = threading.Event()
+        self.view: MonitorView | None = None
+        conf = monitor_config(connect=[connect], **options.pop("conf", {}))
+
+        def run() -> None:
+            self.view = run_monitor(conf, out=self.out, stop=self.stop, **options)
+
+        self.thread = threading.Thread(target=run)
+        self.thread.start()
+
+    def text(self) -> str:
+        return self.out.getvalue()
+
+    def close(self) -> MonitorView:
+        self.stop.set()
+        self.thread.join(5.0)
+        assert self.view is not None
+        return self.view
+
+
+def fly(pub: Any, ticks: int = 40) -> list[Any]:
+    """Publish an engagement at the loop's pace, then its interception."""
+    commands = list(engagement(ticks))
+    pub.publish_event(Event(EventKind.ENGAGED, commands[0].time_s, "guiding in GUIDED"))
+    for command in commands:
+        pub.publish_tick(command)
+        time.sleep(0.002)
+    pub.publish_event(Event(EventKind.INTERCEPTED, commands[-1].time_s, "within 0.1 m"))
+    return commands
+
+
+def test_the_live_table_shows_margins_mode_accelerations_and_outcome(tmp_path: Path) -> None:
+    endpoint = free_endpoint()
+    record = tmp_path / "engagement.jsonl"
+    status = {"phase": "guiding", "scenario": SCENARIO_RAW}
+    with publisher(endpoint, status=lambda: status) as pub:
+        monitor = Monitor(endpoint, record=record, refresh_hz=20.0)
+        assert wait_for(lambda: pub.has_subscribers("guidance") and pub.has_subscribers("event"))
+        assert wait_for(lambda: "yes" in monitor.text())  # alive, and its status asked
+        commands = fly(pub)
+        assert wait_for(lambda: "intercepted" in monitor.text().rsplit("ezcompanion monitor")[-1])
+        view = monitor.close()
+    table = monitor.text().rsplit("ezcompanion monitor", 1)[-1]  # the last redraw
+    assert "\x1b[2J" not in monitor.text()  # no terminal: plain redraws
+    lines = table.splitlines()
+    assert lines[1].split()[:6] == ["vehicle", "live", "t_s", "mode", "range_m", "h_m"]
+    row = lines[2].split()
+    last = commands[-1].step.law
+    assert row[0] == "vehicle1" and row[1] == "yes" and row[-1] == "intercepted"
+    assert float(row[2]) == pytest.approx(commands[-1].time_s, abs=0.005)
+    assert float(row[4]) == pytest.approx(float(last.range_to_target_m), abs=0.0005)
+    assert lines[3].split()[0] == "margin_m" and lines[3].split()[1::2] == ["D1", "D2", "D3"]
+    assert "intercepted: within 0.1 m" in lines[4]
+    vehicle = view.vehicles["vehicle1"]
+    assert vehicle.status is not None and vehicle.status["phase"] == "guiding"
+    assert vehicle.guidance is not None and vehicle.guidance["seq"] > 0
+
+    # the recording: the same samples, back as a track the simulator's plot can draw
+    scenario = recorded_scenario(record)
+    assert scenario == load_scenario(CONFIG)
+    run = read_recording(record, track_csv=tmp_path / "track.csv")
+    header = (tmp_path / "track.csv").read_text().splitlines()[0].split(",")
+    assert header == track_header(("D1", "D2", "D3"))
+    np.testing.assert_allclose(run.t_s, [c.time_s for c in commands], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(
+        run.margin_m, [c.step.law.margin_m for c in commands], rtol=1e-8, atol=1e-9
+    )
+    np.testing.assert_allclose(run.heading_rad, [c.course_rad for c in commands], rtol=1e-8)
+
+
+def test_json_lines_are_the_raw_samples() -> None:
+    endpoint = free_endpoint()
+    with publisher(endpoint) as pub:
+        monitor = Monitor(endpoint, json_lines=True, vehicle="vehicle1")
+        assert wait_for(lambda: pub.has_subscribers("guidance") and pub.has_subscribers("event"))
+        fly(pub, ticks=5)
+        assert wait_for(lambda: '"intercepted"' in monitor.text())
+        monitor.close()
+    lines = [json.loads(line) for line in monitor.text().splitlines()]
+    keys = [line["key"] for line in lines]
+    assert keys.count("ezcompanion/vehicle1/guidance") == 5
+    assert keys.count("ezcompanion/vehicle1/state") == 5
+    assert "ezcompanion/vehicle1/alive" in keys and "ezcompanion/vehicle1/status" in keys
+    guidance = next(line for line in lines if line["key"].endswith("/guidance"))
+    assert guidance["encoding"] == "application/json;ezcompanion.guidance.v1"
+    assert guidance["payload"]["vehicle_id"] == "vehicle1"
+
+
+def test_a_vehicle_that_goes_away_is_marked_gone() -> None:
+    view = MonitorView()
+    view.update("ezcompanion/v2/alive", True)
+    view.update("ezcompanion/v2/guidance", {"time_s": 1.0, "mode": "blend", "zones": []})
+    assert view.vehicles["v2"].outcome == "guiding"
+    view.update("ezcompanion/v2/alive", False)
+    line = view.render().splitlines()[2]
+    assert line.split()[:2] == ["v2", "no"] and line.endswith("gone")
+    assert "waiting for" in MonitorView().render()
+
+
+def test_a_recording_without_the_scenario_needs_one(tmp_path: Path) -> None:
+    record = tmp_path / "r.jsonl"
+    record.write_text(json.dumps({"key": "ezcompanion/v/state", "payload": {}}) + "\n")
+    with pytest.raises(ConfigError, match="not in the recording"):
+        read_recording(record)
+    with pytest.raises(ConfigError, match="no guidance samples"):
+        read_recording(record, load_scenario(CONFIG))
+
+
+# --- the command line ---------------------------------------------------------------------
+
+
+def parse(argv: list[str]) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="ezcompanion")
+    commands = parser.add_subparsers(dest="command", required=True)
+    commands.add_parser("simulate")
+    add_telemetry_parsers(commands)
+    return parser.parse_args(argv)
+
+
+def test_the_commands_parse_with_defaults_and_ignore_others() -> None:
+    args = parse(["monitor"])
+    assert (args.connect, args.vehicle, args.json, args.record) == (None, "*", False, None)
+    args = parse(["router", "--listen", "tcp/0.0.0.0:7447", "--listen", "tcp/[::]:7448"])
+    assert args.listen == ["tcp/0.0.0.0:7447", "tcp/[::]:7448"]
+    assert run_telemetry_command(parse(["simulate"])) is None
+    with pytest.raises(ConfigError, match=r"telemetry\.connect"):
+        run_telemetry_command(parse(["monitor", "--connect", "localhost:7447"]))
+
+
+def test_monitor_through_a_router_and_replay_with_a_plot(tmp_path: Path) -> None:
+    endpoint = free_endpoint()
+    stop = threading.Event()
+    router = threading.Thread(target=run_router, args=(router_config(listen=[endpoint]),),
+                              kwargs={"stop": stop})  # fmt: skip
+    router.start()
+    record = tmp_path / "rec.jsonl"
+    try:
+        with publisher(
+            endpoint, vehicle_id="alpha", mode="client", connect=[endpoint],
+            status=lambda: {"scenario": SCENARIO_RAW},
+        ) as pub:  # fmt: skip
+            monitor = Monitor(endpoint, record=record, conf={"mode": "client"})
+            assert wait_for(lambda: pub.has_subscribers("guidance"))
+            assert wait_for(lambda: "alpha" in monitor.text())
+            fly(pub, ticks=30)
+            assert wait_for(lambda: "intercepted" in monitor.text())
+            view = monitor.close()
+    finally:
+        stop.set()
+        router.join(5.0)
+    assert view.vehicles["alpha"].outcome == "intercepted"
+    png = tmp_path / "replay.png"
+    args = parse(["monitor", "--replay", str(record), "--plot", str(png)])
+    assert run_telemetry_command(args) == 0
+    assert png.stat().st_size > 10_000

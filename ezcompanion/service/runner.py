@@ -119,12 +119,12 @@ class CompanionService:
             loop_rate_hz=settings.loop_rate_hz,
             stale_after_s=settings.stale_after_s,
         )
-        self.telemetry = TelemetryState(origin=scenario.origin)
+        self.vehicle_telemetry = TelemetryState(origin=scenario.origin)
         self.phase = Phase.SEARCHING
         self._stop = threading.Event()
         self.scenario_inbox = ScenarioInbox(self._checked_update)
         self._track_csv = track_csv
-        self._telemetry = telemetry
+        self._zenoh_settings = telemetry
         self._publisher: TelemetryPublisher | None = None
         self._target: tuple[int, int] | None = None
         self._fixed_wing = False
@@ -216,12 +216,12 @@ class CompanionService:
             )
             if s.signing_key_hex:
                 link.enable_signing(signing_key_from_hex(s.signing_key_hex))
-            if self._telemetry is not None and self._telemetry.enabled:
+            if self._zenoh_settings is not None and self._zenoh_settings.enabled:
                 from ezcompanion.telemetry import TelemetryPublisher
 
                 self._publisher = stack.enter_context(
                     TelemetryPublisher(
-                        self._telemetry,
+                        self._zenoh_settings,
                         status=self.status,
                         on_scenario=self.offer_scenario,
                         zone_names=self.loop.controller.zones.names,
@@ -270,7 +270,7 @@ class CompanionService:
             return
         if self._target is None or msg.get_srcSystem() != self._target[0]:
             return
-        used = self.telemetry.update(msg, now)
+        used = self.vehicle_telemetry.update(msg, now)
         if used is not None:
             self._received[used] = self._received.get(used, 0) + 1
         if kind == "COMMAND_ACK" and msg.result != mavlink.MAV_RESULT_ACCEPTED:
@@ -479,7 +479,9 @@ class CompanionService:
         self._last_tick_s = now
         self._next_deadline_s = max(self._next_deadline_s + self.loop.period_s, now)
         self.ticks += 1
-        result = self.loop.tick(self.telemetry.snapshot(self.settings.stale_after_s, now), now)
+        result = self.loop.tick(
+            self.vehicle_telemetry.snapshot(self.settings.stale_after_s, now), now
+        )
         if isinstance(result, TickCommand):
             if self._track is not None:
                 state = result.state

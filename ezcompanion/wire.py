@@ -55,6 +55,8 @@ __all__ = [
     "heading_cdeg",
     "heading_deg_0_360",
     "is_finite",
+    "is_fixed_wing",
+    "is_serial_device",
     "m_s_to_cm_s",
     "m_to_mm",
     "mavlink",
@@ -79,6 +81,13 @@ mavlink: Any = mavutil.mavlink
 Message = Any
 
 URL_SCHEMES = ("udpin", "udpout", "udp", "tcpin", "tcp")
+_DEFAULT_BAUD = 57600
+
+
+def is_serial_device(url: str) -> bool:
+    """A serial device path (/dev/..., or COMn on Windows), not a network URL."""
+    return url.startswith("/") or url.upper().startswith("COM")
+
 
 # SET_POSITION_TARGET_*: bits set mean "ignore" (POSITION_TARGET_TYPEMASK).
 _PT = mavlink
@@ -276,18 +285,26 @@ class Link:
     """
 
     def __init__(self, url: str, *, system_id: int, component_id: int) -> None:
-        scheme = url.split(":", 1)[0]
-        if scheme not in URL_SCHEMES or url.count(":") != 2:
-            raise ConfigError(
-                "connect",
-                url,
-                f"must be SCHEME:HOST:PORT with SCHEME one of {', '.join(URL_SCHEMES)}",
-            )
         for name, value in (("system_id", system_id), ("component_id", component_id)):
             if not 1 <= value <= 255:
                 raise ConfigError(name, value, "must be within [1, 255]")
         self.url = url
+        scheme = url.split(":", 1)[0]
         self._tcp = scheme in _TCP_KINDS
+        options: dict[str, Any] = {}
+        if is_serial_device(url):
+            # a serial device, as MAVProxy writes it: /dev/ttyACM0,57600 (or COM3,115200)
+            url, _, baud = url.partition(",")
+            if baud and not (baud.isdigit() and int(baud) > 0):
+                raise ConfigError("connect", self.url, "the baud rate after ',' must be a number")
+            options["baud"] = int(baud) if baud else _DEFAULT_BAUD
+        elif scheme not in URL_SCHEMES or url.count(":") != 2:
+            raise ConfigError(
+                "connect",
+                url,
+                f"must be SCHEME:HOST:PORT with SCHEME one of {', '.join(URL_SCHEMES)}, "
+                "or a serial device such as /dev/ttyACM0,57600",
+            )
         try:
             self._conn: Any = mavutil.mavlink_connection(
                 url,
@@ -295,9 +312,10 @@ class Link:
                 source_component=component_id,
                 dialect="ardupilotmega",
                 autoreconnect=False,
+                **options,
             )
-        except (OSError, ValueError) as exc:
-            raise ConfigError("connect", url, f"cannot be opened: {exc}") from exc
+        except (OSError, ValueError, ImportError) as exc:
+            raise ConfigError("connect", self.url, f"cannot be opened: {exc}") from exc
         self._conn.mav.robust_parsing = True
         self._messages = 0
         self._bad = 0

@@ -3,7 +3,7 @@
 Layout (every key optional)::
 
     companion:
-      connect: udpin:0.0.0.0:14550   # pymavlink URL; udpout:, tcp:, tcpin: too
+      connect: udpin:0.0.0.0:14550   # pymavlink URL; udpout:, tcp:, tcpin:, /dev/ttyACM0,57600
       system_id: 1                   # ours; the usual companion shares the vehicle's system
       component_id: 191              # MAV_COMP_ID_ONBOARD_COMPUTER
       target_system: 0               # the vehicle; 0 = the first autopilot heard
@@ -28,6 +28,7 @@ from typing import Any
 
 from ezcompanion.config import Scenario, build_dataclass
 from ezcompanion.errors import ConfigError
+from ezcompanion.wire import URL_SCHEMES, is_serial_device
 
 __all__ = ["CompanionSettings", "SetpointKind", "companion_settings"]
 
@@ -93,9 +94,12 @@ class CompanionSettings:
             raise ConfigError("setpoint", self.setpoint, "must be auto, velocity or course")
         if not isinstance(self.engage, bool):
             raise ConfigError("engage", self.engage, "must be true or false")
-        if self.connect.split(":", 1)[0] not in ("udpin", "udpout", "udp", "tcp", "tcpin"):
+        if self.connect.split(":", 1)[0] not in URL_SCHEMES and not is_serial_device(self.connect):
             raise ConfigError(
-                "connect", self.connect, "must be a pymavlink URL such as udpin:0.0.0.0:14550"
+                "connect",
+                self.connect,
+                "must be a pymavlink URL such as udpin:0.0.0.0:14550 or a serial device "
+                "such as /dev/ttyACM0,57600",
             )
 
 

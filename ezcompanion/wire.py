@@ -56,6 +56,7 @@ __all__ = [
     "heading_deg_0_360",
     "is_finite",
     "is_fixed_wing",
+    "is_ground_vehicle",
     "is_serial_device",
     "m_s_to_cm_s",
     "m_to_mm",
@@ -477,12 +478,17 @@ def velocity_setpoint(
     down_m_s: float = 0.0,
     yaw_rate_rad_s: float | None = None,
     body_frame: bool = False,
+    horizontal_only: bool = False,
 ) -> Message:
     """SET_POSITION_TARGET_LOCAL_NED carrying a velocity (and optionally a yaw rate).
 
     With ``body_frame`` the first two components are forward and right (MAV_FRAME_BODY_NED).
+    ``horizontal_only`` also marks vz as ignored, as ArduRover documents for ground vehicles
+    (type_mask 1511 with a yaw rate, instead of 1479).
     """
     mask = POSITION_TARGET_VELOCITY if yaw_rate_rad_s is None else POSITION_TARGET_VELOCITY_YAW_RATE
+    if horizontal_only:
+        mask |= _PT.POSITION_TARGET_TYPEMASK_VZ_IGNORE
     frame = mavlink.MAV_FRAME_BODY_NED if body_frame else mavlink.MAV_FRAME_LOCAL_NED
     return link.mav.set_position_target_local_ned_encode(
         time_boot_ms,
@@ -577,6 +583,11 @@ def guided_mode(heartbeat: Message) -> tuple[str, float, float, float] | None:
     if "GUIDED" not in mapping:
         return None
     return "GUIDED", float(mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED), float(mapping["GUIDED"]), 0.0
+
+
+def is_ground_vehicle(heartbeat: Message) -> bool:
+    """The vehicle drives or sails on a surface (no vertical velocity to command)."""
+    return bool(heartbeat.type in (mavlink.MAV_TYPE_GROUND_ROVER, mavlink.MAV_TYPE_SURFACE_BOAT))
 
 
 def is_fixed_wing(heartbeat: Message) -> bool:

@@ -223,3 +223,18 @@ def test_a_serial_device_link_reads_and_writes_mavlink() -> None:
         os.close(device)
     with pytest.raises(ConfigError, match="baud"):
         open_link("/dev/ttyACM0,fast", system_id=1, component_id=191)
+
+
+def test_a_rover_gets_the_horizontal_velocity_mask() -> None:
+    scenario = load_scenario(CONFIG)
+    loop = GuidanceLoop(scenario, loop_rate_hz=50.0, stale_after_s=0.25)
+    with open_link("udpout:127.0.0.1:9", system_id=1, component_id=191) as link:
+        rover = make_setpoints(
+            SetpointKind.VELOCITY,
+            link,
+            target_system=1,
+            target_component=1,
+            accel_max_m_s2=1.0,
+            ground_vehicle=True,
+        )
+        assert rover.message(_command(loop, 8.0, -4.0, -0.832, 0.555, 1.0)).type_mask == 1511

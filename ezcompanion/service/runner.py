@@ -53,6 +53,7 @@ from ezcompanion.wire import (
     Message,
     guided_mode,
     is_fixed_wing,
+    is_ground_vehicle,
     mavlink,
     mode_name,
     open_link,
@@ -575,6 +576,7 @@ class CompanionService:
             target_system=self._target[0],
             target_component=self._target[1],
             accel_max_m_s2=self.scenario.guidance.accel_max_m_s2,
+            ground_vehicle=is_ground_vehicle(heartbeat),
         )
 
     def _send(self, msg: Message) -> None:

@@ -1,7 +1,8 @@
 """Lateral acceleration to the setpoint each autopilot follows.
 
 ``velocity`` (ArduCopter, ArduRover, PX4 multicopter): SET_POSITION_TARGET_LOCAL_NED in
-LOCAL_NED with velocity + yaw rate (type_mask 1479). The velocity has the scenario's
+LOCAL_NED with velocity + yaw rate (type_mask 1479; 1511, vz ignored, for a rover or boat
+as ArduRover documents). The velocity has the scenario's
 constant speed (so a vehicle that was stopped, by its own timeout say, speeds up again) and
 points along a reference course that turns at omega = a / v; yaw_rate = omega keeps the nose
 with it. (Measured on ArduPilot 4.7 SITL: a 2 m/s vector rotated at 15 deg/s with yaw_rate
@@ -45,12 +46,19 @@ class Setpoints(ABC):
     kind: SetpointKind
 
     def __init__(
-        self, link: Link, *, target_system: int, target_component: int, accel_max_m_s2: float
+        self,
+        link: Link,
+        *,
+        target_system: int,
+        target_component: int,
+        accel_max_m_s2: float,
+        ground_vehicle: bool = False,
     ) -> None:
         self.link = link
         self.target_system = target_system
         self.target_component = target_component
         self.accel_max_m_s2 = accel_max_m_s2
+        self.ground_vehicle = ground_vehicle  # a rover or boat: no vertical velocity
         self.reset()
 
     @abstractmethod
@@ -89,6 +97,7 @@ class VelocitySetpoints(Setpoints):
             east_m_s=speed * math.sin(reference),
             down_m_s=0.0,
             yaw_rate_rad_s=omega,
+            horizontal_only=self.ground_vehicle,
         )
 
 
@@ -123,6 +132,7 @@ def make_setpoints(
     target_system: int,
     target_component: int,
     accel_max_m_s2: float,
+    ground_vehicle: bool = False,
 ) -> Setpoints:
     """The setpoint writer for ``kind`` (not AUTO: resolve it from the heartbeat first)."""
     kinds: dict[SetpointKind, type[Setpoints]] = {
@@ -136,4 +146,5 @@ def make_setpoints(
         target_system=target_system,
         target_component=target_component,
         accel_max_m_s2=accel_max_m_s2,
+        ground_vehicle=ground_vehicle,
     )

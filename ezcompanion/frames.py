@@ -24,10 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 __all__ = [
-    "course_to_paper_angle_rad",
-    "deg_to_rad",
     "line_of_sight_rad",
-    "rad_to_deg",
     "wrap_pi",
 ]
 
@@ -50,18 +47,3 @@ def line_of_sight_rad(
 ) -> float:
     """Bearing from one point to another, clockwise from north, in [-pi, pi]."""
     return math.atan2(to_east_m - from_east_m, to_north_m - from_north_m)
-
-
-def course_to_paper_angle_rad(course_rad: float) -> float:
-    """The paper's heading angle (counter-clockwise from east) for a NED course."""
-    return float(wrap_pi(math.pi / 2.0 - course_rad))
-
-
-def deg_to_rad(angle_deg: float) -> float:
-    """Degrees to radians; used only at the configuration and wire edges."""
-    return math.radians(angle_deg)
-
-
-def rad_to_deg(angle_rad: float) -> float:
-    """Radians to degrees; used only at the configuration and wire edges."""
-    return math.degrees(angle_rad)

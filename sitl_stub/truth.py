@@ -11,15 +11,13 @@ import csv
 from pathlib import Path
 from typing import TextIO
 
+from ezcompanion.sim.engine import TRACK_SERIES
 from ezcompanion.sim.kinematics import Wind
 from sitl_stub.vehicle import VehicleState
 
 __all__ = ["TRUTH_COLUMNS", "TruthWriter"]
 
-TRUTH_COLUMNS = (
-    "t_s", "north_m", "east_m", "heading_rad", "accel_lat_m_s2",
-    "speed_m_s", "course_rad", "mode", "armed",
-)
+TRUTH_COLUMNS = (*TRACK_SERIES, "speed_m_s", "course_rad", "mode", "armed")
 
 
 class TruthWriter:

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import time
 
+from ezcompanion.errors import ConfigError
+
 __all__ = ["ScaledClock"]
 
 
@@ -18,7 +20,7 @@ class ScaledClock:
 
     def __init__(self, speedup: float = 1.0) -> None:
         if not speedup > 0.0:
-            raise ValueError(f"speedup: must be > 0 (got {speedup!r})")
+            raise ConfigError("speedup", speedup, "must be > 0")
         self.speedup = speedup
         self._start = time.monotonic()
 

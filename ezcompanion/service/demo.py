@@ -23,6 +23,7 @@ import numpy as np
 
 from ezcompanion.config import Scenario, load_scenario
 from ezcompanion.guidance import LawName, evaluate_law
+from ezcompanion.sim.engine import TRACK_SERIES
 
 __all__ = [
     "DemoResult",
@@ -125,10 +126,7 @@ def judge_truth(
         rows = list(csv.DictReader(handle))
     if not rows:
         raise ValueError(f"{truth_csv}: no rows")
-    t, north, east, heading, accel = (
-        np.array([float(r[c]) for r in rows])
-        for c in ("t_s", "north_m", "east_m", "heading_rad", "accel_lat_m_s2")
-    )
+    t, north, east, heading, accel = (np.array([float(r[c]) for r in rows]) for c in TRACK_SERIES)
     out = evaluate_law(
         LawName.ROBUST,
         scenario.guidance,

@@ -21,11 +21,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["STATE_SIZE", "Wind", "course_and_ground_speed", "rk4_step", "unicycle_rates"]
+__all__ = ["Wind", "course_and_ground_speed", "rk4_step", "unicycle_rates"]
 
 FloatArray = npt.NDArray[np.float64]
-
-STATE_SIZE = 3  # north_m, east_m, heading_rad
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,6 @@ from ezcompanion.guidance import GuidanceStep, LawName
 from ezcompanion.sim.engine import LAW_SERIES, TRACK_SERIES, SimResult
 
 __all__ = [
-    "TRACK_COLUMNS",
     "TrackWriter",
     "read_track_csv",
     "result_columns",
@@ -28,16 +27,12 @@ __all__ = [
     "write_result_csv",
 ]
 
-TRACK_COLUMNS = TRACK_SERIES
-# Law diagnostics after the track columns: names of ``LawOutput`` and ``SimResult`` fields.
-_LAW_COLUMNS = LAW_SERIES
-
 
 def track_header(zone_names: Sequence[str]) -> list[str]:
     """The columns of a track file, in order; one clearance and one margin column per zone."""
     return [
-        *TRACK_COLUMNS,
-        *_LAW_COLUMNS,
+        *TRACK_SERIES,
+        *LAW_SERIES,
         *(f"clearance_{name}_m" for name in zone_names),
         *(f"margin_{name}_m" for name in zone_names),
     ]
@@ -45,7 +40,7 @@ def track_header(zone_names: Sequence[str]) -> list[str]:
 
 def result_columns(run: SimResult) -> dict[str, np.ndarray]:
     """Column name to values for a whole simulated run, in ``track_header`` order."""
-    values = [getattr(run, name) for name in (*TRACK_COLUMNS, *_LAW_COLUMNS)]
+    values = [getattr(run, name) for name in (*TRACK_SERIES, *LAW_SERIES)]
     values += [run.clearance_m[:, i] for i in range(len(run.zone_names))]
     values += [run.margin_m[:, i] for i in range(len(run.zone_names))]
     return dict(zip(track_header(run.zone_names), values, strict=True))
@@ -59,7 +54,7 @@ def step_row(
     head = [t_s, north_m, east_m, heading_rad, float(step.accel_lat_m_s2)]
     return (
         head
-        + [float(getattr(law, name)) for name in _LAW_COLUMNS]
+        + [float(getattr(law, name)) for name in LAW_SERIES]
         + [*map(float, law.clearance_m), *map(float, law.margin_m)]
     )
 
@@ -125,5 +120,5 @@ def read_track_csv(path: str | Path, scenario: Scenario, law: LawName) -> SimRes
         zone_names=names,
         margin_m=np.column_stack([column[f"margin_{n}_m"] for n in names]),
         clearance_m=np.column_stack([column[f"clearance_{n}_m"] for n in names]),
-        **{name: column[name] for name in (*TRACK_COLUMNS, *_LAW_COLUMNS)},
+        **{name: column[name] for name in (*TRACK_SERIES, *LAW_SERIES)},
     )

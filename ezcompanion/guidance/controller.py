@@ -68,12 +68,16 @@ class KinematicState:
     ``course_rad`` is the direction of the ground velocity, clockwise from north: the law's
     kinematics (and the EZ geometry) are written for the direction of motion, so course over
     ground, not yaw, is what it uses. ``speed_m_s`` is the ground speed, > 0.
+    ``course_rate_rad_s`` is the measured rate of the course, if known: the vehicle's own
+    turn, which lags what it was asked for (``GuidanceParams.response_lag_s``). ``None``
+    means the vehicle flies the actuator state as commanded, with no lag.
     """
 
     north_m: float | FloatArray
     east_m: float | FloatArray
     course_rad: float | FloatArray
     speed_m_s: float | FloatArray
+    course_rate_rad_s: float | FloatArray | None = None
 
 
 @dataclass(frozen=True, eq=False)

@@ -140,6 +140,8 @@ class GuidanceParams:
     actuator_n: int = 2
     accel_max_m_s2: float = 1.0
     intercept_radius_m: float = 0.1
+    # the vehicle: first-order lag from the commanded to the flown lateral acceleration
+    response_lag_s: float = 0.0
     # robust law
     reference_limit_ratio: float = 0.95
     track_boundary_layer_m_s2: float = 0.05
@@ -170,6 +172,7 @@ class GuidanceParams:
             _positive(name, getattr(self, name))
         _non_negative("margin_m", self.margin_m)
         _non_negative("intercept_radius_m", self.intercept_radius_m)
+        _non_negative("response_lag_s", self.response_lag_s)
         if not isinstance(self.blend, BlendMode):
             raise ConfigError("blend", self.blend, f"must be one of {[m.value for m in BlendMode]}")
         n = self.actuator_n

@@ -124,7 +124,7 @@ class Scenario:
     target: Target
     start: VehicleStart
     guidance: GuidanceParams
-    law: LawName = LawName.ROBUST
+    law: LawName = LawName.BACKUP
     simulation: SimulationSettings = field(default_factory=SimulationSettings)
     origin: GeoOrigin = field(default_factory=GeoOrigin)
     sections: Mapping[str, Any] = field(default_factory=dict)
@@ -218,7 +218,7 @@ def scenario_from_dict(data: object) -> Scenario:
         "simulation", SimulationSettings, _mapping("simulation", top.get("simulation", {}))
     )
     origin = build_dataclass("origin", GeoOrigin, _mapping("origin", top.get("origin", {})))
-    law = _enum("law", LawName, top.get("law", LawName.ROBUST.value))
+    law = _enum("law", LawName, top.get("law", LawName.BACKUP.value))
     sections = {key: _mapping(key, top[key]) for key in COMPONENT_SECTIONS if key in top}
     return Scenario(
         name=name,

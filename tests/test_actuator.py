@@ -57,5 +57,5 @@ def test_integration_is_third_order() -> None:
 def test_long_steps_are_split_into_proven_substeps() -> None:
     assert max_actuator_step_s(PARAMS) == pytest.approx(1.0 / (2 * 20.0 + 0.2))
     # One 1 s step from the edge with the strongest outward command stays inside.
-    a = float(advance_actuator(PARAMS, 0.999, PARAMS.command_limit_m_s2 * 10, 1.0))
+    a = float(advance_actuator(PARAMS, 0.999, PARAMS.command_limit_m_s3 * 10, 1.0))
     assert abs(a) < 1.0

@@ -24,7 +24,7 @@ def test_paper_scenarios_load_with_the_papers_values() -> None:
     assert [(d.north_m, d.east_m) for d in s.defenders] == [(2.0, 3.0), (4.4, -2.0), (1.0, -2.6)]
     assert (s.start.north_m, s.start.east_m) == (8.0, -4.0)  # paper [x, y] = [-4, 8]
     assert s.guidance.k_safety_1_s == 0.3 and s.guidance.k_intercept_1_s == 0.7
-    assert s.guidance.accel_max_m_s2 == 1.0 and s.law is LawName.ROBUST
+    assert s.guidance.accel_max_m_s2 == 1.0 and s.law is LawName.BACKUP
     # course along the line of sight from (8, -4) to (2, 0)
     assert s.start.course_rad == pytest.approx(math.atan2(4.0, -6.0))
     s2 = load_scenario(CONFIG / "paper_scenario2.yaml")

@@ -50,7 +50,7 @@ def test_bad_defender_names_the_field(changes: dict[str, float], field: str) -> 
         ({"accel_max_m_s2": float("inf")}, "accel_max_m_s2"),
         ({"margin_m": -0.2}, "margin_m"),
         ({"reference_limit_ratio": 1.0}, "reference_limit_ratio"),
-        ({"command_limit_ratio": 0.5}, "command_limit_ratio"),
+        ({"command_limit_1_s": 0.5}, "command_limit_1_s"),
     ],
 )
 def test_bad_guidance_parameter_names_the_field(changes: dict[str, float], field: str) -> None:

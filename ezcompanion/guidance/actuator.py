@@ -16,8 +16,10 @@ a convex combination of forward-Euler steps. That gives a short proof:
   convex combinations of a and Euler images of points in the interval, so they stay in it,
   and the result a/3 + 2 E(a2)/3 is strictly inside: |a| <= (1 - 2 p1 dt / 3) a_max.
 
-(The model is dimensionally loose, as published: a_c enters a_dot with an implicit 1/s, so
-"n C / a_max" above is a rate in 1/s with C and a_max in m/s^2.)
+Units: a_dot is in m/s^3, so the command a_c is too (the paper writes it like an
+acceleration, with an implicit 1/s). Its bound C = ``command_limit_1_s`` a_max is in m/s^3
+and n C / a_max + p1 is a rate in 1/s, so the model keeps its form when every length and
+time of a scenario is rescaled.
 
 Steps longer than that bound are split into equal substeps. The tests check the bound for
 arbitrary command sequences with hypothesis.
@@ -63,7 +65,7 @@ def advance_one(
 
 def max_actuator_step_s(params: GuidanceParams) -> float:
     """Longest substep for which the bounded integration is proven to keep |a| < a_max."""
-    return 1.0 / (params.actuator_n * params.command_limit_ratio + params.actuator_p1_1_s)
+    return 1.0 / (params.actuator_n * params.command_limit_1_s + params.actuator_p1_1_s)
 
 
 def advance_actuator(
@@ -74,7 +76,7 @@ def advance_actuator(
 ) -> FloatArray:
     """Integrate the saturation model over ``dt_s`` with ``command_m_s2`` held.
 
-    The command is first clipped to the model's bound (``GuidanceParams.command_limit_m_s2``);
+    The command is first clipped to the model's bound (``GuidanceParams.command_limit_m_s3``);
     ``accel_m_s2`` must already lie in [-a_max, a_max]. Returns the new actuator state,
     strictly inside (-a_max, a_max), with the broadcast shape of the inputs.
     """
@@ -90,6 +92,6 @@ def advance_actuator(
             params.accel_max_m_s2,
             params.actuator_p1_1_s,
             params.actuator_n,
-            params.command_limit_m_s2,
+            params.command_limit_m_s3,
         )
     return result

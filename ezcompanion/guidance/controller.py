@@ -23,6 +23,7 @@ import numpy.typing as npt
 from ezcompanion.errors import StateError
 from ezcompanion.guidance._jit import jit
 from ezcompanion.guidance.actuator import advance_one
+from ezcompanion.guidance.backup import BACKUP_NONE, ShieldSettings, shield_batch
 from ezcompanion.guidance.law import (
     O_AC,
     O_ALPHA,
@@ -86,7 +87,12 @@ class GuidanceStep:
 
     ``accel_lat_m_s2`` is the actuator state at the start of the step (what the law saw),
     ``accel_lat_cmd_m_s2`` the state at its end: the lateral acceleration to fly next.
-    ``mode`` holds ``GuidanceMode`` values.
+    ``mode`` holds ``GuidanceMode`` values. The backup law's shield adds ``backup`` (the
+    executed backup policy, ``ezcompanion.guidance.backup.BACKUP_*``; -1 for other laws),
+    ``shield_weight`` (the nominal command's share: 1 unshielded, 0 the backup alone),
+    ``certificate_m`` (the executed backup's certificate at the step's start: >= 0 means
+    a bounded manoeuvre keeps the vehicle out of every zone for ever, under the model) and
+    ``certificate_ahead_m`` (the best one step ahead on the nominal); NaN for other laws.
     """
 
     law: LawOutput
@@ -94,6 +100,10 @@ class GuidanceStep:
     accel_lat_cmd_m_s2: FloatArray
     mode: npt.NDArray[np.int8]
     captured: npt.NDArray[np.bool_]
+    backup: npt.NDArray[np.int8]
+    shield_weight: FloatArray
+    certificate_m: FloatArray
+    certificate_ahead_m: FloatArray
 
 
 class GuidanceController:
@@ -105,7 +115,7 @@ class GuidanceController:
         zones: ZoneSet,
         target: Target | Sequence[Target],
         params: GuidanceParams | None = None,
-        law: LawName = LawName.ROBUST,
+        law: LawName = LawName.BACKUP,
     ) -> None:
         """``zones`` with one row (shared) or one row per vehicle; ``target`` one for all or
         a sequence with one per vehicle."""
@@ -121,6 +131,22 @@ class GuidanceController:
         self._target_e = np.array([t.east_m for t in targets])
         self._shape: tuple[int, ...] = ()
         self._accel = np.zeros(1)
+        self._flown = np.zeros(1)  # the model's flown lateral acceleration (backup law)
+        self._backup = np.full(1, BACKUP_NONE, dtype=np.int8)
+        prm = self.params
+        self._shield = ShieldSettings(
+            accel_max_m_s2=prm.accel_max_m_s2,
+            p1_1_s=prm.actuator_p1_1_s,
+            n=prm.actuator_n,
+            command_limit_m_s3=prm.command_limit_m_s3,
+            response_lag_s=prm.response_lag_s,
+            margin_m=prm.shield_margin_m,
+            band_m=prm.shield_band_m,
+            prediction_step_ratio=prm.prediction_step_ratio,
+            abandon_turn_s=prm.abandon_turn_s,
+            abandon_hold_s=prm.abandon_hold_s,
+            abandon_brake_m_s2=prm.abandon_brake_m_s2,
+        ).packed
 
     @property
     def accel_m_s2(self) -> FloatArray:
@@ -138,21 +164,40 @@ class GuidanceController:
                 raise StateError(name, rows, f"must have 1 or {accel.size} rows for this batch")
         self._shape = accel.shape
         self._accel = accel.reshape(-1).copy()
+        self._flown = self._accel.copy()
+        self._backup = np.full(self._accel.shape, BACKUP_NONE, dtype=np.int8)
+
+    def restrict(
+        self, mask: npt.NDArray[np.bool_], *, zones: ZoneSet, target: Target | Sequence[Target]
+    ) -> GuidanceController:
+        """The same law for the vehicles in ``mask`` of a 1-d batch only (with their zones and
+        targets), each vehicle's internal state kept: actuator, model and held backup."""
+        new = GuidanceController(zones=zones, target=target, params=self.params, law=self.law)
+        new.reset(self._accel[mask])
+        new._flown = self._flown[mask].copy()
+        new._backup = self._backup[mask].copy()
+        return new
 
     def evaluate(self, state: KinematicState) -> LawOutput:
         """The law at ``state`` and the current actuator state, without advancing it."""
-        out, out_zone = self._run_law(state)
+        out, out_zone = self._run_law(self._state_rows(state))
         return LawOutput(out, out_zone, self._shape)
 
     def step(self, state: KinematicState, dt_s: float) -> GuidanceStep:
         """Evaluate the law, advance the actuator by ``dt_s`` and return the command."""
         if not (math.isfinite(dt_s) and dt_s > 0.0):
             raise StateError("dt_s", dt_s, "must be a finite number > 0")
-        out, out_zone = self._run_law(state)
+        rows = self._state_rows(state)
+        out, out_zone = self._run_law(rows)
         accel = self._accel
         accel_next = np.empty_like(accel)
         mode = np.empty(accel.shape, dtype=np.int8)
         _advance_batch(self._packed, out, accel, dt_s, accel_next, mode)
+        size = accel.shape[0]
+        backup = np.full(size, BACKUP_NONE, dtype=np.int8)
+        shield = np.full((size, 6), math.nan)
+        if self.law is LawName.BACKUP:
+            backup, shield = self._shield_step(state, rows, out, dt_s, accel_next, mode)
         self._accel = accel_next
         shape = self._shape
         mode = mode.reshape(shape)
@@ -162,10 +207,56 @@ class GuidanceController:
             accel_lat_cmd_m_s2=accel_next.reshape(shape),
             mode=mode,
             captured=mode == _CAPTURED,
+            backup=backup.reshape(shape),
+            shield_weight=shield[:, 3].reshape(shape),
+            certificate_m=shield[:, 4].reshape(shape),
+            certificate_ahead_m=shield[:, 5].reshape(shape),
         )
 
-    def _run_law(self, state: KinematicState) -> tuple[FloatArray, FloatArray]:
-        north, east, course, speed = self._state_rows(state)
+    def _shield_step(
+        self,
+        state: KinematicState,
+        rows: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
+        out: FloatArray,
+        dt_s: float,
+        accel_next: FloatArray,
+        mode: npt.NDArray[np.int8],
+    ) -> tuple[npt.NDArray[np.int8], FloatArray]:
+        """The backup law: the robust command through the shield, for every vehicle not yet
+        captured; overwrites ``accel_next`` and ``mode`` for those."""
+        north, east, course, speed = rows
+        bound = self.params.accel_max_m_s2
+        if state.course_rate_rad_s is None:
+            flown = self._flown
+        else:
+            rate = np.empty_like(speed)
+            rate.reshape(self._shape)[...] = state.course_rate_rad_s
+            if not np.isfinite(rate).all():
+                raise StateError("course_rate_rad_s", state.course_rate_rad_s, "must be finite")
+            flown = np.clip(speed * rate, -bound, bound)
+        active = mode != _CAPTURED
+        shield = np.full((accel_next.shape[0], 6), math.nan)
+        zones = self.zones
+        shield_batch(
+            self._shield, zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m,
+            north, east, course, self._accel, flown, speed, out[:, O_AC], active, dt_s,
+            self._backup, shield,
+        )  # fmt: skip
+        accel_next[active] = shield[active, 0]
+        self._flown = np.where(active, shield[:, 1], accel_next)
+        backup = np.where(active, shield[:, 2], BACKUP_NONE).astype(np.int8)
+        self._backup = backup
+        # the safety share of what is flown: the backup's, plus the nominal's own alpha
+        share = 1.0 - shield[:, 3] * (1.0 - out[:, O_ALPHA])
+        mode[active & (share >= 1.0 - _MODE_PURE)] = _SAFETY
+        mode[active & (share <= _MODE_PURE)] = _INTERCEPT
+        mode[active & (share > _MODE_PURE) & (share < 1.0 - _MODE_PURE)] = _BLEND
+        return backup, shield
+
+    def _run_law(
+        self, rows: tuple[FloatArray, FloatArray, FloatArray, FloatArray]
+    ) -> tuple[FloatArray, FloatArray]:
+        north, east, course, speed = rows
         return run_kernel(
             self._packed, self.zones, self._target_n, self._target_e, north, east, course,
             speed, self._accel,

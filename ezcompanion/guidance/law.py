@@ -32,7 +32,7 @@ Law variants (``LawName``), numbered as the typos and hazards in docs/paper-note
 ``paper``: the equations as published, with only the guards needed to compute: |S| floored
   at ``gradient_floor_m`` keeping its sign, ranges floored at ``range_floor_m``, the
   saturation denominator floored at ``actuator_floor``, and |a_c| bounded by
-  ``command_limit_ratio`` a_max (hazard 5: without a bounded a_c nothing bounds |a|).
+  ``command_limit_1_s`` a_max (hazard 5: without a bounded a_c nothing bounds |a|).
   alpha(h) is the hard switch or the sigmoid (``BlendMode``); with the sigmoid the
   blend's cross terms (typo 3) remain, as they do in the paper's own simulations.
 ``robust``: the same structure with its hazards fixed:
@@ -41,15 +41,20 @@ Law variants (``LawName``), numbered as the typos and hazards in docs/paper-note
   - sgn(z) becomes tanh(z / phi) (typo 4): no chattering, -K_a z / phi near z = 0;
   - a damped inverse a_b = N S / (S^2 + lambda^2) where S -> 0 (per zone at sigma = 0 or
     pi, and in the notch between overlapping zones);
-  - a blend that cannot leak: alpha is a function of the interception law's barrier
-    residual psi = h_dot(a_T) + K_s h instead of h. alpha = 1 exactly where psi <= 0 (a_T
-    would erode the safe set faster than h_dot = -K_s h allows), 0 where psi >= w, a C2
-    step between. Because h_dot is affine in a, any alpha in [0, 1] keeps
-    h_dot(a_d) + K_s h = (1 - alpha) psi >= 0 once psi >= 0, and alpha = 1 gives equality
-    otherwise: the blended reference always satisfies the barrier condition (before the
-    reference limit). For a scalar input this is the minimum-norm control-barrier filter
-    of a_T, made smooth. It acts on the closing rate, not only on h, so it turns before a
-    fast approach reaches the boundary layer (the notch of scenario 2).
+  - alpha is a function of the interception law's barrier residual
+    psi = h_dot(a_T) + K_s h instead of h: 1 where psi <= 0, 0 where psi >= w, a C2 step
+    between. It acts on the closing rate, not only on h, so it turns before a fast approach
+    reaches the boundary layer (the notch of scenario 2). It guarantees nothing: with the
+    exact inverse the blended reference would satisfy h_dot >= -K_s h, but the damped
+    inverse gives h_dot(a_b) + K_s h = (K_s h - L) lambda^2 / (S^2 + lambda^2), negative
+    wherever K_s h < L, and the reference limit and the actuator's lag break it further;
+  - the backstepping's cross terms carry the weights a_max^2 and (a_max / v)^4 (both 1 at
+    the paper's scale), so that every term of a_c is in m/s^3 and the law is invariant
+    when a scenario's lengths and times are rescaled.
+``backup`` (the default): the robust law as the nominal command, inside the backup-set
+  shield of :mod:`ezcompanion.guidance.backup`, whose certificate carries the guarantee.
+  (The robust law's own avoidance routes the vehicle; the shield only acts where that
+  would leave no certified escape.)
 """
 
 from __future__ import annotations
@@ -226,7 +231,7 @@ class LawOutput:
 def pack_params(law: LawName, params: GuidanceParams) -> FloatArray:
     """The kernels' parameter vector for ``law``."""
     p = np.empty(P_SIZE)
-    p[P_LAW_ROBUST] = 1.0 if LawName(law) is LawName.ROBUST else 0.0
+    p[P_LAW_ROBUST] = 0.0 if LawName(law) is LawName.PAPER else 1.0  # backup: robust nominal
     p[P_BLEND_HARD] = 1.0 if params.blend is BlendMode.HARD else 0.0
     p[P_KS] = params.k_safety_1_s
     p[P_KT] = params.k_intercept_1_s
@@ -242,7 +247,7 @@ def pack_params(law: LawName, params: GuidanceParams) -> FloatArray:
     p[P_PHI] = params.track_boundary_layer_m_s2
     p[P_LAMBDA] = params.safety_damping_m
     p[P_CBF_W] = params.cbf_blend_width_m_s
-    p[P_CMD_LIM] = params.command_limit_m_s2
+    p[P_CMD_LIM] = params.command_limit_m_s3
     p[P_S_FLOOR] = params.gradient_floor_m
     p[P_ACT_FLOOR] = params.actuator_floor
     p[P_R_FLOOR] = params.range_floor_m
@@ -416,11 +421,19 @@ def _evaluate_one(
         track = math.tanh(z / p[P_PHI])
     else:
         track = 1.0 if z > 0.0 else (-1.0 if z < 0.0 else 0.0)
+    if robust:
+        # the backstepping's cross terms in consistent units: weights a_max^2 and
+        # (a_max / v)^4 on the two Lyapunov terms (both 1 at the paper's scale)
+        amax_over_v = p[P_AMAX] * inv_v
+        w_sigma = p[P_AMAX] * p[P_AMAX]
+        w_h = amax_over_v * amax_over_v * amax_over_v * amax_over_v
+    else:
+        w_sigma = w_h = 1.0  # as published
     numer = (
         p[P_P1] * a
         + a_d_rate
-        + (alpha - 1.0) * sigma_t * inv_v
-        + alpha * h * s_grad * inv_v
+        + w_sigma * (alpha - 1.0) * sigma_t * inv_v
+        + w_h * alpha * h * s_grad * inv_v
         - p[P_KA] * track
     )
     denom = max(1.0 - (a / p[P_AMAX]) ** int(p[P_N]), p[P_ACT_FLOOR])

@@ -41,6 +41,7 @@ class LawName(StrEnum):
 
     PAPER = "paper"
     ROBUST = "robust"
+    BACKUP = "backup"
 
 
 class BlendMode(StrEnum):
@@ -142,13 +143,23 @@ class GuidanceParams:
     intercept_radius_m: float = 0.1
     # the vehicle: first-order lag from the commanded to the flown lateral acceleration
     response_lag_s: float = 0.0
+    # backup law: its shield keeps every look-ahead gap >= shield_margin_m; the nominal is
+    # blended out over shield_band_m above the acceptance level
+    shield_margin_m: float = 0.1
+    shield_band_m: float = 0.05
+    prediction_step_ratio: float = 0.05
+    # what the autopilot flies if the companion falls silent (0 s: not checked): the turn goes
+    # on for abandon_turn_s, then straight for abandon_hold_s, then braking (0: none)
+    abandon_turn_s: float = 0.0
+    abandon_hold_s: float = 0.0
+    abandon_brake_m_s2: float = 0.0
     # robust law
     reference_limit_ratio: float = 0.95
     track_boundary_layer_m_s2: float = 0.05
     safety_damping_m: float = 0.05
     cbf_blend_width_m_s: float = 0.1
     # guards (both laws)
-    command_limit_ratio: float = 20.0
+    command_limit_1_s: float = 20.0
     gradient_floor_m: float = 1e-6
     actuator_floor: float = 1e-3
     range_floor_m: float = 1e-6
@@ -173,6 +184,15 @@ class GuidanceParams:
         _non_negative("margin_m", self.margin_m)
         _non_negative("intercept_radius_m", self.intercept_radius_m)
         _non_negative("response_lag_s", self.response_lag_s)
+        for name in ("abandon_turn_s", "abandon_hold_s", "abandon_brake_m_s2"):
+            _non_negative(name, getattr(self, name))
+        _positive("shield_band_m", self.shield_band_m)
+        _non_negative("shield_margin_m", self.shield_margin_m)
+        _finite("prediction_step_ratio", self.prediction_step_ratio)
+        if not 0.0 < self.prediction_step_ratio <= 0.25:
+            raise ConfigError(
+                "prediction_step_ratio", self.prediction_step_ratio, "must be in (0, 0.25]"
+            )
         if not isinstance(self.blend, BlendMode):
             raise ConfigError("blend", self.blend, f"must be one of {[m.value for m in BlendMode]}")
         n = self.actuator_n
@@ -185,14 +205,14 @@ class GuidanceParams:
             raise ConfigError(
                 "reference_limit_ratio", self.reference_limit_ratio, "must be in (0, 1)"
             )
-        _finite("command_limit_ratio", self.command_limit_ratio)
-        if self.command_limit_ratio < 1.0:
-            raise ConfigError("command_limit_ratio", self.command_limit_ratio, "must be >= 1")
+        _finite("command_limit_1_s", self.command_limit_1_s)
+        if self.command_limit_1_s < 1.0:
+            raise ConfigError("command_limit_1_s", self.command_limit_1_s, "must be >= 1")
         _finite("actuator_floor", self.actuator_floor)
         if not 0.0 < self.actuator_floor < 1.0:
             raise ConfigError("actuator_floor", self.actuator_floor, "must be in (0, 1)")
 
     @property
-    def command_limit_m_s2(self) -> float:
+    def command_limit_m_s3(self) -> float:
         """Bound on |a_c|: the saturation model keeps |a| < a_max only for a bounded a_c."""
-        return self.command_limit_ratio * self.accel_max_m_s2
+        return self.command_limit_1_s * self.accel_max_m_s2

@@ -114,12 +114,9 @@ class _LawPolicy:
         )
 
     def keep(self, scenarios: ScenarioBatch, mask: BoolArray) -> _LawPolicy:
-        old = self.controller
-        new = GuidanceController(
-            zones=scenarios.zones(), target=scenarios.targets(), params=old.params, law=old.law
+        return _LawPolicy(
+            self.controller.restrict(mask, zones=scenarios.zones(), target=scenarios.targets())
         )
-        new.reset(old.accel_m_s2[mask])
-        return _LawPolicy(new)
 
 
 def law_policy(scenarios: ScenarioBatch, params: GuidanceParams, law: LawName) -> Policy:

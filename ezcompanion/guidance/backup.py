@@ -1,0 +1,682 @@
+"""The backup-set shield of the default law: a certificate that some bounded manoeuvre is
+safe for ever, kept true at every step.
+
+The argument, in the order the code follows it (docs/guidance.md has it in full, with its
+assumptions named; tests/test_backup.py checks each step):
+
+1. **The zones as discs.** A vehicle at p flying the fixed heading u is inside defender i's
+   engagement zone (r < rho_i(sigma), :mod:`ezcompanion.guidance.zones`) exactly when its
+   look-ahead point q = p + mu_i R_i u lies inside the defender's reach disc,
+   |q - d_i| < R_i + c_i. (Square r - mu R cos(sigma) < sqrt(mu^2 R^2 cos^2 sigma +
+   (R + c)^2 - mu^2 R^2) and collect terms.) So the gap g_i = |q - d_i| - (R_i + c_i) has the
+   sign of the true clearance r - rho, and it is 1-Lipschitz in q, which moves at most at
+   v + mu R |a| / v.
+2. **The model.** Speed v constant, course rate a_v / v, the flown lateral acceleration a_v
+   follows the actuator state a with a first-order lag tau (``response_lag_s``; tau = 0:
+   a_v = a), and a follows the saturation model with a bounded command.
+3. **Three backup policies**, each an autonomous feedback on the actuator (no clock, no
+   switching time): LEFT and RIGHT hold the command at -C and +C (a hard turn, converging
+   to a circle), STRAIGHT commands -k a with k = C / a_max (the turn dies out, then a
+   straight line). The flow of an autonomous policy from a later point of its own trajectory
+   is the rest of that trajectory, so the least gap along it can only grow: the *tail
+   property*.
+4. **Certificates.** For each policy, the least gap (less the margin) along its flow for all
+   time: sampled at a step dt_p with the inter-sample dip (Lipschitz bound, item 1)
+   subtracted, until the actuator and the lag have converged; the rest in closed form: a
+   circle's look-ahead points lie on a circle about its centre, a straight line's on a ray,
+   each with the residual heading change after the sampled part bounded and subtracted.
+   So certificate >= 0 implies the flow stays out of every zone (by the margin) for ever.
+   Where an abandon profile is set (the autopilot's behaviour if the companion falls silent:
+   straight on for a hold time, then braking; or a turn, then straight), each sample's
+   abandon path is checked too, so every state on a certified flow is safe to abandon.
+5. **The shield step.** The nominal command is flown if the state it leads to one step
+   ahead (dt, zero-order hold) keeps a certificate >= theta = the largest dip; between theta
+   and theta + band it is blended with the current backup's command (smoothstep weight),
+   the blend verified the same way; otherwise the backup is flown, as the autonomous flow
+   itself. The executed backup changes only to one certified better by more than the dip
+   band (hysteresis). Then, under the model, the true (unsampled) certificate of the
+   executed backup never decreases along backup steps and every other step lands on a
+   certificate >= theta >= its sampling error: by induction, a start with a certificate
+   >= 0 stays outside every zone for ever.
+
+Pure and compiled like the law (:mod:`ezcompanion.guidance.law`); one vehicle per call of
+``shield_one``, any batch through ``shield_batch``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+
+from ezcompanion.guidance._jit import jit, jit_inline
+from ezcompanion.guidance.actuator import actuator_rate, advance_one
+
+__all__ = [
+    "BACKUP_LEFT",
+    "BACKUP_NONE",
+    "BACKUP_RIGHT",
+    "BACKUP_STRAIGHT",
+    "ShieldSettings",
+    "lookahead_gap",
+]
+
+FloatArray = npt.NDArray[np.float64]
+
+# Backup policies (``GuidanceStep`` reports them; -1: none, the law is not shielded)
+BACKUP_NONE, BACKUP_LEFT, BACKUP_RIGHT, BACKUP_STRAIGHT = -1, 0, 1, 2
+_N_BACKUPS = 3
+
+# Packed shield settings (private to the kernels)
+(
+    S_AMAX,
+    S_P1,
+    S_N,
+    S_CMD,
+    S_TAU,
+    S_EPS,
+    S_BAND,
+    S_PRED_RATIO,
+    S_AB_TURN,
+    S_AB_HOLD,
+    S_AB_BRAKE,
+    S_SIZE,
+) = range(12)
+
+# The sampled part of a flow ends when the heading change still to come is bounded by this
+# (it is then accounted for in closed form), or after this many samples; a turn looks for
+# its exit every this many samples.
+_RESIDUAL_RAD = 5e-4
+_MAX_SAMPLES = 4000
+_EXIT_EVERY = 1
+# The nominal's weight looks this many samples ahead (a fixed time, whatever the step).
+_PREVIEW_SAMPLES = 4
+
+
+class ShieldSettings:
+    """The shield's packed settings: built once per controller from ``GuidanceParams``."""
+
+    __slots__ = ("packed",)
+
+    def __init__(
+        self,
+        *,
+        accel_max_m_s2: float,
+        p1_1_s: float,
+        n: int,
+        command_limit_m_s3: float,
+        response_lag_s: float,
+        margin_m: float,
+        band_m: float,
+        prediction_step_ratio: float,
+        abandon_turn_s: float,
+        abandon_hold_s: float,
+        abandon_brake_m_s2: float,
+    ) -> None:
+        p = np.empty(S_SIZE)
+        p[S_AMAX] = accel_max_m_s2
+        p[S_P1] = p1_1_s
+        p[S_N] = n
+        p[S_CMD] = command_limit_m_s3
+        p[S_TAU] = response_lag_s
+        p[S_EPS] = margin_m
+        p[S_BAND] = band_m
+        p[S_PRED_RATIO] = prediction_step_ratio
+        p[S_AB_TURN] = abandon_turn_s
+        p[S_AB_HOLD] = abandon_hold_s
+        p[S_AB_BRAKE] = abandon_brake_m_s2
+        self.packed = p
+
+
+# ---------------------------------------------------------------------------------------
+# 1. gaps: least distance from look-ahead points to the reach discs, closed form
+
+
+@jit
+def _dip(mur: float, dist: float, speed: float, amax: float, av_rate: float, step: float
+         ) -> float:
+    """How far below the least of its two sample values the gap of one zone can dip between
+    samples ``step`` apart, for a look-ahead point ``dist`` from the defender at a sample.
+
+    The look-ahead point q moves at |q_dot| <= V = v + mu R a_max / v and accelerates at
+    |q_ddot| <= a_max + mu R (av_rate / v + a_max^2 / v^2) (av_rate bounds |d a_v / dt|),
+    so |q - d|'' <= V^2 / |q - d| + |q_ddot| =: K while |q - d| >= dist - V step > 0: a
+    function with |f''| <= K lies above the line between its samples less K step^2 / 8.
+    Otherwise the first-order bound V step / 2. (step = 0: no dip.)"""  # fmt: skip
+    fast = speed + mur * amax / speed
+    near = dist - fast * step
+    first = 0.5 * fast * step
+    if near <= 0.0:
+        return first
+    curve = fast * fast / near + amax + mur * (av_rate / speed + amax * amax / (speed * speed))
+    return min(first, 0.125 * curve * step * step)
+
+
+@jit
+def _av_rate_bound(s: FloatArray) -> float:
+    """A bound on |d a_v / dt| along any flow: the actuator's slew C + p1 a_max, and with a
+    lag the initial mismatch |a - a_v| <= 2 a_max over tau, whichever is larger."""
+    slew = s[S_CMD] + s[S_P1] * s[S_AMAX]
+    tau = s[S_TAU]
+    return max(slew, 2.0 * s[S_AMAX] / tau) if tau > 0.0 else slew
+
+
+@jit
+def _point_gap(
+    zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
+    n: float, e: float, cos_h: float, sin_h: float, eps: float, speed: float, amax: float,
+    av_rate: float, step: float,
+) -> float:
+    """min_i |p + mu_i R_i u - d_i| - reach_i - eps, each less its inter-sample dip for
+    samples ``step`` apart (``_dip``; step 0: the gap at this point alone)."""  # fmt: skip
+    best = math.inf
+    for i in range(zn.shape[1]):
+        mur = zmur[kz, i]
+        qn = n + mur * cos_h - zn[kz, i]
+        qe = e + mur * sin_h - ze[kz, i]
+        dist = math.sqrt(qn * qn + qe * qe)
+        g = dist - zreach[kz, i] - eps
+        if step > 0.0:
+            g -= _dip(mur, dist, speed, amax, av_rate, step)
+        best = min(best, g)
+    return best
+
+
+@jit
+def _segment_gap(
+    zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
+    n: float, e: float, cos_h: float, sin_h: float, start_m: float, stop_m: float,
+    lookahead_start: bool, eps: float, widen: float,
+) -> float:
+    """Least gap of the points p + s u, s in [s0_i, s1_i], to the reach discs, where
+    s0_i = min(mu_i R_i, start_m) if ``lookahead_start`` else start_m, and
+    s1_i = stop_m + mu_i R_i (stop_m = inf: a ray). ``widen`` (rad) subtracts the lateral
+    uncertainty of a heading known to within +-widen: (|d - p| + reach + mu R) sin(widen)."""
+    best = math.inf
+    for i in range(zn.shape[1]):
+        mur = zmur[kz, i]
+        s0 = min(mur, start_m) if lookahead_start else start_m
+        s1 = stop_m + mur
+        wn = zn[kz, i] - n
+        we = ze[kz, i] - e
+        along = wn * cos_h + we * sin_h
+        s = min(max(along, s0), s1)
+        dn = wn - s * cos_h
+        de = we - s * sin_h
+        g = math.sqrt(dn * dn + de * de) - zreach[kz, i] - eps
+        if widen > 0.0:
+            g -= (math.sqrt(wn * wn + we * we) + zreach[kz, i] + mur) * math.sin(min(widen, 1.5))
+        best = min(best, g)
+    return best
+
+
+@jit
+def _annulus_gap(
+    zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
+    cn: float, ce: float, radius_m: float, inner_ahead_m: float, outer_ahead_m: float,
+    eps: float, shift_m: float,
+) -> float:
+    """Least gap of the annulus about (cn, ce) swept by the points s ahead of a circle of
+    radius ``radius_m`` along its tangents, s in [inner_ahead_i, outer_ahead_i] (with
+    ``inner_ahead_m`` < 0 meaning mu_i R_i for both: the look-ahead circle alone), against the
+    reach discs; ``shift_m`` is an uncertainty in the centre."""
+    best = math.inf
+    r2 = radius_m * radius_m
+    for i in range(zn.shape[1]):
+        mur = zmur[kz, i]
+        s0 = mur if inner_ahead_m < 0.0 else min(mur, inner_ahead_m)
+        s1 = mur if inner_ahead_m < 0.0 else outer_ahead_m + mur
+        r_in = math.sqrt(r2 + s0 * s0)
+        r_out = math.sqrt(r2 + s1 * s1)
+        dn = zn[kz, i] - cn
+        de = ze[kz, i] - ce
+        dist = math.sqrt(dn * dn + de * de)
+        reach = zreach[kz, i] + eps + shift_m
+        g = max(dist - reach - r_out, r_in - dist - reach)
+        best = min(best, g)
+    return best
+
+
+@jit
+def _arc_end(
+    n: float, e: float, heading: float, accel: float, speed: float, duration_s: float
+) -> tuple[float, float, float]:
+    """Position and heading after flying lateral acceleration ``accel`` for ``duration_s``."""
+    turn = accel * duration_s / speed
+    if abs(turn) < 1e-9:
+        chord = speed * duration_s
+    else:
+        chord = 2.0 * speed * speed / accel * math.sin(0.5 * turn)
+    mid = heading + 0.5 * turn
+    return n + chord * math.cos(mid), e + chord * math.sin(mid), heading + turn
+
+
+@jit
+def _abandon_gap(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, n: float, e: float, heading: float, accel: float, speed: float,
+) -> float:
+    """Least gap of the path the autopilot flies if no setpoint follows this state: the turn
+    goes on for ``abandon_turn_s`` (its end checked; the turn itself is on the sampled flow),
+    then straight for ``abandon_hold_s``, then braking at ``abandon_brake_m_s2`` to a stop
+    (or, without braking, the hold's end is the horizon). inf where no profile is set."""
+    hold = s[S_AB_HOLD]
+    if hold <= 0.0:
+        return math.inf
+    n1, e1, h1 = _arc_end(n, e, heading, accel, speed, s[S_AB_TURN])
+    brake = s[S_AB_BRAKE]
+    stop = speed * hold + (0.5 * speed * speed / brake if brake > 0.0 else 0.0)
+    return _segment_gap(
+        zn, ze, zmur, zreach, kz, n1, e1, math.cos(h1), math.sin(h1), speed * hold, stop,
+        True, s[S_EPS], 0.0,
+    )  # fmt: skip
+
+
+def lookahead_gap(
+    zones_north_m: FloatArray,
+    zones_east_m: FloatArray,
+    mu_range_m: FloatArray,
+    reach_m: FloatArray,
+    north_m: float,
+    east_m: float,
+    course_rad: float,
+    margin_m: float = 0.0,
+) -> float:
+    """min_i |p + mu_i R_i u - d_i| - (R_i + c_i) - margin (zone arrays of shape (1, zones)):
+    > 0 exactly where r_i > rho_i(sigma_i) for every zone (item 1 of the module docstring)."""
+    return float(
+        _point_gap(
+            zones_north_m, zones_east_m, mu_range_m, reach_m, 0, north_m, east_m,
+            math.cos(course_rad), math.sin(course_rad), margin_m, 1.0, 1.0, 0.0, 0.0,
+        )
+    )  # fmt: skip
+
+
+# ---------------------------------------------------------------------------------------
+# 2. the model: actuator, lag, kinematics over one step with the actuator path given
+
+
+@jit
+def _advance_straighten(a: float, dt_s: float, accel_max: float, p1: float, n: int,
+                        limit: float) -> float:
+    """The actuator over ``dt_s`` under the feedback a_c = -(limit / a_max) a, integrated
+    continuously (SSPRK3, substeps within the bound that keeps |a| < a_max)."""  # fmt: skip
+    gain = limit / accel_max
+    max_step = 1.0 / (n * limit / accel_max + p1)
+    steps = max(1, math.ceil(dt_s / max_step - 1e-9))
+    h = dt_s / steps
+    for _ in range(steps):
+        a1 = a + h * actuator_rate(a, -gain * a, accel_max, p1, n)
+        a2 = 0.75 * a + 0.25 * (a1 + h * actuator_rate(a1, -gain * a1, accel_max, p1, n))
+        a = a / 3.0 + (2.0 / 3.0) * (a2 + h * actuator_rate(a2, -gain * a2, accel_max, p1, n))
+    return a
+
+
+@jit
+def _lag_response(a0: float, a1: float, av0: float, tau: float, t: float, dt: float
+                  ) -> tuple[float, float]:
+    """a_v(t) and its integral over [0, t] for a_v' = (a - a_v) / tau, a linear from a0 to a1
+    over dt (tau = 0: a_v = a)."""  # fmt: skip
+    rate = (a1 - a0) / dt
+    if tau <= 0.0:
+        return a0 + rate * t, a0 * t + 0.5 * rate * t * t
+    decay = math.exp(-t / tau)
+    offset = av0 - a0 + rate * tau
+    av = a0 + rate * t - rate * tau + offset * decay
+    integral = a0 * t + 0.5 * rate * t * t - rate * tau * t + offset * tau * (1.0 - decay)
+    return av, integral
+
+
+@jit
+def _fly(n: float, e: float, h: float, a0: float, a1: float, av0: float, speed: float,
+         tau: float, dt: float) -> tuple[float, float, float, float]:
+    """The vehicle over dt while the actuator moves linearly from a0 to a1: position by
+    Simpson's rule on the exact heading, heading and a_v exact."""  # fmt: skip
+    _, half = _lag_response(a0, a1, av0, tau, 0.5 * dt, dt)
+    av1, full = _lag_response(a0, a1, av0, tau, dt, dt)
+    hm = h + half / speed
+    h1 = h + full / speed
+    step = speed * dt / 6.0
+    n1 = n + step * (math.cos(h) + 4.0 * math.cos(hm) + math.cos(h1))
+    e1 = e + step * (math.sin(h) + 4.0 * math.sin(hm) + math.sin(h1))
+    return n1, e1, h1, av1
+
+
+# ---------------------------------------------------------------------------------------
+# 3-4. certificates of the backup policies
+
+
+@jit
+def _turn_limit(s: FloatArray, sign: float) -> float:
+    """The fixed point a* of the saturation model under the held command sign * C."""
+    amax, p1, n, cmd = s[S_AMAX], s[S_P1], int(s[S_N]), s[S_CMD]
+    a = sign * amax * 0.999
+    for _ in range(50):  # Newton on (1 - (a/amax)^n) C sign - p1 a = 0; monotone, converges
+        f = (1.0 - (a / amax) ** n) * cmd * sign - p1 * a
+        df = -n * (a / amax) ** (n - 1) / amax * cmd * sign - p1
+        a -= f / df
+    return a
+
+
+@jit
+def sample_ticks(s: FloatArray, speed: float, dt: float) -> int:
+    """Control steps per certificate sample: the sample step m dt is the largest multiple of
+    the control step within ``prediction_step_ratio`` v / a_max (at least one step), so that
+    every sample of a turn is a control step too."""
+    return max(1, int(math.floor(s[S_PRED_RATIO] * speed / s[S_AMAX] / dt + 1e-9)))
+
+
+@jit
+def acceptance_level_m(s: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
+                       speed: float, dt: float) -> float:
+    """theta: the largest inter-sample dip (``_dip``) of any zone at the certificates' sample
+    step, for a look-ahead point on the margin. Where a certificate is >= 0 every sample
+    lies outside the margin, so the sampled certificate is within theta of the true one."""  # fmt: skip
+    step = sample_ticks(s, speed, dt) * dt
+    rate = _av_rate_bound(s)
+    theta = 0.0
+    for i in range(zmur.shape[1]):
+        dist = zreach[kz, i] + s[S_EPS]
+        theta = max(theta, _dip(zmur[kz, i], dist, speed, s[S_AMAX], rate, step))
+    return theta
+
+
+@jit
+def _residual_turn_rad(s: FloatArray, a: float, av: float, limit: float, speed: float) -> float:
+    """A bound on the heading change still to come once the actuator is at a and the flown
+    acceleration at av, converging to ``limit`` (0: STRAIGHT, a*: a turn), measured from the
+    limit's own turn: int |a_v - a*| dt / v <= (tau |av - a*| + int |a - a*| dt) / v, and
+    |a - a*| decays at least at the rate r = k (1 - (a_far / a_max)^n) + p1 (k = C / a_max,
+    a_far the farther of a and a* from 0), so int |a - a*| dt <= |a - a*| / r."""
+    amax, n = s[S_AMAX], int(s[S_N])
+    far = max(abs(a), abs(limit)) / amax
+    if limit == 0.0:
+        rate = s[S_CMD] / amax * (1.0 - far**n) + s[S_P1]
+    else:  # the turn's linearisation about a*: n C |a|^(n-1) / a_max^n + p1, at the nearer a
+        near = min(abs(a), abs(limit)) / amax
+        rate = n * s[S_CMD] / amax * near ** (n - 1) + s[S_P1]
+    return (s[S_TAU] * abs(av - limit) + abs(a - limit) / rate) / speed
+
+
+@jit
+def straight_certificate(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
+    stop_below: float,
+) -> float:
+    """Certificate of STRAIGHT from this state: the turn dies out under a_c = -(C / a_max) a,
+    then a straight line for ever. Flown control step by control step (``dt``, the actuator
+    linear over each, as the service flies it), sampled every ``sample_ticks`` steps until
+    the heading change still to come is below ``_RESIDUAL_RAD``; then the ray in closed
+    form, widened by that residual. Stops early, returning the running least gap, once that
+    is below ``stop_below``."""  # fmt: skip
+    amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
+    rate = _av_rate_bound(s)
+    ticks = sample_ticks(s, speed, dt)
+    step = ticks * dt
+    best = math.inf
+    for _ in range(_MAX_SAMPLES):
+        best = min(best, _point_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h),
+                                    eps, speed, amax, rate, step))  # fmt: skip
+        best = min(best, _abandon_gap(s, zn, ze, zmur, zreach, kz, n, e, h, a, speed))
+        if best < stop_below or _residual_turn_rad(s, a, av, 0.0, speed) < _RESIDUAL_RAD:
+            break
+        for _ in range(ticks):
+            a1 = _advance_straighten(a, dt, amax, p1, int(s[S_N]), s[S_CMD])
+            n, e, h, av = _fly(n, e, h, a, a1, av, speed, tau, dt)
+            a = a1
+    if best < stop_below:
+        return best
+    widen = _residual_turn_rad(s, a, av, 0.0, speed)
+    hold = s[S_AB_HOLD]
+    # the look-ahead points of the line; with an abandon profile, from min(mu R, v hold)
+    # ahead: the abandon paths from points of the line are parts of the line
+    start = speed * hold if hold > 0.0 else math.inf
+    tail = _segment_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h), start,
+                        math.inf, True, eps, widen)  # fmt: skip
+    return min(best, tail)
+
+
+@jit
+def turn_certificate(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, policy: int, n: float, e: float, h: float, a: float, av: float, speed: float,
+    dt: float, exit_now: float, exit_level: float, stop_below: float,
+) -> float:
+    """Certificate of LEFT or RIGHT: turn hard (a_c = -+C held) until a sample where the
+    STRAIGHT certificate is at least ``exit_level``, then STRAIGHT; with no such sample
+    within a revolution after the turn has converged, the circle for ever (closed form).
+    Samples every ``sample_ticks`` control steps ``dt``, so every sample is a control step
+    (``exit_now``: the STRAIGHT certificate at this state, already known)."""  # fmt: skip
+    amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
+    cmd = s[S_CMD] * (-1.0 if policy == BACKUP_LEFT else 1.0)
+    ticks = sample_ticks(s, speed, dt)
+    step = ticks * dt
+    rate = _av_rate_bound(s)
+    limit = _turn_limit(s, -1.0 if policy == BACKUP_LEFT else 1.0)
+    best = math.inf
+    turned = 0.0
+    converged = False
+    for j in range(_MAX_SAMPLES):
+        best = min(best, _point_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h),
+                                    eps, speed, amax, rate, step))  # fmt: skip
+        best = min(best, _abandon_gap(s, zn, ze, zmur, zreach, kz, n, e, h, a, speed))
+        if best < stop_below:
+            return best
+        if j == 0:
+            leave = exit_now
+        elif j % _EXIT_EVERY == 0:  # (any subset of the samples keeps the argument)
+            leave = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
+                                         dt, exit_level)  # fmt: skip
+        else:
+            leave = -math.inf
+        if leave >= exit_level:
+            return min(best, leave)
+        if converged and turned >= 2.0 * math.pi:
+            break
+        converged = converged or _residual_turn_rad(s, a, av, limit, speed) < _RESIDUAL_RAD
+        h0 = h
+        for _ in range(ticks):
+            a1 = advance_one(a, cmd, dt, amax, p1, int(s[S_N]), s[S_CMD])
+            n, e, h, av = _fly(n, e, h, a, a1, av, speed, tau, dt)
+            a = a1
+        if converged:
+            turned += abs(h - h0)
+    # the circle: the residual heading change after the sampled part, about a*
+    widen = _residual_turn_rad(s, a, av, limit, speed)
+    radius = speed * speed / abs(limit)
+    side = 1.0 if limit > 0.0 else -1.0
+    ch = math.cos(h)
+    sh = math.sin(h)
+    cn = n - side * radius * sh
+    ce = e + side * radius * ch
+    shift = widen * (2.0 * radius + speed * (tau + 1.0 / p1)) + speed * speed * abs(
+        a - limit
+    ) / (limit * limit)
+    tail = _annulus_gap(zn, ze, zmur, zreach, kz, cn, ce, radius, -1.0, 0.0, eps,
+                        shift + widen * np.max(zmur[kz]))  # fmt: skip
+    hold = s[S_AB_HOLD]
+    if hold > 0.0:
+        brake = s[S_AB_BRAKE]
+        stop = speed * hold + (0.5 * speed * speed / brake if brake > 0.0 else 0.0)
+        tail = min(tail, _annulus_gap(zn, ze, zmur, zreach, kz, cn, ce, radius, speed * hold,
+                                      stop, eps, shift + widen * stop))  # fmt: skip
+    return min(best, tail)
+
+
+@jit
+def backup_certificates(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
+    enough: float, out: FloatArray,
+) -> None:
+    """The certificates of LEFT, RIGHT and STRAIGHT at this state into ``out[0:3]``.
+
+    Once one reaches ``enough`` the others are not needed: they are set to -inf. A
+    certificate that cannot beat the best so far stops early, below it (a value only known
+    to be lower)."""
+    theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
+    straight = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
+                                    -math.inf)  # fmt: skip
+    out[BACKUP_STRAIGHT] = straight
+    if straight >= theta:  # both turns leave at once: they are STRAIGHT
+        out[BACKUP_LEFT] = out[BACKUP_RIGHT] = straight
+        return
+    best = straight
+    for policy in (BACKUP_LEFT, BACKUP_RIGHT):
+        if best >= enough:
+            out[policy] = -math.inf
+            continue
+        out[policy] = turn_certificate(s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av,
+                                       speed, dt, straight, theta, best)  # fmt: skip
+        best = max(best, out[policy])
+
+
+# ---------------------------------------------------------------------------------------
+# 5. the shield step
+
+
+@jit
+def _fly_step(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, policy: int, command: float, n: float, e: float, h: float, a: float, av: float,
+    speed: float, dt: float,
+) -> tuple[float, float, float, float, float, float]:
+    """One control step of ``policy`` (or, with policy -1, ``command`` held), in substeps
+    within the sample step, with the least gap along it; returns the gap and the state
+    after."""
+    steps = max(1, math.ceil(dt / (s[S_PRED_RATIO] * speed / s[S_AMAX]) - 1e-9))
+    sub = dt / steps
+    amax, p1, nn, cmd = s[S_AMAX], s[S_P1], int(s[S_N]), s[S_CMD]
+    rate = _av_rate_bound(s)
+    if policy == BACKUP_LEFT:
+        command = -cmd
+    elif policy == BACKUP_RIGHT:
+        command = cmd
+    best = math.inf
+    a_end = _advance_straighten(a, dt, amax, p1, nn, cmd) if policy == BACKUP_STRAIGHT else (
+        advance_one(a, command, dt, amax, p1, nn, cmd)
+    )
+    # the vehicle sees the actuator move from a to a_end; substeps interpolate it linearly
+    for i in range(steps):
+        a0 = a + (a_end - a) * i / steps
+        a1 = a + (a_end - a) * (i + 1) / steps
+        n, e, h, av = _fly(n, e, h, a0, a1, av, speed, s[S_TAU], sub)
+        best = min(best, _point_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h),
+                                    s[S_EPS], speed, amax, rate, sub))  # fmt: skip
+    return best, n, e, h, a_end, av
+
+
+@jit
+def _ahead(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, command: float, n: float, e: float, h: float, a: float, av: float, speed: float,
+    dt: float, fly_s: float, enough: float, certs: FloatArray,
+) -> tuple[float, int, float, float]:
+    """Fly ``command`` held for ``fly_s``: the best certificate after it (with the flight's
+    own least gap; exact up to ``enough``), which backup holds it, and the actuator and
+    model a_v at the end. ``dt`` is the control step the certificates align with."""
+    gap, n1, e1, h1, a1, av1 = _fly_step(s, zn, ze, zmur, zreach, kz, -1, command, n, e, h, a,
+                                         av, speed, fly_s)  # fmt: skip
+    backup_certificates(s, zn, ze, zmur, zreach, kz, n1, e1, h1, a1, av1, speed, dt, enough,
+                        certs)  # fmt: skip
+    which = int(np.argmax(certs))
+    return min(certs[which], gap), which, a1, av1
+
+
+@jit
+def backup_command(s: FloatArray, policy: int, a: float) -> float:
+    """The actuator command of a backup policy at actuator state ``a``."""
+    cmd = s[S_CMD]
+    if policy == BACKUP_LEFT:
+        return -cmd
+    if policy == BACKUP_RIGHT:
+        return cmd
+    return -cmd / s[S_AMAX] * a
+
+
+@jit
+def shield_one(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float,
+    nominal: float, dt: float, current: int, out: FloatArray, k: int,
+) -> None:
+    """One shielded step for vehicle ``k``: writes ``out[k, :]`` = (a after the step, the
+    model's a_v after it, the backup held after the step, the nominal's weight, the
+    certificate of the held backup at the start, the certificate one step ahead on the
+    nominal)."""
+    theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
+    band = s[S_BAND]
+    certs = np.empty(_N_BACKUPS)
+    # the nominal held for the preview sets the weight; held for one step, it must keep a
+    # certificate >= theta to be flown at all
+    preview_s = max(dt, _PREVIEW_SAMPLES * sample_ticks(s, speed, dt) * dt)
+    preview, _, _, _ = _ahead(s, zn, ze, zmur, zreach, kz, nominal, n, e, h, a, av, speed, dt,
+                              preview_s, theta + band, certs)  # fmt: skip
+    ahead, which, a_next, av_next = _ahead(s, zn, ze, zmur, zreach, kz, nominal, n, e, h, a, av,
+                                           speed, dt, dt, theta, certs)  # fmt: skip
+    x = min(max((preview - theta) / band, 0.0), 1.0)
+    weight = x * x * (3.0 - 2.0 * x) if ahead >= theta else 0.0
+    cert_now = math.nan  # computed only where the backup's command is used
+    if weight < 1.0:
+        # the held backup: kept unless another is certified (>= theta) and better by 2 theta
+        backup_certificates(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, math.inf,
+                            certs)  # fmt: skip
+        best = int(np.argmax(certs))
+        if not 0 <= current < _N_BACKUPS or (
+            certs[best] >= theta and certs[best] > certs[current] + 2.0 * theta
+        ):
+            current = best
+        if current != BACKUP_STRAIGHT and certs[BACKUP_STRAIGHT] >= theta:
+            current = BACKUP_STRAIGHT  # a turn backup leaves here (its own rule)
+        cert_now = certs[current]
+        accepted = False
+        if weight > 0.0:
+            # blend with the held backup's command, held over the step, and verify the blend
+            blended = weight * nominal + (1.0 - weight) * backup_command(s, current, a)
+            check, which_b, a_b, av_b = _ahead(s, zn, ze, zmur, zreach, kz, blended, n, e, h, a,
+                                               av, speed, dt, dt, theta, certs)  # fmt: skip
+            if check >= theta:
+                accepted = True
+                which, a_next, av_next = which_b, a_b, av_b
+        if not accepted:
+            weight = 0.0
+            which = current
+            _, _, _, _, a_next, av_next = _fly_step(s, zn, ze, zmur, zreach, kz, current, 0.0, n,
+                                                    e, h, a, av, speed, dt)  # fmt: skip
+    out[k, 0] = a_next
+    out[k, 1] = av_next
+    out[k, 2] = which
+    out[k, 3] = weight
+    out[k, 4] = cert_now
+    out[k, 5] = ahead
+
+
+@jit
+def shield_batch(
+    s: FloatArray,
+    zn: FloatArray,
+    ze: FloatArray,
+    zmur: FloatArray,
+    zreach: FloatArray,
+    n: FloatArray,
+    e: FloatArray,
+    h: FloatArray,
+    a: FloatArray,
+    av: FloatArray,
+    speed: FloatArray,
+    nominal: FloatArray,
+    active: npt.NDArray[np.bool_],
+    dt: float,
+    current: npt.NDArray[np.int8],
+    out: FloatArray,
+) -> None:
+    """``shield_one`` for every vehicle with ``active`` set (zone row k, or 0 if shared)."""
+    shared = zn.shape[0] == 1
+    for k in range(n.shape[0]):
+        if active[k]:
+            shield_one(
+                s, zn, ze, zmur, zreach, 0 if shared else k, n[k], e[k], h[k], a[k], av[k],
+                speed[k], nominal[k], dt, int(current[k]), out, k,
+            )  # fmt: skip

@@ -10,13 +10,11 @@ socket, and prints percentiles on exit. The product code carries no instrumentat
 from __future__ import annotations
 
 import json
-import os
 import sys
 import time
 from typing import Any
 
-os.environ.setdefault("EZCOMPANION_JIT", "0")  # as `ezcompanion run`
-
+# compiled, as `ezcompanion run` runs it
 from ezcompanion.config import load_scenario
 from ezcompanion.service.events import EventLog
 from ezcompanion.service.runner import CompanionService

@@ -11,7 +11,6 @@ the service interprets the law's kernels instead of compiling them (see
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -24,7 +23,7 @@ CONFIG_DIR = Path(__file__).resolve().parents[1] / "config"
 PAPER_SCENARIOS = {1: "paper_scenario1.yaml", 2: "paper_scenario2.yaml"}
 
 
-LAWS = ("paper", "robust")
+LAWS = ("backup", "robust", "paper")  # LawName values, the default first
 
 
 def run_simulate(
@@ -128,7 +127,7 @@ def run_demo(*, scenarios: Sequence[int], out_dir: Path, speedup: float, profile
 def run_reference_demo(*, scenarios: Sequence[int], out_dir: Path) -> int:
     """The paper's scenarios in the reference simulator, both laws, with figures and CSVs.
 
-    Returns 1 if the robust law fails to intercept or enters an engagement zone.
+    Returns 1 if the default (backup) law fails to intercept or enters an engagement zone.
     """
     from ezcompanion.config import load_scenario
     from ezcompanion.guidance import LawName
@@ -139,14 +138,14 @@ def run_reference_demo(*, scenarios: Sequence[int], out_dir: Path) -> int:
     failed = False
     for number in scenarios:
         scenario = load_scenario(CONFIG_DIR / PAPER_SCENARIOS[number])
-        for law in (LawName.ROBUST, LawName.PAPER):
+        for law in (LawName.BACKUP, LawName.ROBUST, LawName.PAPER):
             run = simulate(scenario, law)
             stem = out_dir / f"scenario{number}_{law.value}"
             print(run.summary())
             print(f"  wrote {write_result_csv(run, stem.with_suffix('.csv'))}")
             print(f"  wrote {plot_result(run, stem.with_suffix('.png'))}")
             outcome = run.outcome
-            if law is LawName.ROBUST and not (
+            if law is LawName.BACKUP and not (
                 outcome.intercepted and min(outcome.min_clearance_m) > 0.0
             ):
                 failed = True
@@ -217,10 +216,6 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``ezcompanion`` console script."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    if argv[:1] == ["run"]:
-        # The service interprets the law (0.1 ms a step) rather than load numba's LLVM
-        # (about 110 MB); set EZCOMPANION_JIT=1 to compile it anyway.
-        os.environ.setdefault("EZCOMPANION_JIT", "0")
     args = _parser().parse_args(argv)
     try:
         if args.command == "validate":

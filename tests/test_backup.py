@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
@@ -30,7 +31,6 @@ from ezcompanion.guidance import (
 from ezcompanion.guidance import backup as bk
 from ezcompanion.guidance.controller import GuidanceStep
 from ezcompanion.sim.engine import SimResult, simulate
-from pathlib import Path
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
 
@@ -211,9 +211,8 @@ class Vehicle:
         def rates(t: float, x: FloatArray) -> FloatArray:
             a = a0 + (a1 - a0) * t / dt
             av = a if tau == 0.0 else x[3]
-            return np.array(
-                [v * math.cos(x[2]), v * math.sin(x[2]), av / v, 0.0 if tau == 0.0 else (a - av) / tau]
-            )
+            lag = 0.0 if tau == 0.0 else (a - av) / tau
+            return np.array([v * math.cos(x[2]), v * math.sin(x[2]), av / v, lag])
 
         best = math.inf
         for j in range(substeps):
@@ -274,8 +273,11 @@ def start_certificate(
     return float(certs.max())
 
 
+Engagement = tuple[ZoneSet, GuidanceParams, tuple[float, float, float, float], list[float], float]
+
+
 @st.composite
-def engagements(draw: st.DrawFn) -> tuple[ZoneSet, GuidanceParams, tuple[float, ...], list[float], float]:
+def engagements(draw: st.DrawFn) -> Engagement:
     zones = draw(layouts())
     tau = draw(st.sampled_from([0.0, 0.0, 0.3, 1.2]))
     params = dataclasses.replace(PARAMS, response_lag_s=tau)
@@ -298,16 +300,14 @@ def engagements(draw: st.DrawFn) -> tuple[ZoneSet, GuidanceParams, tuple[float, 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.filter_too_much,
                                                                   HealthCheck.too_slow])
 @given(case=engagements())
-def test_a_certified_start_stays_out_of_every_zone_whatever_the_nominal(
-    case: tuple[ZoneSet, GuidanceParams, tuple[float, float, float, float], list[float], float],
-) -> None:
+def test_a_certified_start_stays_out_of_every_zone_whatever_the_nominal(case: Engagement) -> None:
     """The theorem: certificate >= theta at the start, then every gap along the flight stays
     >= the margin, for any bounded nominal, with or without the lag."""
     zones, params, start, nominal, dt = case
     theta = bk.acceptance_level_m(settings_for(params), zones.mu_range_m, zones.reach_m, 0,
                                   1.0, dt)  # fmt: skip
     assume(start_certificate(zones, params, start, dt) >= theta)
-    least, weights, _ = run_shield(zones, params, start, nominal, dt)
+    least, _weights, _ = run_shield(zones, params, start, nominal, dt)
     assert least >= params.shield_margin_m - 1e-6
 
 
@@ -322,7 +322,7 @@ def test_the_shield_overrides_a_nominal_that_flies_into_a_zone() -> None:
     straight = [0.0] * 400
     free = Vehicle(*start, 1.0, 0.0)
     assert min(free.fly(0.0, 0.0, dt, zones) for _ in straight) < 0.0
-    least, weights, certs = run_shield(zones, PARAMS, start, straight, dt)
+    least, weights, _certs = run_shield(zones, PARAMS, start, straight, dt)
     assert least >= PARAMS.shield_margin_m - 1e-9
     assert min(weights) < 0.1 and max(weights) == 1.0  # blended out, then back
 
@@ -433,13 +433,13 @@ def _scaled_runs(law: LawName, length: float, time: float) -> tuple[SimResult, S
                                 range_m=d.range_m * length,
                                 capture_radius_m=d.capture_radius_m * length)
             for d in base.defenders
-        ),  # fmt: skip
+        ),
         target=dataclasses.replace(base.target, north_m=base.target.north_m * length,
-                                   east_m=base.target.east_m * length),  # fmt: skip
+                                   east_m=base.target.east_m * length),
         start=dataclasses.replace(
             base.start, north_m=base.start.north_m * length, east_m=base.start.east_m * length,
             speed_m_s=base.start.speed_m_s * length / time,
-        ),  # fmt: skip
+        ),
         guidance=scaled(base.guidance, length, time),
         simulation=dataclasses.replace(base.simulation, dt_s=0.02 * time, duration_s=5.0 * time),
     )

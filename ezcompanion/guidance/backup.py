@@ -14,30 +14,35 @@ assumptions named; tests/test_backup.py checks each step):
 2. **The model.** Speed v constant, course rate a_v / v, the flown lateral acceleration a_v
    follows the actuator state a with a first-order lag tau (``response_lag_s``; tau = 0:
    a_v = a), and a follows the saturation model with a bounded command.
-3. **Three backup policies**, each an autonomous feedback on the actuator (no clock, no
-   switching time): LEFT and RIGHT hold the command at -C and +C (a hard turn, converging
-   to a circle), STRAIGHT commands -k a with k = C / a_max (the turn dies out, then a
-   straight line). The flow of an autonomous policy from a later point of its own trajectory
-   is the rest of that trajectory, so the least gap along it can only grow: the *tail
-   property*.
-4. **Certificates.** For each policy, the least gap (less the margin) along its flow for all
-   time: sampled at a step dt_p with the inter-sample dip (Lipschitz bound, item 1)
-   subtracted, until the actuator and the lag have converged; the rest in closed form: a
-   circle's look-ahead points lie on a circle about its centre, a straight line's on a ray,
-   each with the residual heading change after the sampled part bounded and subtracted.
-   So certificate >= 0 implies the flow stays out of every zone (by the margin) for ever.
-   Where an abandon profile is set (the autopilot's behaviour if the companion falls silent:
-   straight on for a hold time, then braking; or a turn, then straight), each sample's
-   abandon path is checked too, so every state on a certified flow is safe to abandon.
-5. **The shield step.** The nominal command is flown if the state it leads to one step
-   ahead (dt, zero-order hold) keeps a certificate >= theta = the largest dip; between theta
-   and theta + band it is blended with the current backup's command (smoothstep weight),
-   the blend verified the same way; otherwise the backup is flown, as the autonomous flow
-   itself. The executed backup changes only to one certified better by more than the dip
-   band (hysteresis). Then, under the model, the true (unsampled) certificate of the
-   executed backup never decreases along backup steps and every other step lands on a
-   certificate >= theta >= its sampling error: by induction, a start with a certificate
-   >= 0 stays outside every zone for ever.
+3. **Three backup policies**, feedbacks on the actuator alone (no clock): STRAIGHT commands
+   a_c = -(C / a_max) a, integrated continuously (the turn dies out, then a straight line);
+   LEFT and RIGHT hold a_c = -C or +C (a hard turn) until the first control step at which
+   STRAIGHT is certified, then STRAIGHT; a turn with no such step within a revolution after
+   it has converged circles for ever.
+4. **Certificates.** For each policy, the least gap (less the margin) along its flight for
+   all time, from below: the flight is integrated control step by control step (the
+   actuator linear over each, as flown) and sampled every m steps (m dt within
+   ``prediction_step_ratio`` v / a_max), each sample less its inter-sample dip (a
+   second-order bound on the gap between two samples); once the heading change still to
+   come is bounded small, the rest in closed form: a circle's look-ahead points lie on a
+   circle about its centre, a straight line's on a ray, the bound subtracted as a widening.
+   So a certificate >= 0 means that flight stays out of every zone by the margin for ever.
+   A turn's exit sample is a control step, so flown by its rule it leaves there or earlier,
+   and an earlier exit is itself certified (>= theta, the largest dip). Where an abandon
+   profile is set (what the autopilot flies if the companion falls silent: the turn goes
+   on for a time, then straight for a hold time, then braking), every sample's abandon
+   path is checked as well, so every state of a certified flight is safe to abandon.
+5. **The shield step.** The nominal command, held over the next control step, is flown if
+   some backup is certified (>= theta) from where it leads; its weight comes from the
+   nominal held for a longer preview (a fixed time, so the behaviour does not depend on the
+   step), smoothstep over ``shield_band_m`` above theta, and a weight below 1 blends in the
+   held backup's command, verified the same way. Otherwise the held backup flies, by its
+   rule. The held backup changes only to one certified (>= theta) and better by 2 theta.
+   By induction on the control steps, under the model: *if a backup is certified at the
+   start, the flight stays outside every zone by the margin for ever*, whatever the
+   nominal command does. (The held backup is always one whose flight, by its rule, is safe
+   for ever: it was certified when taken, and each step either flies it or moves to
+   another certified one.)
 
 Pure and compiled like the law (:mod:`ezcompanion.guidance.law`); one vehicle per call of
 ``shield_one``, any batch through ``shield_batch``.
@@ -50,7 +55,7 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-from ezcompanion.guidance._jit import jit, jit_inline
+from ezcompanion.guidance._jit import jit
 from ezcompanion.guidance.actuator import actuator_rate, advance_one
 
 __all__ = [
@@ -159,7 +164,7 @@ def _av_rate_bound(s: FloatArray) -> float:
     lag the initial mismatch |a - a_v| <= 2 a_max over tau, whichever is larger."""
     slew = s[S_CMD] + s[S_P1] * s[S_AMAX]
     tau = s[S_TAU]
-    return max(slew, 2.0 * s[S_AMAX] / tau) if tau > 0.0 else slew
+    return float(max(slew, 2.0 * s[S_AMAX] / tau)) if tau > 0.0 else float(slew)
 
 
 @jit
@@ -351,7 +356,7 @@ def _fly(n: float, e: float, h: float, a0: float, a1: float, av0: float, speed: 
 def _turn_limit(s: FloatArray, sign: float) -> float:
     """The fixed point a* of the saturation model under the held command sign * C."""
     amax, p1, n, cmd = s[S_AMAX], s[S_P1], int(s[S_N]), s[S_CMD]
-    a = sign * amax * 0.999
+    a: float = sign * amax * 0.999
     for _ in range(50):  # Newton on (1 - (a/amax)^n) C sign - p1 a = 0; monotone, converges
         f = (1.0 - (a / amax) ** n) * cmd * sign - p1 * a
         df = -n * (a / amax) ** (n - 1) / amax * cmd * sign - p1
@@ -364,7 +369,8 @@ def sample_ticks(s: FloatArray, speed: float, dt: float) -> int:
     """Control steps per certificate sample: the sample step m dt is the largest multiple of
     the control step within ``prediction_step_ratio`` v / a_max (at least one step), so that
     every sample of a turn is a control step too."""
-    return max(1, int(math.floor(s[S_PRED_RATIO] * speed / s[S_AMAX] / dt + 1e-9)))
+    ticks: int = math.floor(s[S_PRED_RATIO] * speed / s[S_AMAX] / dt + 1e-9)
+    return max(1, ticks)
 
 
 @jit
@@ -372,7 +378,7 @@ def acceptance_level_m(s: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: 
                        speed: float, dt: float) -> float:
     """theta: the largest inter-sample dip (``_dip``) of any zone at the certificates' sample
     step, for a look-ahead point on the margin. Where a certificate is >= 0 every sample
-    lies outside the margin, so the sampled certificate is within theta of the true one."""  # fmt: skip
+    lies outside the margin, so the sampled certificate is within theta of the true one."""
     step = sample_ticks(s, speed, dt) * dt
     rate = _av_rate_bound(s)
     theta = 0.0
@@ -396,7 +402,7 @@ def _residual_turn_rad(s: FloatArray, a: float, av: float, limit: float, speed: 
     else:  # the turn's linearisation about a*: n C |a|^(n-1) / a_max^n + p1, at the nearer a
         near = min(abs(a), abs(limit)) / amax
         rate = n * s[S_CMD] / amax * near ** (n - 1) + s[S_P1]
-    return (s[S_TAU] * abs(av - limit) + abs(a - limit) / rate) / speed
+    return float((s[S_TAU] * abs(av - limit) + abs(a - limit) / rate) / speed)
 
 
 @jit
@@ -590,10 +596,10 @@ def backup_command(s: FloatArray, policy: int, a: float) -> float:
     """The actuator command of a backup policy at actuator state ``a``."""
     cmd = s[S_CMD]
     if policy == BACKUP_LEFT:
-        return -cmd
+        return float(-cmd)
     if policy == BACKUP_RIGHT:
-        return cmd
-    return -cmd / s[S_AMAX] * a
+        return float(cmd)
+    return float(-cmd / s[S_AMAX] * a)
 
 
 @jit

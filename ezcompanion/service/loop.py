@@ -7,6 +7,7 @@ the budget, or when the engagement is over; a state the law must not see never r
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from enum import StrEnum
@@ -87,6 +88,14 @@ class GuidanceLoop:
             self.period_s,
         )
         self.controller.reset()
+
+    def assume_response_lag(self, lag_s: float) -> None:
+        """Give the law the vehicle's response lag ``lag_s`` (its autopilot's measured
+        default) unless the scenario states one; keeps the actuator state."""
+        if self.scenario.guidance.response_lag_s > 0.0 or lag_s <= 0.0:
+            return
+        guidance = dataclasses.replace(self.scenario.guidance, response_lag_s=lag_s)
+        self.update_scenario(dataclasses.replace(self.scenario, guidance=guidance))
 
     def update_scenario(self, scenario: Scenario) -> None:
         """Fly against new defenders and target from the next tick on, keeping the actuator

@@ -40,6 +40,7 @@ from ezcompanion import __version__
 from ezcompanion.config import Scenario, scenario_to_dict, scenario_update
 from ezcompanion.errors import ConfigError
 from ezcompanion.guidance import LawName
+from ezcompanion.service.autopilots import autopilot_profile
 from ezcompanion.service.clock import ScaledClock
 from ezcompanion.service.events import EventKind, EventLog
 from ezcompanion.service.inbox import ScenarioInbox
@@ -304,6 +305,7 @@ class CompanionService:
             self._target = source
             self._fixed_wing = is_fixed_wing(msg)
             self._setpoints = self._make_setpoints(msg)
+            self.loop.assume_response_lag(autopilot_profile(msg).response_lag_s)
             self.events.emit(
                 EventKind.VEHICLE_FOUND,
                 now,

@@ -1,0 +1,62 @@
+"""What each autopilot does with the companion's setpoints, as measured: how fast the
+vehicle responds, and what it flies when the setpoints stop.
+
+Figures (issues 9 and 11, ArduCopter and ArduPlane V4.7.0-dev SITL, PX4 v1.16 SIH):
+
+- ArduCopter: the flown course rate lags the commanded one by about 0.5 s; with no new
+  setpoint it flies the last velocity for its GUIDED timeout (GUID_TIMEOUT, 3 s), then
+  brakes (WPNAV_ACCEL, 2.5 m/s^2 by default).
+- PX4 multicopter: velocity setpoints lag by 0.9 to 1.4 s (1.2 s taken); offboard loss after
+  1.04 to 1.15 s (COM_OF_LOSS_T 1.0 s), then a failsafe to POSCTL, which brakes
+  (MPC_ACC_HOR 3 m/s^2).
+- ArduPlane: a course command is flown until another comes, for ever; the law takes a
+  configured horizon of 10 s (long enough for a person to take over), the turn to the
+  commanded course (2 s ahead) first. Roll response lag about 1 s.
+
+The law uses ``response_lag_s`` unless the scenario states its own. The abandon figures are
+reported with each profile; the law checks them only where the scenario sets
+``abandon_hold_s`` (at the paper's scale a 3 s hold leaves no room to intercept:
+docs/guidance.md, "Safe to abandon").
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ezcompanion.wire import Message, is_fixed_wing, mavlink
+
+__all__ = ["AutopilotProfile", "autopilot_profile"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class AutopilotProfile:
+    """An autopilot's measured response and what it flies when the setpoints stop."""
+
+    name: str
+    response_lag_s: float
+    abandon_turn_s: float
+    abandon_hold_s: float
+    abandon_brake_m_s2: float
+
+
+ARDUCOPTER = AutopilotProfile(
+    name="ArduCopter", response_lag_s=0.5, abandon_turn_s=0.0, abandon_hold_s=3.0,
+    abandon_brake_m_s2=2.5,
+)  # fmt: skip
+PX4_COPTER = AutopilotProfile(
+    name="PX4", response_lag_s=1.2, abandon_turn_s=0.0, abandon_hold_s=1.15,
+    abandon_brake_m_s2=3.0,
+)  # fmt: skip
+ARDUPLANE = AutopilotProfile(
+    name="ArduPlane", response_lag_s=1.0, abandon_turn_s=2.0, abandon_hold_s=8.0,
+    abandon_brake_m_s2=0.0,
+)  # fmt: skip
+
+
+def autopilot_profile(heartbeat: Message) -> AutopilotProfile:
+    """The profile for the vehicle that sent ``heartbeat``."""
+    if is_fixed_wing(heartbeat):
+        return ARDUPLANE
+    if heartbeat.autopilot == mavlink.MAV_AUTOPILOT_PX4:
+        return PX4_COPTER
+    return ARDUCOPTER

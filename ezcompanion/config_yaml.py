@@ -34,7 +34,7 @@ class _StrictLoader(yaml.SafeLoader):
     scanner's work grows with the square of the nesting, the composer recurses on it); the
     duplicate check walks the composed nodes."""
 
-    def fetch_flow_collection_start(self, TokenClass: Any) -> None:  # noqa: N803 (pyyaml's)
+    def fetch_flow_collection_start(self, TokenClass: Any) -> None:
         if self.flow_level >= MAX_DEPTH:
             raise yaml.scanner.ScannerError(
                 None, None, f"nests deeper than {MAX_DEPTH} levels", self.get_mark()

@@ -28,6 +28,7 @@ from typing import Any
 from ezcompanion.cli_args import (
     OneLineParser,
     add_common_flags,
+    add_logging_flags,
     configure_logging,
     endpoint,
     guarded,
@@ -260,6 +261,7 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--connect",
         type=endpoint,
+        metavar="URL",
         help="MAVLink endpoint, pymavlink or MAVSDK form: udpin:0.0.0.0:14550 (the default), "
         "udp://:14540, tcp://127.0.0.1:5760, serial:///dev/ttyACM0:57600, /dev/ttyACM0,57600",
     )
@@ -328,6 +330,8 @@ def _parser() -> argparse.ArgumentParser:
     add_telemetry_parsers(commands)
     # validate's results go to a fresh directory unless --out names one (see output_directory)
     commands.choices["validate"].set_defaults(out=None)
+    for command in commands.choices.values():
+        add_logging_flags(command, subcommand=True)
     return parser
 
 

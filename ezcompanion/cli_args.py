@@ -26,6 +26,7 @@ __all__ = [
     "LOG_LEVELS",
     "OneLineParser",
     "add_common_flags",
+    "add_logging_flags",
     "configure_logging",
     "endpoint",
     "guarded",
@@ -81,12 +82,19 @@ def add_common_flags(parser: argparse.ArgumentParser, *, prog: str) -> None:
     parser.add_argument(
         "--version", action="version", version=f"{prog} {__version__}", help="print the version"
     )
+    add_logging_flags(parser)
+
+
+def add_logging_flags(parser: argparse.ArgumentParser, *, subcommand: bool = False) -> None:
+    """``-v``/``--verbose`` and ``--log-level``; on a ``subcommand`` they default to nothing,
+    so that ``ezcompanion -v run`` and ``ezcompanion run -v`` both count."""
     parser.add_argument(
-        "-v", "--verbose", action="count", default=0,
+        "-v", "--verbose", action="count", default=argparse.SUPPRESS if subcommand else 0,
         help="log more: -v for INFO, -vv for DEBUG (default: warnings only)",
     )  # fmt: skip
     parser.add_argument(
         "--log-level", type=str.upper, choices=LOG_LEVELS, metavar="LEVEL",
+        default=argparse.SUPPRESS if subcommand else None,
         help=f"logging level, one of {', '.join(LOG_LEVELS)} (overrides -v)",
     )  # fmt: skip
 

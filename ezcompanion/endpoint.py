@@ -17,7 +17,8 @@ MAVProxy / pymavlink                    MAVSDK                                  
 host out (``udp://:14540``, ``udpin::14550``): every interface, ``0.0.0.0``. An endpoint
 that sends or connects needs a host. Ports are within [1, 65535]; a host is an IPv4 address
 or a DNS name (pymavlink's URLs cannot carry IPv6 addresses); a serial port without a baud
-rate runs at 57600. Errors name the setting and the text as given.
+rate runs at 57600. A listening endpoint may ask for port 0: any free port, as the tests
+do. Errors name the setting and the text as given.
 """
 
 from __future__ import annotations
@@ -134,8 +135,10 @@ def _from_url(field: str, text: str, scheme: str) -> Endpoint:
 
 
 def _network(field: str, text: str, kind: EndpointKind, host: str, port_text: str) -> Endpoint:
-    if not (port_text.isascii() and port_text.isdigit()) or not 1 <= int(port_text) <= 65535:
-        raise ConfigError(field, text, "the port must be an integer within [1, 65535]")
+    lowest = 0 if kind.listens else 1  # a listener may ask for any free port (0)
+    digits = port_text.isascii() and port_text.isdigit()
+    if not digits or not lowest <= int(port_text) <= 65535:
+        raise ConfigError(field, text, f"the port must be an integer within [{lowest}, 65535]")
     if not host:
         if not kind.listens:
             raise ConfigError(field, text, f"{kind.value} needs a host to send to or connect to")

@@ -49,6 +49,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--connect",
         type=endpoint,
+        metavar="URL",
         help="MAVLink endpoint, pymavlink or MAVSDK form: udpout:127.0.0.1:14550 (the "
         "default), udpout://127.0.0.1:14550, tcpin://0.0.0.0:5760",
     )

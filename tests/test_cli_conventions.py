@@ -54,7 +54,7 @@ def test_version(tool: object, capsys: pytest.CaptureFixture[str]) -> None:
         (["run", "--config", str(SCENARIO), "--max-time", "inf"], "--max-time", "'inf'"),
         (["run", "--config", str(SCENARIO), "--max-time", "soon"], "--max-time", "'soon'"),
         (["run", "--config", str(SCENARIO), "--connect", "udpin:127.0.0.1:99999"],
-         "--connect", "the port must be an integer within [1, 65535]"),
+         "--connect", "the port must be an integer within [0, 65535]"),
         (["run", "--config", str(SCENARIO), "--connect", "udp://[::1]:14540"],
          "--connect", "IPv6"),
         (["run", "--config", str(SCENARIO), "--speedup", "0"], "--speedup", "'0'"),
@@ -117,6 +117,9 @@ def test_every_flag_has_help() -> None:
     verbose = _parser().parse_args(["-vv", "simulate", "x.yaml"])
     assert verbose.verbose == 2 and verbose.log_level is None
     assert _parser().parse_args(["--log-level", "debug", "simulate", "x"]).log_level == "DEBUG"
+    after = _parser().parse_args(["run", "--config", "x.yaml", "-v", "--log-level", "error"])
+    assert after.verbose == 1 and after.log_level == "ERROR"
+    assert _parser().parse_args(["-v", "monitor"]).verbose == 1  # not reset by the subcommand
 
 
 def test_run_with_no_vehicle_is_a_link_failure_not_a_miss(

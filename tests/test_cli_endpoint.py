@@ -46,9 +46,10 @@ def test_both_spellings_give_pymavlinks_string(written: str, opened: str) -> Non
 @pytest.mark.parametrize(
     ("written", "reason"),
     [
-        ("udpin:127.0.0.1:99999", "the port must be an integer within [1, 65535]"),
-        ("udpin://0.0.0.0:0", "the port must be an integer within [1, 65535]"),
-        ("udp://:port", "the port must be an integer within [1, 65535]"),
+        ("udpin:127.0.0.1:99999", "the port must be an integer within [0, 65535]"),
+        ("udpout://127.0.0.1:0", "the port must be an integer within [1, 65535]"),
+        ("tcp:127.0.0.1:0", "the port must be an integer within [1, 65535]"),
+        ("udp://:port", "the port must be an integer within [0, 65535]"),
         ("udpout::14550", "udpout needs a host"),
         ("tcp://:5760", "tcp needs a host"),
         ("udp://[::1]:14540", "IPv6 addresses cannot be used"),
@@ -96,11 +97,18 @@ def test_any_host_and_port_read_the_same_in_either_spelling(
     assert parse_endpoint(mavsdk.pymavlink) == mavsdk
 
 
-@given(st.one_of(st.integers(max_value=0), st.integers(min_value=65536)))
+@given(st.one_of(st.integers(max_value=-1), st.integers(min_value=65536)))
 def test_every_port_outside_the_range_is_refused(port: int) -> None:
-    for text in (f"udpin:127.0.0.1:{port}", f"udpin://127.0.0.1:{port}"):
+    for text in (f"udpin:127.0.0.1:{port}", f"udpout://127.0.0.1:{port}"):
         with pytest.raises(ConfigError, match="port must be an integer within"):
             parse_endpoint(text)
+
+
+def test_port_0_is_any_free_port_for_a_listener_only() -> None:
+    assert pymavlink_url("udpin://127.0.0.1:0") == "udpin:127.0.0.1:0"
+    assert pymavlink_url("tcpin:127.0.0.1:0") == "tcpin:127.0.0.1:0"
+    with pytest.raises(ConfigError, match=r"within \[1, 65535\]"):
+        pymavlink_url("udpout:127.0.0.1:0")
 
 
 def _free_udp_port() -> int:

@@ -46,7 +46,7 @@ coords = st.floats(-30.0, 30.0)
 courses = st.floats(-math.pi, math.pi)
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=150, deadline=None)
 @given(defenders, coords, coords, courses)
 def test_the_zone_for_a_fixed_course_is_the_disc_mu_r_ahead(
     d: Defender, north_m: float, east_m: float, course_rad: float
@@ -70,7 +70,7 @@ def test_the_zone_for_a_fixed_course_is_the_disc_mu_r_ahead(
         assert (disc_depth > 0.0) == (r < rho)
 
 
-@settings(max_examples=100, deadline=None)
+@settings(max_examples=50, deadline=None)
 @given(defenders, coords, coords)
 def test_inside_for_every_course_matches_a_sweep_of_courses(
     d: Defender, north_m: float, east_m: float

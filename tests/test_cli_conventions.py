@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import re
+import signal
 import socket
 import subprocess
 import sys
@@ -204,3 +205,40 @@ def test_a_binary_scenario_as_a_real_process(tool: str, tmp_path: Path) -> None:
     assert done.stderr.splitlines() == [
         f"{prog}: error: scenario: is not UTF-8 text (byte 0x80 at offset 0) (got '{path}')"
     ]
+
+
+def test_a_bug_is_one_line_and_exit_70(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import ezcompanion.cli as cli
+
+    def broken(*_args: object, **_kwargs: object) -> int:
+        raise RuntimeError("a bug\nover two lines")
+
+    monkeypatch.setattr(cli, "run_simulate", broken)
+    assert main(["simulate", str(SCENARIO)]) == ExitCode.INTERNAL_ERROR
+    assert one_line(capsys) == (
+        "ezcompanion: internal error: RuntimeError: a bug over two lines "
+        "(rerun with --log-level DEBUG for the traceback)"
+    )
+
+
+def test_sigint_during_run_is_exit_130_in_one_line() -> None:
+    port = _free_udp_port()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "ezcompanion", "run", "--config", str(SCENARIO),
+         "--connect", f"udpin://127.0.0.1:{port}", "--no-telemetry"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert proc.stdout is not None
+        first = proc.stdout.readline()  # the service is listening: its handlers are set
+        assert "listening: link open on udpin:127.0.0.1:" in first
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30.0)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == ExitCode.INTERRUPTED
+    assert err.splitlines() == ["ezcompanion: interrupted before the engagement ended"]

@@ -242,3 +242,29 @@ def test_sigint_during_run_is_exit_130_in_one_line() -> None:
             proc.wait()
     assert proc.returncode == ExitCode.INTERRUPTED
     assert err.splitlines() == ["ezcompanion: interrupted before the engagement ended"]
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [  # issue 10's scenario files that crashed a tool or were accepted
+        ("accel_max_m_s2: 1.0 ", "accel_max_m_s2: 1e308 ",
+         "vehicle.accel_max_m_s2: must be within (0, 1000] (got 1e+308)"),
+        ("north_m: 2.0              # the", f"north_m: 1{'0' * 400}  # the",
+         "target.north_m: must be within [-100000, 100000] (got 1000000"),
+        ("north_m: 8.0 ", "north_m: 1e300 ",
+         "vehicle.north_m: must be within [-100000, 100000] (got 1e+300)"),
+        ("north_m: 8.0 ", "north_m: 4.0\n  north_m: 8.0 ", "vehicle.north_m: is given twice"),
+        ("{name: D3,", "{name: D1,", "defenders[2].name: is also the name of defenders[0]"),
+    ],
+)  # fmt: skip
+def test_issue_10_scenarios_are_one_line_in_both_tools(
+    old: str, new: str, message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    text = SCENARIO.read_text()
+    assert old in text
+    path = tmp_path / "scenario.yaml"
+    path.write_text(text.replace(old, new, 1))
+    assert main(["simulate", str(path)]) == ExitCode.BAD_INPUT
+    assert one_line(capsys).startswith(f"ezcompanion: error: {message}")
+    assert stub_main(["--config", str(path), "--connect", "udpout:127.0.0.1:9"]) == 2
+    assert one_line(capsys).startswith(f"sitl-stub: error: {message}")

@@ -268,3 +268,22 @@ def test_issue_10_scenarios_are_one_line_in_both_tools(
     assert one_line(capsys).startswith(f"ezcompanion: error: {message}")
     assert stub_main(["--config", str(path), "--connect", "udpout:127.0.0.1:9"]) == 2
     assert one_line(capsys).startswith(f"sitl-stub: error: {message}")
+
+
+def test_the_scenarios_connect_takes_mavsdk_urls_too(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    port = _free_udp_port()
+    data = yaml.safe_load(SCENARIO.read_text())
+    data["companion"] = {"connect": f"udp://127.0.0.1:{port}"}
+    path = tmp_path / "scenario.yaml"
+    path.write_text(yaml.safe_dump(data))
+    argv = ["run", "--config", str(path), "--max-time", "0.3", "--no-telemetry"]
+    assert main(argv) == ExitCode.LINK_FAILURE  # opened (as udpin:), and nobody there
+    assert capsys.readouterr().err.endswith(f"(got 'udpin:127.0.0.1:{port}')\n")
+    data["companion"] = {"connect": "udp://127.0.0.1:70000"}
+    path.write_text(yaml.safe_dump(data))
+    assert main(argv) == ExitCode.BAD_INPUT
+    assert one_line(capsys).startswith(
+        "ezcompanion: error: companion.connect: the port must be an integer within [0, 65535]"
+    )

@@ -134,3 +134,11 @@ def test_mavsdk_urls_open_real_links_over_loopback() -> None:
             listener.wait_readable(0.1)
             heard = [m for m in listener.recv_messages() if m.get_type() == "HEARTBEAT"]
     assert heard and heard[0].get_srcSystem() == 7
+
+
+def test_the_stubs_connect_setting_takes_either_spelling() -> None:
+    from sitl_stub import StubSettings
+
+    assert StubSettings(connect="udpout://127.0.0.1:14550").connect == "udpout:127.0.0.1:14550"
+    with pytest.raises(ConfigError, match=r"^connect: udpout needs a host"):
+        StubSettings(connect="udpout://:14550")

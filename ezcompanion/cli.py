@@ -23,7 +23,7 @@ import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from ezcompanion.cli_args import (
     OneLineParser,
@@ -36,6 +36,9 @@ from ezcompanion.cli_args import (
 )
 from ezcompanion.errors import LinkError
 from ezcompanion.exit_codes import ExitCode
+
+if TYPE_CHECKING:  # imported for real inside the commands (see above)
+    from ezcompanion.config import Scenario
 
 __all__ = [
     "main",
@@ -77,7 +80,7 @@ def output_directory(given: Path | None, default: Path) -> Path:
     raise AssertionError("unreachable")  # pragma: no cover
 
 
-def _load(config: Path) -> Any:
+def _load(config: Path) -> Scenario:
     """The scenario, with its warnings printed on stderr."""
     from ezcompanion.config import load_scenario, scenario_warnings
 

@@ -1,7 +1,14 @@
 """The ``ezcompanion`` command line: each command builds its inputs and calls a typed function.
 
-Exit codes: 0 done, 1 the job ran but its outcome failed (no interception, a zone entered),
-2 bad input.
+Exit codes (``ezcompanion.exit_codes.ExitCode``): 0 done (intercepted), 1 the job ran but its
+outcome failed (no interception, a zone entered), 2 bad input, 3 the link or the vehicle
+failed, 4 a file cannot be read or written, 70 a bug, 130 interrupted. Every ending other
+than 0 and 1 prints one line on stderr; no traceback unless ``--log-level DEBUG``.
+
+Output directories: a command that writes a directory by default (``demo``, ``validate``)
+never writes into one that holds earlier results: ``demo-out`` is taken, so ``demo-out-2``,
+and so on. A directory given with ``--out`` is used as asked, with a note when it already
+holds files.
 
 Imports are made inside the commands: ``run`` must decide before the law is imported that
 the service interprets the law's kernels instead of compiling them (see
@@ -11,19 +18,75 @@ the service interprets the law's kernels instead of compiling them (see
 from __future__ import annotations
 
 import argparse
+import itertools
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from ezcompanion.errors import EzCompanionError
+from ezcompanion.cli_args import (
+    OneLineParser,
+    add_common_flags,
+    add_logging_flags,
+    configure_logging,
+    endpoint,
+    guarded,
+    number_within,
+)
+from ezcompanion.errors import LinkError
+from ezcompanion.exit_codes import ExitCode
 
-__all__ = ["main", "run_demo", "run_reference_demo", "run_service", "run_simulate"]
+if TYPE_CHECKING:  # imported for real inside the commands (see above)
+    from ezcompanion.config import Scenario
+
+__all__ = [
+    "main",
+    "output_directory",
+    "run_demo",
+    "run_reference_demo",
+    "run_service",
+    "run_simulate",
+]
+
 
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "config"
 PAPER_SCENARIOS = {1: "paper_scenario1.yaml", 2: "paper_scenario2.yaml"}
 
 
 LAWS = ("backup", "robust", "paper")  # LawName values, the default first
+SPEEDUP = number_within(0.0, 1000.0)
+SECONDS = number_within(0.0, 1e6, unit=" s")
+
+
+def output_directory(given: Path | None, default: Path) -> Path:
+    """Where a command writes: ``given`` as asked (with a note on stdout if it already holds
+    files), else ``default`` or the first of ``default-2``, ``default-3``, ... that is absent
+    or empty, claimed by creating it."""
+    if given is not None:
+        if given.is_dir() and any(given.iterdir()):
+            print(f"note: {given}/ holds earlier results; files of the same name are replaced")
+        return given
+    for number in itertools.count(1):
+        candidate = default if number == 1 else default.with_name(f"{default.name}-{number}")
+        try:
+            candidate.mkdir(parents=True)
+        except FileExistsError:
+            if not (candidate.is_dir() and not any(candidate.iterdir())):
+                continue
+        if number > 1:
+            print(f"writing to {candidate}/ ({default}/ holds earlier results)")
+        return candidate
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
+def _load(config: Path) -> Scenario:
+    """The scenario, with its warnings printed on stderr."""
+    from ezcompanion.config import load_scenario, scenario_warnings
+
+    scenario = load_scenario(config)
+    for warning in scenario_warnings(scenario):
+        print(f"ezcompanion: warning: {warning}", file=sys.stderr)
+    return scenario
 
 
 def run_simulate(
@@ -33,13 +96,13 @@ def run_simulate(
     out_csv: Path | None = None,
     plot_png: Path | None = None,
 ) -> int:
-    """Simulate one scenario in the reference simulator and print its outcome."""
-    from ezcompanion.config import load_scenario
+    """Simulate one scenario in the reference simulator and print its outcome: 0 if it
+    intercepted outside every zone, 1 if not."""
     from ezcompanion.guidance import LawName
     from ezcompanion.sim.engine import simulate
     from ezcompanion.sim.output import write_result_csv
 
-    run = simulate(load_scenario(config), LawName(law) if law else None)
+    run = simulate(_load(config), LawName(law) if law else None)
     print(run.summary())
     if out_csv is not None:
         print(f"  wrote {write_result_csv(run, out_csv)}")
@@ -47,7 +110,9 @@ def run_simulate(
         from ezcompanion.sim.plot import plot_result
 
         print(f"  wrote {plot_result(run, plot_png)}")
-    return 0
+    outcome = run.outcome
+    ok = outcome.intercepted and min(outcome.min_clearance_m) > 0.0
+    return ExitCode.OK if ok else ExitCode.FAILED
 
 
 def run_service(
@@ -59,17 +124,27 @@ def run_service(
     telemetry: dict[str, object] | None = None,
     **overrides: object,
 ) -> int:
-    """Steer a vehicle through one engagement; 0 if intercepted, 1 if it ended otherwise."""
+    """Steer a vehicle through one engagement. 0 if intercepted; 1 if it ended otherwise;
+    3 if no vehicle was heard or the link was lost at the end; 130 if stopped by a signal.
+
+    ``connect`` (an override, or the scenario's ``companion.connect``) may be written in
+    MAVProxy's or MAVSDK's form; it is checked and passed on as pymavlink's string.
+    """
     import signal
 
-    from ezcompanion.config import load_scenario
+    from ezcompanion.endpoint import pymavlink_url
     from ezcompanion.guidance import LawName
-    from ezcompanion.service.events import EventLog
+    from ezcompanion.service.events import EventKind, EventLog
     from ezcompanion.service.runner import CompanionService
     from ezcompanion.service.settings import companion_settings
     from ezcompanion.telemetry import telemetry_settings
 
-    scenario = load_scenario(config)
+    scenario = _load(config)
+    section = scenario.sections.get("companion", {})
+    if overrides.get("connect") is not None:
+        overrides["connect"] = pymavlink_url(overrides["connect"], field="--connect")
+    elif "connect" in section:
+        overrides["connect"] = pymavlink_url(section["connect"], field="companion.connect")
     settings = companion_settings(scenario, **overrides)
     zenoh = telemetry_settings(scenario.sections.get("telemetry", {}), **(telemetry or {}))
     events = EventLog(lambda event: print(event.line(), flush=True))
@@ -81,16 +156,31 @@ def run_service(
         track_csv=track_csv,
         telemetry=zenoh,
     )
-    previous = {
-        sig: signal.signal(sig, lambda *_: service.stop())
-        for sig in (signal.SIGINT, signal.SIGTERM)
-    }
+    signalled: list[int] = []
+
+    def on_signal(signum: int, _frame: object) -> None:
+        signalled.append(signum)
+        service.stop()
+
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         outcome = service.run(max_time_s=max_time_s)
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
-    return 0 if outcome.intercepted else 1
+    if outcome.intercepted:
+        return ExitCode.OK
+    if signalled:
+        print("ezcompanion: interrupted before the engagement ended", file=sys.stderr)
+        return ExitCode.INTERRUPTED
+    if not events.of_kind(EventKind.VEHICLE_FOUND):
+        raise LinkError("connect", settings.connect, f"no vehicle heard in {outcome.time_s:.1f} s")
+    lost, restored = events.of_kind(EventKind.LINK_LOST), events.of_kind(EventKind.LINK_RESTORED)
+    if lost and (not restored or restored[-1].time_s < lost[-1].time_s):
+        raise LinkError(
+            "connect", settings.connect, f"link to the vehicle lost at {lost[-1].time_s:.1f} s"
+        )
+    return ExitCode.FAILED
 
 
 def run_demo(*, scenarios: Sequence[int], out_dir: Path, speedup: float, profile: str) -> int:
@@ -98,7 +188,6 @@ def run_demo(*, scenarios: Sequence[int], out_dir: Path, speedup: float, profile
 
     Returns 1 if any engagement fails to intercept or enters an engagement zone.
     """
-    from ezcompanion.config import load_scenario
     from ezcompanion.service.demo import run_loopback, telemetry_endpoint
     from ezcompanion.sim.output import read_track_csv
     from ezcompanion.sim.plot import plot_result
@@ -106,7 +195,7 @@ def run_demo(*, scenarios: Sequence[int], out_dir: Path, speedup: float, profile
     failed = False
     for number in scenarios:
         config = CONFIG_DIR / PAPER_SCENARIOS[number]
-        scenario = load_scenario(config)
+        scenario = _load(config)
         where = out_dir / f"scenario{number}"
         print(
             f"--- scenario {number}: sitl_stub ({profile}) and the companion over loopback UDP, "
@@ -121,7 +210,7 @@ def run_demo(*, scenarios: Sequence[int], out_dir: Path, speedup: float, profile
         print(f"  wrote {plot_result(view, where / 'engagement.png')}")
         if not (result.intercepted and min(result.min_clearance_m) > 0.0):
             failed = True
-    return 1 if failed else 0
+    return ExitCode.FAILED if failed else ExitCode.OK
 
 
 def run_reference_demo(*, scenarios: Sequence[int], out_dir: Path) -> int:
@@ -129,7 +218,6 @@ def run_reference_demo(*, scenarios: Sequence[int], out_dir: Path) -> int:
 
     Returns 1 if the default (backup) law fails to intercept or enters an engagement zone.
     """
-    from ezcompanion.config import load_scenario
     from ezcompanion.guidance import LawName
     from ezcompanion.sim.engine import simulate
     from ezcompanion.sim.output import write_result_csv
@@ -137,7 +225,7 @@ def run_reference_demo(*, scenarios: Sequence[int], out_dir: Path) -> int:
 
     failed = False
     for number in scenarios:
-        scenario = load_scenario(CONFIG_DIR / PAPER_SCENARIOS[number])
+        scenario = _load(CONFIG_DIR / PAPER_SCENARIOS[number])
         for law in (LawName.BACKUP, LawName.ROBUST, LawName.PAPER):
             run = simulate(scenario, law)
             stem = out_dir / f"scenario{number}_{law.value}"
@@ -149,15 +237,20 @@ def run_reference_demo(*, scenarios: Sequence[int], out_dir: Path) -> int:
                 outcome.intercepted and min(outcome.min_clearance_m) > 0.0
             ):
                 failed = True
-    return 1 if failed else 0
+    return ExitCode.FAILED if failed else ExitCode.OK
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="ezcompanion",
         description="A MAVLink guidance companion: intercept guidance among engagement zones.",
+        epilog="Exit codes: 0 done (intercepted), 1 not intercepted or a zone entered, 2 bad "
+        "input, 3 link or vehicle failure, 4 file error, 70 internal error, 130 interrupted.",
     )
-    commands = parser.add_subparsers(dest="command", required=True)
+    add_common_flags(parser, prog="ezcompanion")
+    commands = parser.add_subparsers(
+        dest="command", required=True, metavar="COMMAND", help="what to do (COMMAND --help)"
+    )
 
     sim = commands.add_parser("simulate", help="run one scenario in the reference simulator")
     sim.add_argument("config", type=Path, help="scenario YAML file")
@@ -167,7 +260,13 @@ def _parser() -> argparse.ArgumentParser:
 
     run = commands.add_parser("run", help="steer a vehicle over MAVLink (the companion service)")
     run.add_argument("--config", type=Path, required=True, help="scenario YAML file")
-    run.add_argument("--connect", help="pymavlink URL (default udpin:0.0.0.0:14550)")
+    run.add_argument(
+        "--connect",
+        type=endpoint,
+        metavar="URL",
+        help="MAVLink endpoint, pymavlink or MAVSDK form: udpin:0.0.0.0:14550 (the default), "
+        "udp://:14540, tcp://127.0.0.1:5760, serial:///dev/ttyACM0:57600, /dev/ttyACM0,57600",
+    )
     run.add_argument("--law", choices=LAWS, help="override the scenario's law")
     run.add_argument(
         "--engage",
@@ -175,12 +274,21 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         help="ask the vehicle for GUIDED/OFFBOARD (never arms)",
     )
-    run.add_argument("--setpoint", choices=["auto", "velocity", "course"])
+    run.add_argument(
+        "--setpoint",
+        choices=["auto", "velocity", "course"],
+        help="how the acceleration reaches the autopilot: velocity (copter, PX4), course "
+        "(ArduPlane) or auto (chosen from the vehicle's heartbeat; the default)",
+    )
     run.add_argument("--signing-key-hex", help="MAVLink 2 signing key, 64 hex digits")
     run.add_argument("--tlog", type=Path, help="record every frame in and out to this .tlog")
     run.add_argument("--track", type=Path, help="write the companion's view to this CSV")
-    run.add_argument("--speedup", type=float, help="clock speed-up, to match a loopback vehicle")
-    run.add_argument("--max-time", type=float, help="give up after this many seconds")
+    run.add_argument(
+        "--speedup", type=SPEEDUP, help="clock speed-up, to match a loopback vehicle (0, 1000]"
+    )
+    run.add_argument(
+        "--max-time", type=SECONDS, metavar="SECONDS", help="give up after this many seconds"
+    )
     run.add_argument(
         "--zenoh-listen", action="append", help="telemetry endpoint (default tcp/127.0.0.1:7447)"
     )
@@ -196,9 +304,21 @@ def _parser() -> argparse.ArgumentParser:
 
     demo = commands.add_parser("demo", help="fly the paper's scenarios on the loopback vehicle")
     demo.add_argument("--scenario", type=int, choices=sorted(PAPER_SCENARIOS), help="just one")
-    demo.add_argument("--out", type=Path, default=Path("demo-out"), help="output directory")
-    demo.add_argument("--speedup", type=float, default=10.0, help="simulated s per wall s")
-    demo.add_argument("--profile", choices=["copter", "plane", "px4"], default="copter")
+    demo.add_argument(
+        "--out",
+        type=Path,
+        help="output directory (default demo-out, or demo-out-2, ... if that holds results)",
+    )
+    demo.add_argument(
+        "--speedup", type=SPEEDUP, default=10.0, help="simulated s per wall s (default 10)"
+    )
+    demo.add_argument(
+        "--profile",
+        choices=["copter", "plane", "px4"],
+        default="copter",
+        help="the autopilot the loopback vehicle imitates: ArduCopter, ArduPlane or PX4 "
+        "(default copter)",
+    )
     demo.add_argument(
         "--reference",
         action="store_true",
@@ -210,58 +330,68 @@ def _parser() -> argparse.ArgumentParser:
 
     add_validate_parser(commands)
     add_telemetry_parsers(commands)
+    # validate's results go to a fresh directory unless --out names one (see output_directory)
+    commands.choices["validate"].set_defaults(out=None)
+    for command in commands.choices.values():
+        add_logging_flags(command, subcommand=True)
     return parser
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``ezcompanion`` console script."""
-    argv = list(sys.argv[1:] if argv is None else argv)
-    args = _parser().parse_args(argv)
-    try:
-        if args.command == "validate":
-            from ezcompanion.validation.cli import run_validate
+def _dispatch(args: argparse.Namespace) -> int:
+    if args.command == "validate":
+        from ezcompanion.validation.cli import run_validate
 
-            return run_validate(args)
-        from ezcompanion.telemetry.cli import run_telemetry_command
+        args.out = output_directory(args.out, Path("validation-out"))
+        return run_validate(args)
+    from ezcompanion.telemetry.cli import run_telemetry_command
 
-        code = run_telemetry_command(args)
-        if code is not None:
-            return code
-        if args.command == "simulate":
-            return run_simulate(
-                args.config,
-                law=args.law,
-                out_csv=args.out,
-                plot_png=args.plot,
-            )
-        if args.command == "run":
-            return run_service(
-                args.config,
-                law=args.law,
-                max_time_s=args.max_time,
-                track_csv=args.track,
-                connect=args.connect,
-                engage=args.engage,
-                setpoint=args.setpoint,
-                signing_key_hex=args.signing_key_hex,
-                tlog=str(args.tlog) if args.tlog else None,
-                speedup=args.speedup,
-                telemetry={
-                    "listen": args.zenoh_listen,
-                    "connect": args.zenoh_connect,
-                    "vehicle_id": args.vehicle_id,
-                    "enabled": args.telemetry_enabled,
-                },
-            )
-        scenarios = [args.scenario] if args.scenario else sorted(PAPER_SCENARIOS)
-        if args.reference:
-            return run_reference_demo(scenarios=scenarios, out_dir=args.out)
-        return run_demo(
-            scenarios=scenarios, out_dir=args.out, speedup=args.speedup, profile=args.profile
+    code = run_telemetry_command(args)
+    if code is not None:
+        return code
+    if args.command == "simulate":
+        return run_simulate(
+            args.config,
+            law=args.law,
+            out_csv=args.out,
+            plot_png=args.plot,
         )
-    except EzCompanionError as exc:
-        print(f"ezcompanion: error: {exc}", file=sys.stderr)
-        return 2
+    if args.command == "run":
+        return run_service(
+            args.config,
+            law=args.law,
+            max_time_s=args.max_time,
+            track_csv=args.track,
+            connect=args.connect,
+            engage=args.engage,
+            setpoint=args.setpoint,
+            signing_key_hex=args.signing_key_hex,
+            tlog=str(args.tlog) if args.tlog else None,
+            speedup=args.speedup,
+            telemetry={
+                "listen": args.zenoh_listen,
+                "connect": args.zenoh_connect,
+                "vehicle_id": args.vehicle_id,
+                "enabled": args.telemetry_enabled,
+            },
+        )
+    scenarios = [args.scenario] if args.scenario else sorted(PAPER_SCENARIOS)
+    out_dir = output_directory(args.out, Path("demo-out"))
+    if args.reference:
+        return run_reference_demo(scenarios=scenarios, out_dir=out_dir)
+    return run_demo(
+        scenarios=scenarios, out_dir=out_dir, speedup=args.speedup, profile=args.profile
+    )
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``ezcompanion`` console script; returns the exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        args = _parser().parse_args(argv)
+    except SystemExit as exc:  # --help, --version, or a usage error (already printed)
+        return exc.code if isinstance(exc.code, int) else ExitCode.BAD_INPUT
+    configure_logging(args)
+    return guarded("ezcompanion", lambda: _dispatch(args))
 
 
 if __name__ == "__main__":

@@ -6,6 +6,13 @@ fall back to a default), and every error names the full path of the offending ke
 ``defenders[1].speed_ratio: must be in (0, 1) (got 1.2)``. Angles are in degrees in the file
 (keys end in ``_deg``) and radians everywhere after loading.
 
+Three layers of checks, each with its own module: the file itself (size, UTF-8, duplicate
+keys, nesting: ``ezcompanion.config_yaml``), each number's physical range
+(``ezcompanion.config_limits``: positions within 100 km, speeds within 1000 m/s, ...), and
+what the scenario means (``ezcompanion.config_checks``: no start inside a zone, a target
+that can be reached, at most 64 defenders with distinct names). ``scenario_warnings`` gives
+what is odd but still meaningful (a capture radius larger than the range, say).
+
 Layout (see ``config/paper_scenario1.yaml`` for a commented example)::
 
     name: str
@@ -31,8 +38,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import yaml
-
+from ezcompanion import config_checks
+from ezcompanion.config_limits import (
+    ACCEL_LIMIT_M_S2,
+    ANGLE,
+    GUIDANCE_LIMITS,
+    MAX_SIMULATION_STEPS,
+    POSITION,
+    Bound,
+    check_integer,
+    check_number,
+)
+from ezcompanion.config_yaml import read_yaml_file
 from ezcompanion.errors import ConfigError, FieldError
 from ezcompanion.frames import line_of_sight_rad
 from ezcompanion.guidance import (
@@ -55,6 +72,7 @@ __all__ = [
     "scenario_from_dict",
     "scenario_to_dict",
     "scenario_update",
+    "scenario_warnings",
 ]
 
 # Top-level sections owned and validated by other components; kept raw in ``Scenario.sections``.
@@ -93,6 +111,11 @@ class SimulationSettings:
                 raise ConfigError(name, value, "must be a finite number > 0")
         if self.dt_s > self.duration_s:
             raise ConfigError("dt_s", self.dt_s, "must not exceed duration_s")
+        if self.duration_s / self.dt_s > MAX_SIMULATION_STEPS:
+            raise ConfigError(
+                "duration_s", self.duration_s, f"must be at most {MAX_SIMULATION_STEPS} steps "
+                f"of dt_s ({self.dt_s:g} s)",
+            )  # fmt: skip
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -136,16 +159,21 @@ class Scenario:
 
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario file."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ConfigError("scenario", str(path), f"cannot be read: {exc.strerror}") from exc
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ConfigError("scenario", str(path), f"is not valid YAML: {exc}") from exc
-    return scenario_from_dict(data)
+    return scenario_from_dict(read_yaml_file(path))
+
+
+def scenario_warnings(scenario: Scenario) -> tuple[str, ...]:
+    """What is odd about ``scenario`` but still meaningful to run, one line each."""
+    start = scenario.start
+    return config_checks.zone_warnings(
+        scenario.defenders, scenario.target, scenario.guidance
+    ) + config_checks.start_warnings(
+        scenario.defenders,
+        scenario.guidance,
+        north_m=start.north_m,
+        east_m=start.east_m,
+        course_rad=start.course_rad,
+    )
 
 
 def scenario_from_dict(data: object) -> Scenario:
@@ -157,9 +185,7 @@ def scenario_from_dict(data: object) -> Scenario:
         required={"name", "vehicle", "target", "defenders"},
         optional={"law", "guidance", "simulation", "origin", *COMPONENT_SECTIONS},
     )
-    name = top["name"]
-    if not isinstance(name, str) or not name:
-        raise ConfigError("name", name, "must be a non-empty string")
+    name = _name(top["name"])
 
     vehicle = _mapping("vehicle", top["vehicle"])
     _only(
@@ -168,27 +194,21 @@ def scenario_from_dict(data: object) -> Scenario:
         required={"north_m", "east_m", "speed_m_s", "accel_max_m_s2"},
         optional={"course_deg", "course_from_los_deg"},
     )
-    target = build_dataclass("target", Target, _mapping("target", top["target"]))
-    defenders_raw = top["defenders"]
-    if not isinstance(defenders_raw, list) or not defenders_raw:
-        raise ConfigError("defenders", defenders_raw, "must be a non-empty list")
-    defenders = tuple(
-        build_dataclass(f"defenders[{i}]", Defender, _mapping(f"defenders[{i}]", item))
-        for i, item in enumerate(defenders_raw)
-    )
+    target = _target(top["target"])
+    defenders = _defenders(top["defenders"])
 
-    start_n = _number("vehicle.north_m", vehicle["north_m"])
-    start_e = _number("vehicle.east_m", vehicle["east_m"])
+    start_n = check_number("vehicle.north_m", vehicle["north_m"], POSITION)
+    start_e = check_number("vehicle.east_m", vehicle["east_m"], POSITION)
     has_course = "course_deg" in vehicle
     if has_course == ("course_from_los_deg" in vehicle):
         raise ConfigError(
             "vehicle", sorted(vehicle), "give exactly one of course_deg and course_from_los_deg"
         )
     if has_course:
-        course_rad = math.radians(_number("vehicle.course_deg", vehicle["course_deg"]))
+        course_rad = math.radians(check_number("vehicle.course_deg", vehicle["course_deg"], ANGLE))
     else:
         offset = math.radians(
-            _number("vehicle.course_from_los_deg", vehicle["course_from_los_deg"])
+            check_number("vehicle.course_from_los_deg", vehicle["course_from_los_deg"], ANGLE)
         )
         course_rad = line_of_sight_rad(start_n, start_e, target.north_m, target.east_m) + offset
     start = build_dataclass(
@@ -200,6 +220,12 @@ def scenario_from_dict(data: object) -> Scenario:
             "course_rad": course_rad,
             "speed_m_s": vehicle["speed_m_s"],
         },
+        limits=GUIDANCE_LIMITS["VehicleStart"],
+    )
+    accel_max = check_number(
+        "vehicle.accel_max_m_s2",
+        vehicle["accel_max_m_s2"],
+        Bound(0.0, ACCEL_LIMIT_M_S2, low_open=True),
     )
 
     guidance_raw = dict(_mapping("guidance", top.get("guidance", {})))
@@ -207,17 +233,33 @@ def scenario_from_dict(data: object) -> Scenario:
         raise ConfigError(
             "guidance.accel_max_m_s2", guidance_raw["accel_max_m_s2"], "belongs under vehicle"
         )
-    guidance_raw["accel_max_m_s2"] = vehicle["accel_max_m_s2"]
+    guidance_raw["accel_max_m_s2"] = accel_max
     if "blend" in guidance_raw:
         guidance_raw["blend"] = _enum("guidance.blend", BlendMode, guidance_raw["blend"])
     guidance = build_dataclass(
-        "guidance", GuidanceParams, guidance_raw, rename={"accel_max_m_s2": "vehicle"}
+        "guidance",
+        GuidanceParams,
+        guidance_raw,
+        rename={"accel_max_m_s2": "vehicle"},
+        limits=GUIDANCE_LIMITS["GuidanceParams"],
     )
 
     simulation = build_dataclass(
-        "simulation", SimulationSettings, _mapping("simulation", top.get("simulation", {}))
+        "simulation",
+        SimulationSettings,
+        _mapping("simulation", top.get("simulation", {})),
+        limits=GUIDANCE_LIMITS["SimulationSettings"],
     )
-    origin = build_dataclass("origin", GeoOrigin, _mapping("origin", top.get("origin", {})))
+    origin = build_dataclass(
+        "origin",
+        GeoOrigin,
+        _mapping("origin", top.get("origin", {})),
+        limits=GUIDANCE_LIMITS["GeoOrigin"],
+    )
+    config_checks.check_target(defenders, target, guidance)
+    config_checks.check_start(
+        defenders, target, guidance, north_m=start_n, east_m=start_e, course_rad=course_rad
+    )
     law = _enum("law", LawName, top.get("law", LawName.BACKUP.value))
     sections = {key: _mapping(key, top[key]) for key in COMPONENT_SECTIONS if key in top}
     return Scenario(
@@ -274,18 +316,46 @@ def scenario_update(current: Scenario, data: object) -> Scenario:
         defenders, target, name = whole.defenders, whole.target, whole.name
     else:
         _only("", top, required={"defenders", "target"}, optional={"name"})
-        defenders_raw = top["defenders"]
-        if not isinstance(defenders_raw, list) or not defenders_raw:
-            raise ConfigError("defenders", defenders_raw, "must be a non-empty list")
-        defenders = tuple(
-            build_dataclass(f"defenders[{i}]", Defender, _mapping(f"defenders[{i}]", item))
-            for i, item in enumerate(defenders_raw)
-        )
-        target = build_dataclass("target", Target, _mapping("target", top["target"]))
-        name = top.get("name", current.name)
-        if not isinstance(name, str) or not name:
-            raise ConfigError("name", name, "must be a non-empty string")
+        defenders = _defenders(top["defenders"])
+        target = _target(top["target"])
+        name = _name(top.get("name", current.name))
+        config_checks.check_target(defenders, target, current.guidance)
     return dataclasses.replace(current, name=name, defenders=defenders, target=target)
+
+
+def _name(value: object) -> str:
+    if not isinstance(value, str) or not value or len(value) > 128 or not value.isprintable():
+        raise ConfigError("name", value, "must be a non-empty string of at most 128 printable "
+                          "characters")  # fmt: skip
+    return value
+
+
+def _target(value: object) -> Target:
+    target: Target = build_dataclass(
+        "target", Target, _mapping("target", value), limits=GUIDANCE_LIMITS["Target"]
+    )
+    return target
+
+
+def _defenders(value: object) -> tuple[Defender, ...]:
+    if not isinstance(value, list) or not value:
+        raise ConfigError("defenders", value, "must be a non-empty list")
+    if len(value) > config_checks.MAX_ZONES:
+        raise ConfigError(
+            "defenders", f"a list of {len(value)}",
+            f"must hold at most {config_checks.MAX_ZONES} defenders",
+        )  # fmt: skip
+    defenders = tuple(
+        build_dataclass(
+            f"defenders[{i}]",
+            Defender,
+            _mapping(f"defenders[{i}]", item),
+            limits=GUIDANCE_LIMITS["Defender"],
+        )
+        for i, item in enumerate(value)
+    )
+    config_checks.check_defenders(defenders)
+    return defenders
 
 
 def _mapping(path: str, value: object) -> Mapping[str, Any]:
@@ -306,12 +376,6 @@ def _only(path: str, data: Mapping[str, Any], *, required: set[str], optional: s
         raise ConfigError(f"{prefix}{key}", None, "is required")
 
 
-def _number(path: str, value: object) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise ConfigError(path, value, "must be a finite number")
-    return float(value)
-
-
 def _enum(path: str, kind: type[LawName] | type[BlendMode], value: object) -> Any:
     try:
         return kind(str(value)) if isinstance(value, str) else kind(value)  # type: ignore[arg-type]
@@ -321,11 +385,18 @@ def _enum(path: str, kind: type[LawName] | type[BlendMode], value: object) -> An
 
 
 def build_dataclass(
-    path: str, kind: Any, data: Mapping[str, Any], rename: Mapping[str, str] | None = None
+    path: str,
+    kind: Any,
+    data: Mapping[str, Any],
+    rename: Mapping[str, str] | None = None,
+    *,
+    limits: Mapping[str, Bound] | None = None,
 ) -> Any:
     """Construct a frozen dataclass from a mapping, prefixing its errors with ``path``.
 
-    Unknown and missing keys are errors; float fields accept ints. Components that own a
+    Unknown and missing keys are errors; float fields accept ints. A field in ``limits``
+    must lie within its bound (an ``int`` field must be an integer); any other float field
+    must be finite and within ``config_limits.MAGNITUDE_LIMIT``. Components that own a
     section of the scenario file (``COMPONENT_SECTIONS``) validate it with this too.
     """
     fields = {f.name: f for f in dataclasses.fields(kind)}
@@ -336,10 +407,13 @@ def build_dataclass(
     }
     _only(path, data, required=required, optional=set(fields) - required)
     values: dict[str, Any] = {}
+    limits = limits or {}
     for key, value in data.items():
         expected = fields[key].type
-        if expected in ("float", float):
-            value = _number(f"{path}.{key}", value)
+        if expected in ("int", int) and key in limits:
+            value = check_integer(f"{path}.{key}", value, limits[key])
+        elif expected in ("float", float):
+            value = check_number(f"{path}.{key}", value, *(limits[key],) if key in limits else ())
         values[key] = value
     try:
         return kind(**values)

@@ -2,11 +2,34 @@
 
 Each subclasses a built-in exception so callers can catch it the ordinary way, and each
 carries the offending field and value so that the message says what was wrong with what.
+Messages are one line: the value is shown with ``reprlib`` (bounded length and depth), so
+a 5,000-element list or a 400-digit number cannot flood a terminal (at most 120 characters).
 """
 
 from __future__ import annotations
 
-__all__ = ["ConfigError", "EzCompanionError", "FieldError", "StateError"]
+import reprlib
+
+__all__ = ["ConfigError", "EzCompanionError", "FieldError", "LinkError", "StateError", "shown"]
+
+_SHOWN = reprlib.Repr()
+_SHOWN.maxlevel = 3
+_SHOWN.maxstring = 80
+_SHOWN.maxother = 80
+_SHOWN.maxlong = 40
+_SHOWN.maxlist = _SHOWN.maxtuple = _SHOWN.maxset = _SHOWN.maxdict = 6
+
+
+_SHOWN_MAX = 120
+
+
+def shown(value: object) -> str:
+    """``repr(value)``, cut to a readable length (at most 120 characters)."""
+    try:
+        text = _SHOWN.repr(value)
+    except (RecursionError, ValueError):  # a pathological object: say what it is
+        return f"<{type(value).__name__}>"
+    return text if len(text) <= _SHOWN_MAX else f"{text[: _SHOWN_MAX - 3]}..."
 
 
 class EzCompanionError(Exception):
@@ -24,7 +47,7 @@ class FieldError(EzCompanionError, ValueError):
         self.field = field
         self.value = value
         self.reason = reason
-        super().__init__(f"{field}: {reason} (got {value!r})")
+        super().__init__(f"{field}: {reason} (got {shown(value)})")
 
 
 class ConfigError(FieldError):
@@ -33,3 +56,8 @@ class ConfigError(FieldError):
 
 class StateError(FieldError):
     """A vehicle state or step input the law must not be fed (non-finite, out of range)."""
+
+
+class LinkError(FieldError, ConnectionError):
+    """A MAVLink endpoint that is well formed but cannot be used (the port is taken, the
+    device is missing, nothing answers); ``field`` names the setting (``connect``)."""

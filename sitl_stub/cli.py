@@ -4,13 +4,14 @@
               --speedup 10 --profile copter --truth-out truth.csv --duration 60
 
 Settings come from the scenario's ``sitl_stub:`` section, then from these flags. The run
-ends after ``--duration`` simulated seconds, or on SIGINT/SIGTERM.
+ends after ``--duration`` simulated seconds, or on SIGINT/SIGTERM. Exit codes are
+``ezcompanion.exit_codes.ExitCode``: 0 done, 2 bad input (one line naming the field), 3 the
+link failed during the run, 4 a file error, 70 a bug (the stub's thread failed).
 """
 
 from __future__ import annotations
 
 import argparse
-import logging
 import signal
 import sys
 import threading
@@ -18,7 +19,15 @@ from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType
 
-from ezcompanion.errors import ConfigError
+from ezcompanion.cli_args import (
+    OneLineParser,
+    add_common_flags,
+    configure_logging,
+    endpoint,
+    guarded,
+    number_within,
+)
+from ezcompanion.exit_codes import ExitCode
 from sitl_stub.config import load_stub_config
 from sitl_stub.profiles import Profile
 from sitl_stub.server import SitlStub
@@ -27,30 +36,45 @@ __all__ = ["main", "parse_args", "run"]
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
-    """The command line, parsed."""
-    parser = argparse.ArgumentParser(
+    """The command line, parsed (a usage error exits 2 with one line on stderr)."""
+    return _parser().parse_args(argv)
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = OneLineParser(
         prog="sitl-stub", description="A loopback MAVLink vehicle for tests and demos."
     )
+    add_common_flags(parser, prog="sitl-stub")
     parser.add_argument("--config", required=True, type=Path, help="scenario YAML file")
-    parser.add_argument("--connect", help="pymavlink URL, e.g. udpout:127.0.0.1:14550")
-    parser.add_argument("--speedup", type=float, help="simulated seconds per wall second")
+    parser.add_argument(
+        "--connect",
+        type=endpoint,
+        metavar="URL",
+        help="MAVLink endpoint, pymavlink or MAVSDK form: udpout:127.0.0.1:14550 (the "
+        "default), udpout://127.0.0.1:14550, tcpin://0.0.0.0:5760",
+    )
+    parser.add_argument(
+        "--speedup", type=number_within(0.0, 1000.0), help="simulated seconds per wall second"
+    )
     parser.add_argument(
         "--profile", choices=[p.value for p in Profile], help="autopilot to imitate"
     )
     parser.add_argument("--initial-mode", help="flight mode at start (default per profile)")
     parser.add_argument("--truth-out", type=Path, help="CSV of the true state at every step")
-    parser.add_argument("--duration", type=float, help="stop after this many simulated seconds")
+    parser.add_argument(
+        "--duration",
+        type=number_within(0.0, 1e6, unit=" s"),
+        metavar="SECONDS",
+        help="stop after this many simulated seconds (default: run until a signal)",
+    )
     parser.add_argument("--seed", type=int, help="seed of the fault generator")
-    parser.add_argument("--system-id", type=int, help="MAVLink system id")
-    parser.add_argument("--component-id", type=int, help="MAVLink component id")
-    parser.add_argument("--log-level", default="WARNING", help="logging level (default WARNING)")
-    return parser.parse_args(argv)
+    parser.add_argument("--system-id", type=int, help="MAVLink system id, 1 to 255")
+    parser.add_argument("--component-id", type=int, help="MAVLink component id, 1 to 255")
+    return parser
 
 
 def run(args: argparse.Namespace) -> int:
     """Run one stub until its duration or a signal; the exit code."""
-    if args.duration is not None and not args.duration > 0.0:
-        raise ConfigError("duration", args.duration, "must be > 0")
     config = load_stub_config(
         args.config,
         connect=args.connect,
@@ -75,18 +99,24 @@ def run(args: argparse.Namespace) -> int:
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
-    return 1 if stub.error is not None else 0
+    error = stub.error
+    if error is None:
+        return ExitCode.OK
+    if isinstance(error, OSError):  # the socket or the serial port failed under the stub
+        print(f"sitl-stub: error: the link failed: {error}", file=sys.stderr)
+        return ExitCode.LINK_FAILURE
+    print(f"sitl-stub: internal error: {type(error).__name__}: {error}", file=sys.stderr)
+    return ExitCode.INTERNAL_ERROR
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``sitl-stub`` and ``python -m sitl_stub``."""
-    args = parse_args(argv)
-    logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(name)s %(message)s")
+    """Entry point of ``sitl-stub`` and ``python -m sitl_stub``; returns the exit code."""
     try:
-        return run(args)
-    except ConfigError as exc:
-        print(f"sitl-stub: {exc}", file=sys.stderr)
-        return 2
+        args = parse_args(argv)
+    except SystemExit as exc:  # --help, --version, or a usage error (already printed)
+        return exc.code if isinstance(exc.code, int) else ExitCode.BAD_INPUT
+    configure_logging(args)
+    return guarded("sitl-stub", lambda: run(args))
 
 
 if __name__ == "__main__":

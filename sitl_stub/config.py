@@ -4,7 +4,7 @@ Layout (every key optional; see ``docs/sitl_stub.md``)::
 
     sitl_stub:
       profile: copter | plane | px4
-      connect: udpout:127.0.0.1:14550
+      connect: udpout:127.0.0.1:14550   # or udpout://..., tcp://..., serial:///dev/ttyS0:57600
       system_id: 1
       component_id: 1
       speedup: 1.0
@@ -14,8 +14,8 @@ Layout (every key optional; see ``docs/sitl_stub.md``)::
       course_gain_1_s: 2.0
       yaw_rate_max_deg_s: 90.0
       loiter_radius_m: 60.0
-      height_m: 20.0                # above the origin; constant
-      wind_north_m_s: 0.0
+      height_m: 20.0                # above the origin; constant; within [-1000, 100000]
+      wind_north_m_s: 0.0           # each within [-100, 100]
       wind_east_m_s: 0.0
       initial_mode: AUTO            # default per profile
       start_armed: true
@@ -31,6 +31,11 @@ Layout (every key optional; see ``docs/sitl_stub.md``)::
       faults: {drop_rate, delay_s, jitter_s, duplicate_rate, reorder_rate, reorder_delay_s,
                freeze_start_s, freeze_duration_s, freeze_mode: silent | stale,
                jump_at_s, jump_north_m, jump_east_m}
+
+Every number has a stated range (the error gives it); positions and offsets are held to the
+scenario's limit (``ezcompanion.config_limits.POSITION_LIMIT_M``, 100 km), so that what the
+stub sends fits MAVLink's fields. ``connect`` takes MAVProxy's and MAVSDK's spellings
+(``ezcompanion.endpoint``) and is kept as the pymavlink string.
 """
 
 from __future__ import annotations
@@ -43,18 +48,21 @@ from pathlib import Path
 from typing import Any
 
 from ezcompanion.config import GeoOrigin, Scenario, VehicleStart, build_dataclass, load_scenario
+from ezcompanion.config_limits import POSITION_LIMIT_M
+from ezcompanion.endpoint import pymavlink_url
 from ezcompanion.errors import ConfigError
-from ezcompanion.wire import URL_SCHEMES, signing_key_from_hex, signing_key_from_passphrase
+from ezcompanion.wire import signing_key_from_hex, signing_key_from_passphrase
 from sitl_stub.profiles import Profile, ProfileSpec, profile_spec
 
 __all__ = ["Faults", "StreamRates", "StubConfig", "StubSettings", "load_stub_config", "stub_config"]
 
 
-def _check(name: str, value: object, *, low: float = -math.inf, high: float = math.inf,
-           low_open: bool = False) -> None:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+def _check(name: str, value: object, *, low: float, high: float, low_open: bool = False) -> None:
+    if isinstance(value, bool) or not isinstance(value, int | float):
         raise ConfigError(name, value, "must be a finite number")
-    if value < low or value > high or (low_open and value == low):
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ConfigError(name, value, "must be a finite number")
+    if value < low or value > high or (low_open and value == low):  # exact for any int
         left = "(" if low_open else "["
         raise ConfigError(name, value, f"must be within {left}{low}, {high}]")
 
@@ -96,8 +104,9 @@ class Faults:
         for name in ("delay_s", "jitter_s", "reorder_delay_s", "freeze_start_s",
                      "freeze_duration_s"):
             _check(name, getattr(self, name), low=0.0, high=3600.0)
-        for name in ("jump_at_s", "jump_north_m", "jump_east_m"):
-            _check(name, getattr(self, name))
+        _check("jump_at_s", self.jump_at_s, low=-1e6, high=1e6)
+        for name in ("jump_north_m", "jump_east_m"):
+            _check(name, getattr(self, name), low=-POSITION_LIMIT_M, high=POSITION_LIMIT_M)
         if self.freeze_mode not in ("silent", "stale"):
             raise ConfigError("freeze_mode", self.freeze_mode, "must be silent or stale")
 
@@ -138,24 +147,25 @@ class StubSettings:
     faults: Faults = field(default_factory=Faults)
 
     def __post_init__(self) -> None:
-        if self.profile not in {p.value for p in Profile}:
+        if not isinstance(self.profile, str) or self.profile not in {p.value for p in Profile}:
             raise ConfigError("profile", self.profile, "must be copter, plane or px4")
-        if not isinstance(self.connect, str) or self.connect.split(":", 1)[0] not in URL_SCHEMES:
-            raise ConfigError("connect", self.connect, f"must start with one of {URL_SCHEMES}")
+        object.__setattr__(self, "connect", pymavlink_url(self.connect, field="connect"))
         for name in ("system_id", "component_id"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 255:
                 raise ConfigError(name, value, "must be an integer within [1, 255]")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int):
-            raise ConfigError("seed", self.seed, "must be an integer")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+            raise ConfigError("seed", self.seed, "must be an integer >= 0")
         _check("speedup", self.speedup, low=0.0, high=1000.0, low_open=True)
         _check("physics_dt_s", self.physics_dt_s, low=0.0, high=0.1, low_open=True)
         _check("response_time_s", self.response_time_s, low=0.0, high=60.0)
         _check("course_gain_1_s", self.course_gain_1_s, low=0.0, high=100.0, low_open=True)
         _check("yaw_rate_max_deg_s", self.yaw_rate_max_deg_s, low=0.0, high=3600.0, low_open=True)
         _check("loiter_radius_m", self.loiter_radius_m, low=0.0, high=1e5, low_open=True)
-        for name in ("height_m", "wind_north_m_s", "wind_east_m_s", "local_origin_after_s"):
-            _check(name, getattr(self, name))
+        _check("height_m", self.height_m, low=-1000.0, high=1e5)
+        for name in ("wind_north_m_s", "wind_east_m_s"):
+            _check(name, getattr(self, name), low=-100.0, high=100.0)
+        _check("local_origin_after_s", self.local_origin_after_s, low=-1e6, high=1e6)
         for name in ("setpoint_timeout_s", "attitude_timeout_s", "course_timeout_s"):
             if getattr(self, name) is not None:
                 _check(name, getattr(self, name), low=0.0, high=3600.0)
@@ -168,11 +178,15 @@ class StubSettings:
             raise ConfigError("signing_key_hex", self.signing_key_hex,
                               "give at most one of signing_key_hex and signing_passphrase")
         if self.signing_key_hex is not None:
-            signing_key_from_hex(str(self.signing_key_hex))
+            if not isinstance(self.signing_key_hex, str):
+                raise ConfigError("signing_key_hex", self.signing_key_hex, "must be a string")
+            signing_key_from_hex(self.signing_key_hex)
         if self.signing_passphrase is not None and not isinstance(self.signing_passphrase, str):
             raise ConfigError("signing_passphrase", self.signing_passphrase, "must be a string")
         spec = profile_spec(Profile(self.profile))
-        if self.initial_mode is not None and spec.mode_by_name(str(self.initial_mode)) is None:
+        if self.initial_mode is not None and (
+            not isinstance(self.initial_mode, str) or spec.mode_by_name(self.initial_mode) is None
+        ):
             names = ", ".join(m.name for m in spec.modes)
             raise ConfigError("initial_mode", self.initial_mode, f"must be one of {names}")
 

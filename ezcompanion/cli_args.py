@@ -1,0 +1,137 @@
+"""Command-line conventions shared by ``ezcompanion`` and ``sitl-stub``.
+
+- A usage error is one line, ``PROG: error: argument --max-time: must be ... (got 'nan')``,
+  and exit code 2 (``ExitCode.BAD_INPUT``): no usage block to scroll past.
+- Flags with a value are parsed by the typed readers here, which state the range they accept
+  (``--max-time nan`` and ``--max-time -1`` are refused, not run).
+- ``--version``, and ``-v``/``--log-level`` for the standard ``logging`` levels.
+- ``--connect`` takes MAVProxy's and MAVSDK's spellings (``ezcompanion.endpoint``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import sys
+from collections.abc import Callable
+from typing import NoReturn
+
+from ezcompanion import __version__
+from ezcompanion.endpoint import pymavlink_url
+from ezcompanion.errors import ConfigError, EzCompanionError, LinkError, shown
+from ezcompanion.exit_codes import ExitCode
+
+__all__ = [
+    "LOG_LEVELS",
+    "OneLineParser",
+    "add_common_flags",
+    "add_logging_flags",
+    "configure_logging",
+    "endpoint",
+    "guarded",
+    "number_within",
+]
+
+_log = logging.getLogger("ezcompanion.cli")
+
+LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL")
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An ArgumentParser whose usage errors are one line on stderr and exit code 2."""
+
+    def error(self, message: str) -> NoReturn:
+        """Print ``PROG: error: MESSAGE`` (one line) and exit with ``ExitCode.BAD_INPUT``."""
+        line = " ".join(message.split())
+        self.exit(ExitCode.BAD_INPUT, f"{self.prog}: error: {line} (see {self.prog} --help)\n")
+
+
+def number_within(
+    low: float, high: float, *, low_open: bool = True, unit: str = ""
+) -> Callable[[str], float]:
+    """A flag reader for a finite number within [low, high] (``low`` excluded if
+    ``low_open``): NaN, infinities, text and values outside are refused."""
+    left = "(" if low_open else "["
+    allowed = f"a finite number within {left}{low:g}, {high:g}]{unit}"
+
+    def read(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be {allowed} (got {shown(text)})") from None
+        above = value > low if low_open else value >= low
+        if not (math.isfinite(value) and above and value <= high):
+            raise argparse.ArgumentTypeError(f"must be {allowed} (got {shown(text)})")
+        return value
+
+    read.__name__ = "number"  # argparse names the type in some messages
+    return read
+
+
+def endpoint(text: str) -> str:
+    """A flag reader for ``--connect``: the pymavlink connection string of ``text``."""
+    try:
+        return pymavlink_url(text, field="--connect")
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(f"{exc.reason} (got {shown(text)})") from None
+
+
+def add_common_flags(parser: argparse.ArgumentParser, *, prog: str) -> None:
+    """``--version``, ``-v``/``--verbose`` and ``--log-level`` on ``parser``."""
+    parser.add_argument(
+        "--version", action="version", version=f"{prog} {__version__}", help="print the version"
+    )
+    add_logging_flags(parser)
+
+
+def add_logging_flags(parser: argparse.ArgumentParser, *, subcommand: bool = False) -> None:
+    """``-v``/``--verbose`` and ``--log-level``; on a ``subcommand`` they default to nothing,
+    so that ``ezcompanion -v run`` and ``ezcompanion run -v`` both count."""
+    parser.add_argument(
+        "-v", "--verbose", action="count", default=argparse.SUPPRESS if subcommand else 0,
+        help="log more: -v for INFO, -vv for DEBUG (default: warnings only)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--log-level", type=str.upper, choices=LOG_LEVELS, metavar="LEVEL",
+        default=argparse.SUPPRESS if subcommand else None,
+        help=f"logging level, one of {', '.join(LOG_LEVELS)} (overrides -v)",
+    )  # fmt: skip
+
+
+def configure_logging(args: argparse.Namespace) -> None:
+    """Set the root logger from ``--log-level`` or the ``-v`` count, to stderr."""
+    level = getattr(args, "log_level", None)
+    if level is None:
+        level = ("WARNING", "INFO", "DEBUG")[min(getattr(args, "verbose", 0), 2)]
+    logging.basicConfig(
+        level=level, stream=sys.stderr, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
+    )
+
+
+def guarded(prog: str, job: Callable[[], int]) -> int:
+    """Run ``job()`` and turn every way it can fail into one line on stderr and an exit code."""
+    try:
+        return int(job())
+    except LinkError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return ExitCode.LINK_FAILURE
+    except EzCompanionError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return ExitCode.BAD_INPUT
+    except OSError as exc:
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"{prog}: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return ExitCode.IO_ERROR
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted", file=sys.stderr)
+        return ExitCode.INTERRUPTED
+    except Exception as exc:  # a bug: say so in one line, keep the traceback for DEBUG
+        _log.debug("internal error", exc_info=True)
+        summary = " ".join(str(exc).split())[:200]
+        print(
+            f"{prog}: internal error: {type(exc).__name__}: {summary} "
+            "(rerun with --log-level DEBUG for the traceback)",
+            file=sys.stderr,
+        )
+        return ExitCode.INTERNAL_ERROR

@@ -1,0 +1,160 @@
+"""Physical limits of a scenario's numbers: finite is not enough.
+
+A number that is finite can still be absurd (an acceleration of 1e308 m/s^2 turns every
+saturation into a no-op; a position of 1e7 m overflows the altitude the loopback vehicle
+sends in millimetres). Each field of a scenario has a stated range; the scenario loader
+refuses a value outside it with the range in the message.
+
+=============================  =======================  =========================================
+what                           range                    why
+=============================  =======================  =========================================
+positions (north_m, east_m)    within +-1e5 m           the local NED frame is a plane tangent at
+of vehicle, target, defenders                           the origin; 100 km out the Earth is 785 m
+                                                        below it: move the origin instead
+defender range_m               (0, 1e5] m               inside the frame
+defender capture_radius_m      [0, 1e5] m               inside the frame
+vehicle speed_m_s              (0, 1000] m/s            beyond any vehicle ArduPilot or PX4 flies
+vehicle accel_max_m_s2         (0, 1000] m/s^2          about 100 g
+course_deg, course_from_los    [-360, 360] deg          one turn either way
+gains (k_*, actuator_p1_1_s)   (0, 1000] 1/s ...        faster than any 50 Hz loop can follow
+guidance lengths (margin_m...)  within the frame (1e5 m)
+floors (gradient, range)       (0, 1] m                 numerical guards, never large
+response_lag_s                 [0, 60] s
+actuator_n                     even, [2, 32]            (a/a_max)^n underflows beyond
+simulation dt_s                (0, 1] s
+simulation duration_s          (0, 86400] s, and at most 1e6 steps of dt_s
+origin alt_m                   [-1000, 100000] m
+=============================  =======================  =========================================
+
+Ratios (``speed_ratio``, ``reference_limit_ratio``, ``actuator_floor``) are bounded by the
+dataclasses themselves, in (0, 1). Settings sections owned by other components
+(``companion:``, ``sitl_stub:``) state their own ranges; their numbers without one are held
+to ``MAGNITUDE_LIMIT``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ezcompanion.errors import ConfigError
+
+__all__ = [
+    "ACCEL_LIMIT_M_S2",
+    "ANGLE_LIMIT_DEG",
+    "GUIDANCE_LIMITS",
+    "MAGNITUDE_LIMIT",
+    "MAX_SIMULATION_STEPS",
+    "POSITION_LIMIT_M",
+    "SPEED_LIMIT_M_S",
+    "Bound",
+    "check_integer",
+    "check_number",
+]
+
+POSITION_LIMIT_M = 1e5
+SPEED_LIMIT_M_S = 1000.0
+ACCEL_LIMIT_M_S2 = 1000.0
+ANGLE_LIMIT_DEG = 360.0
+GAIN_LIMIT = 1000.0
+MAX_SIMULATION_STEPS = 1_000_000
+MAGNITUDE_LIMIT = 1e9  # no setting in SI units needs more
+
+
+def _text(x: float) -> str:
+    return f"{x:.12g}"
+
+
+@dataclass(frozen=True)
+class Bound:
+    """An interval of allowed values; ``low_open``/``high_open`` exclude the end."""
+
+    low: float
+    high: float
+    low_open: bool = False
+    high_open: bool = False
+
+    def contains(self, value: float) -> bool:
+        """True when ``value`` lies inside (works for integers of any size)."""
+        above = value > self.low if self.low_open else value >= self.low
+        below = value < self.high if self.high_open else value <= self.high
+        return above and below
+
+    def __str__(self) -> str:
+        left = "(" if self.low_open else "["
+        right = ")" if self.high_open else "]"
+        return f"{left}{_text(self.low)}, {_text(self.high)}{right}"
+
+
+POSITION = Bound(-POSITION_LIMIT_M, POSITION_LIMIT_M)
+LENGTH = Bound(0.0, POSITION_LIMIT_M, low_open=True)
+LENGTH_OR_ZERO = Bound(0.0, POSITION_LIMIT_M)
+GAIN = Bound(0.0, GAIN_LIMIT, low_open=True)
+FLOOR = Bound(0.0, 1.0, low_open=True)
+ANGLE = Bound(-ANGLE_LIMIT_DEG, ANGLE_LIMIT_DEG)
+ANY = Bound(-MAGNITUDE_LIMIT, MAGNITUDE_LIMIT)
+
+#: fields of the scenario's dataclasses, by class name then field
+GUIDANCE_LIMITS: dict[str, dict[str, Bound]] = {
+    "Target": {"north_m": POSITION, "east_m": POSITION},
+    "Defender": {
+        "north_m": POSITION,
+        "east_m": POSITION,
+        "range_m": LENGTH,
+        "capture_radius_m": LENGTH_OR_ZERO,
+    },
+    "VehicleStart": {
+        "north_m": POSITION,
+        "east_m": POSITION,
+        "speed_m_s": Bound(0.0, SPEED_LIMIT_M_S, low_open=True),
+    },
+    "GuidanceParams": {
+        "k_safety_1_s": GAIN,
+        "k_intercept_1_s": GAIN,
+        "k_track_m_s3": GAIN,
+        "actuator_p1_1_s": GAIN,
+        "softmin_beta_m": LENGTH,
+        "margin_m": LENGTH_OR_ZERO,
+        "blend_threshold_m": LENGTH,
+        "blend_width_m": LENGTH,
+        "intercept_radius_m": LENGTH_OR_ZERO,
+        "safety_damping_m": LENGTH,
+        "accel_max_m_s2": Bound(0.0, ACCEL_LIMIT_M_S2, low_open=True),
+        "response_lag_s": Bound(0.0, 60.0),
+        "track_boundary_layer_m_s2": Bound(0.0, ACCEL_LIMIT_M_S2, low_open=True),
+        "cbf_blend_width_m_s": Bound(0.0, SPEED_LIMIT_M_S, low_open=True),
+        "command_limit_ratio": Bound(1.0, GAIN_LIMIT),
+        "gradient_floor_m": FLOOR,
+        "range_floor_m": FLOOR,
+        "actuator_n": Bound(2, 32),
+    },
+    "SimulationSettings": {
+        "dt_s": Bound(0.0, 1.0, low_open=True),
+        "duration_s": Bound(0.0, 86400.0, low_open=True),
+    },
+    "GeoOrigin": {
+        "lat_deg": Bound(-90.0, 90.0),
+        "lon_deg": Bound(-180.0, 180.0),
+        "alt_m": Bound(-1000.0, 1e5),
+    },
+}
+
+
+def check_number(path: str, value: object, bound: Bound = ANY) -> float:
+    """``value`` as a float if it is a number within ``bound``; a ConfigError naming ``path``
+    and the range if not (booleans, strings, NaN, infinities, integers too large for a float).
+    """
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ConfigError(path, value, "must be a number")
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ConfigError(path, value, "must be a finite number")
+    if not bound.contains(value):  # before float(): 10**400 compares, it does not convert
+        raise ConfigError(path, value, f"must be within {bound}")
+    return float(value)
+
+
+def check_integer(path: str, value: object, bound: Bound) -> int:
+    """``value`` if it is an integer (not a boolean) within ``bound``; else a ConfigError."""
+    if isinstance(value, bool) or not isinstance(value, int) or not bound.contains(value):
+        raise ConfigError(path, value, f"must be an integer within {bound}")
+    return value

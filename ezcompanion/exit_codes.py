@@ -1,0 +1,41 @@
+"""Exit codes of ``ezcompanion`` and ``sitl-stub``: one per kind of ending, documented once.
+
+Every ending other than ``OK`` comes with one line on stderr that says why. Scripts can tell
+a bad scenario (fix the file) from a link that failed (check the cabling) from an engagement
+that ran and missed (look at the gains).
+
+==================  =====  ==================================================================
+name                code   meaning
+==================  =====  ==================================================================
+``OK``              0      done; for ``run`` and ``demo``: intercepted outside every zone
+``FAILED``          1      the job ran but its outcome failed: not intercepted, or a zone
+                           entered
+``BAD_INPUT``       2      a scenario file, a section of it or a flag is invalid (argparse's
+                           usage errors use 2 as well)
+``LINK_FAILURE``    3      the MAVLink link or the vehicle failed: the endpoint cannot be
+                           opened, no vehicle was heard, or the link was lost at the end
+``IO_ERROR``        4      a file cannot be read or written (an output directory that is not
+                           writable, a missing recording)
+``INTERNAL_ERROR``  70     a bug: an unexpected exception (``EX_SOFTWARE`` of sysexits.h);
+                           the traceback is logged at ``--log-level DEBUG``
+``INTERRUPTED``     130    stopped by SIGINT or SIGTERM before the job was done (128 + SIGINT)
+==================  =====  ==================================================================
+"""
+
+from __future__ import annotations
+
+from enum import IntEnum
+
+__all__ = ["ExitCode"]
+
+
+class ExitCode(IntEnum):
+    """How a command ended (the process exit status)."""
+
+    OK = 0
+    FAILED = 1
+    BAD_INPUT = 2
+    LINK_FAILURE = 3
+    IO_ERROR = 4
+    INTERNAL_ERROR = 70
+    INTERRUPTED = 130

@@ -1,0 +1,289 @@
+"""Command-line conventions of both tools: --version, -v/--log-level, help for every flag,
+one-line errors with distinct exit codes, and output directories that keep earlier results.
+Issue 10's reproducers for flags are here: ``--max-time nan`` (never ended), ``-1`` (exited 1
+silently), ``--connect udpin:127.0.0.1:99999`` and ``sitl-stub --log-level LOUD`` (both
+tracebacks)."""
+
+from __future__ import annotations
+
+import argparse
+import re
+import signal
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from ezcompanion import __version__
+from ezcompanion.cli import _parser, main, output_directory
+from ezcompanion.exit_codes import ExitCode
+from sitl_stub.cli import _parser as stub_parser
+from sitl_stub.cli import main as stub_main
+
+CONFIG = Path(__file__).resolve().parents[1] / "config"
+SCENARIO = CONFIG / "paper_scenario1.yaml"
+
+
+@pytest.fixture(autouse=True)
+def _interpreted_law(monkeypatch: pytest.MonkeyPatch) -> None:
+    # ``main(["run", ...])`` sets EZCOMPANION_JIT=0 for its process; keep it to this test
+    monkeypatch.setenv("EZCOMPANION_JIT", "0")
+
+
+def one_line(capsys: pytest.CaptureFixture[str]) -> str:
+    err = capsys.readouterr().err
+    lines = err.splitlines()
+    assert len(lines) == 1, err
+    assert "Traceback" not in err
+    return lines[0]
+
+
+@pytest.mark.parametrize("tool", [main, stub_main])
+def test_version(tool: object, capsys: pytest.CaptureFixture[str]) -> None:
+    assert tool(["--version"]) == 0  # type: ignore[operator]
+    assert capsys.readouterr().out.strip().endswith(f" {__version__}")
+
+
+@pytest.mark.parametrize(
+    ("argv", "flag", "said"),
+    [
+        (["run", "--config", str(SCENARIO), "--max-time", "nan"], "--max-time", "'nan'"),
+        (["run", "--config", str(SCENARIO), "--max-time", "-1"], "--max-time", "'-1'"),
+        (["run", "--config", str(SCENARIO), "--max-time", "inf"], "--max-time", "'inf'"),
+        (["run", "--config", str(SCENARIO), "--max-time", "soon"], "--max-time", "'soon'"),
+        (["run", "--config", str(SCENARIO), "--connect", "udpin:127.0.0.1:99999"],
+         "--connect", "the port must be an integer within [0, 65535]"),
+        (["run", "--config", str(SCENARIO), "--connect", "udp://[::1]:14540"],
+         "--connect", "IPv6"),
+        (["run", "--config", str(SCENARIO), "--speedup", "0"], "--speedup", "'0'"),
+        (["run", "--config", str(SCENARIO), "--setpoint", "thrust"], "--setpoint", "'thrust'"),
+        (["run"], "--config", "required"),
+        (["demo", "--speedup", "nan"], "--speedup", "'nan'"),
+        (["demo", "--profile", "rover"], "--profile", "'rover'"),
+        (["--log-level", "LOUD", "simulate", str(SCENARIO)], "--log-level", "'LOUD'"),
+        (["fly"], "COMMAND", "'fly'"),
+    ],
+)  # fmt: skip
+def test_a_bad_flag_is_one_line_and_exit_2(
+    argv: list[str], flag: str, said: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(argv) == ExitCode.BAD_INPUT
+    line = one_line(capsys)
+    assert line.startswith("ezcompanion") and ": error: " in line
+    assert flag in line and said in line
+
+
+@pytest.mark.parametrize(
+    ("argv", "flag"),
+    [
+        (["--config", str(SCENARIO), "--log-level", "LOUD"], "--log-level"),
+        (["--config", str(SCENARIO), "--duration", "nan"], "--duration"),
+        (["--config", str(SCENARIO), "--duration", "-1"], "--duration"),
+        (["--config", str(SCENARIO), "--speedup", "1e9"], "--speedup"),
+        (["--config", str(SCENARIO), "--connect", "udpout:127.0.0.1:0"], "--connect"),
+        (["--config", str(SCENARIO), "--profile", "rover"], "--profile"),
+        (["--duration", "1"], "--config"),
+    ],
+)
+def test_a_bad_stub_flag_is_one_line_and_exit_2(
+    argv: list[str], flag: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert stub_main(argv) == ExitCode.BAD_INPUT
+    line = one_line(capsys)
+    assert line.startswith("sitl-stub: error: ") and flag in line
+
+
+def test_a_bad_stub_id_names_the_field(capsys: pytest.CaptureFixture[str]) -> None:
+    argv = ["--config", str(SCENARIO), "--system-id", "300", "--connect", "udpout:127.0.0.1:9"]
+    assert stub_main(argv) == ExitCode.BAD_INPUT
+    assert one_line(capsys).startswith("sitl-stub: error: system_id: must be an integer")
+
+
+def _flags(parser: argparse.ArgumentParser) -> list[tuple[str, argparse.Action]]:
+    found = [(parser.prog, a) for a in parser._actions]
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                if name in ("simulate", "run", "demo"):  # this module's commands
+                    found += [(sub.prog, a) for a in sub._actions]
+    return found
+
+
+def test_every_flag_has_help() -> None:
+    for prog, action in _flags(_parser()) + _flags(stub_parser()):
+        assert action.help, f"{prog} {action.option_strings or action.dest} has no help"
+    verbose = _parser().parse_args(["-vv", "simulate", "x.yaml"])
+    assert verbose.verbose == 2 and verbose.log_level is None
+    assert _parser().parse_args(["--log-level", "debug", "simulate", "x"]).log_level == "DEBUG"
+    after = _parser().parse_args(["run", "--config", "x.yaml", "-v", "--log-level", "error"])
+    assert after.verbose == 1 and after.log_level == "ERROR"
+    assert _parser().parse_args(["-v", "monitor"]).verbose == 1  # not reset by the subcommand
+
+
+def test_run_with_no_vehicle_is_a_link_failure_not_a_miss(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    port = _free_udp_port()
+    argv = ["run", "--config", str(SCENARIO), "--connect", f"udpin://127.0.0.1:{port}",
+            "--max-time", "0.5", "--no-telemetry"]  # fmt: skip
+    assert main(argv) == ExitCode.LINK_FAILURE
+    (error,) = capsys.readouterr().err.splitlines()
+    assert re.fullmatch(  # the endpoint as pymavlink opened it
+        r"ezcompanion: error: connect: no vehicle heard in [0-9.]+ s "
+        rf"\(got 'udpin:127.0.0.1:{port}'\)",
+        error,
+    )
+
+
+def _free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+def test_simulate_warns_and_exits_1_when_not_intercepted(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    data = yaml.safe_load(SCENARIO.read_text())
+    data["simulation"]["duration_s"] = 0.5  # far too short to reach the target
+    data["defenders"][2].update(range_m=0.5, capture_radius_m=1.5)
+    path = tmp_path / "short.yaml"
+    path.write_text(yaml.safe_dump(data))
+    assert main(["simulate", str(path)]) == ExitCode.FAILED
+    captured = capsys.readouterr()
+    assert captured.err.splitlines() == [
+        "ezcompanion: warning: defenders[2].capture_radius_m: 1.5 m is larger than range_m "
+        "0.5 m; check that the two were not swapped"
+    ]
+    assert "NOT intercepted by t = 0.50 s" in captured.out
+
+
+def test_default_output_directories_never_reuse_earlier_results(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    default = tmp_path / "demo-out"
+    assert output_directory(None, default) == default and default.is_dir()
+    assert output_directory(None, default) == default  # still empty: reused
+    (default / "truth.csv").write_text("t_s\n")
+    second = output_directory(None, default)
+    assert second == tmp_path / "demo-out-2" and second.is_dir()
+    (second / "truth.csv").write_text("t_s\n")
+    assert output_directory(None, default) == tmp_path / "demo-out-3"
+    assert "writing to" in capsys.readouterr().out
+    # asked for by name: used, and the user is told it holds results
+    assert output_directory(default, tmp_path / "other") == default
+    assert "holds earlier results" in capsys.readouterr().out
+    assert (default / "truth.csv").read_text() == "t_s\n"  # nothing removed
+    assert _parser().parse_args(["validate"]).out is None  # resolved the same way
+
+
+def test_an_unwritable_output_is_exit_4_in_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    argv = ["simulate", str(SCENARIO), "--out", str(blocker / "run.csv")]
+    assert main(argv) == ExitCode.IO_ERROR
+    err = capsys.readouterr().err
+    assert err.splitlines()[-1].startswith(f"ezcompanion: error: {blocker}")
+
+
+@pytest.mark.parametrize("tool", ["ezcompanion", "sitl_stub"])
+def test_a_binary_scenario_as_a_real_process(tool: str, tmp_path: Path) -> None:
+    path = tmp_path / "scenario.yaml"
+    path.write_bytes(bytes(range(128, 256)) * 4)
+    args = ["simulate", str(path)] if tool == "ezcompanion" else ["--config", str(path)]
+    done = subprocess.run(
+        [sys.executable, "-m", tool, *args],
+        capture_output=True, text=True, timeout=60.0, check=False,
+    )  # fmt: skip
+    assert done.returncode == ExitCode.BAD_INPUT, done.stderr
+    prog = "ezcompanion" if tool == "ezcompanion" else "sitl-stub"
+    assert done.stderr.splitlines() == [
+        f"{prog}: error: scenario: is not UTF-8 text (byte 0x80 at offset 0) (got '{path}')"
+    ]
+
+
+def test_a_bug_is_one_line_and_exit_70(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import ezcompanion.cli as cli
+
+    def broken(*_args: object, **_kwargs: object) -> int:
+        raise RuntimeError("a bug\nover two lines")
+
+    monkeypatch.setattr(cli, "run_simulate", broken)
+    assert main(["simulate", str(SCENARIO)]) == ExitCode.INTERNAL_ERROR
+    assert one_line(capsys) == (
+        "ezcompanion: internal error: RuntimeError: a bug over two lines "
+        "(rerun with --log-level DEBUG for the traceback)"
+    )
+
+
+def test_sigint_during_run_is_exit_130_in_one_line() -> None:
+    port = _free_udp_port()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "ezcompanion", "run", "--config", str(SCENARIO),
+         "--connect", f"udpin://127.0.0.1:{port}", "--no-telemetry"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert proc.stdout is not None
+        first = proc.stdout.readline()  # the service is listening: its handlers are set
+        assert "listening: link open on udpin:127.0.0.1:" in first
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30.0)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == ExitCode.INTERRUPTED
+    assert err.splitlines() == ["ezcompanion: interrupted before the engagement ended"]
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [  # issue 10's scenario files that crashed a tool or were accepted
+        ("accel_max_m_s2: 1.0 ", "accel_max_m_s2: 1e308 ",
+         "vehicle.accel_max_m_s2: must be within (0, 1000] (got 1e+308)"),
+        ("north_m: 2.0              # the", f"north_m: 1{'0' * 400}  # the",
+         "target.north_m: must be within [-100000, 100000] (got 1000000"),
+        ("north_m: 8.0 ", "north_m: 1e300 ",
+         "vehicle.north_m: must be within [-100000, 100000] (got 1e+300)"),
+        ("north_m: 8.0 ", "north_m: 4.0\n  north_m: 8.0 ", "vehicle.north_m: is given twice"),
+        ("{name: D3,", "{name: D1,", "defenders[2].name: is also the name of defenders[0]"),
+    ],
+)  # fmt: skip
+def test_issue_10_scenarios_are_one_line_in_both_tools(
+    old: str, new: str, message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    text = SCENARIO.read_text()
+    assert old in text
+    path = tmp_path / "scenario.yaml"
+    path.write_text(text.replace(old, new, 1))
+    assert main(["simulate", str(path)]) == ExitCode.BAD_INPUT
+    assert one_line(capsys).startswith(f"ezcompanion: error: {message}")
+    assert stub_main(["--config", str(path), "--connect", "udpout:127.0.0.1:9"]) == 2
+    assert one_line(capsys).startswith(f"sitl-stub: error: {message}")
+
+
+def test_the_scenarios_connect_takes_mavsdk_urls_too(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    port = _free_udp_port()
+    data = yaml.safe_load(SCENARIO.read_text())
+    data["companion"] = {"connect": f"udp://127.0.0.1:{port}"}
+    path = tmp_path / "scenario.yaml"
+    path.write_text(yaml.safe_dump(data))
+    argv = ["run", "--config", str(path), "--max-time", "0.3", "--no-telemetry"]
+    assert main(argv) == ExitCode.LINK_FAILURE  # opened (as udpin:), and nobody there
+    assert capsys.readouterr().err.endswith(f"(got 'udpin:127.0.0.1:{port}')\n")
+    data["companion"] = {"connect": "udp://127.0.0.1:70000"}
+    path.write_text(yaml.safe_dump(data))
+    assert main(argv) == ExitCode.BAD_INPUT
+    assert one_line(capsys).startswith(
+        "ezcompanion: error: companion.connect: the port must be an integer within [0, 65535]"
+    )

@@ -1,0 +1,144 @@
+"""MAVLink endpoints: MAVProxy's and MAVSDK's spellings open the same pymavlink connection,
+and a bad one is refused naming the setting, before any socket is opened."""
+
+from __future__ import annotations
+
+import socket
+import time
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from ezcompanion.endpoint import Endpoint, EndpointKind, parse_endpoint, pymavlink_url
+from ezcompanion.errors import ConfigError
+from ezcompanion.wire import open_link
+
+
+@pytest.mark.parametrize(
+    ("written", "opened"),
+    [
+        ("udpin:0.0.0.0:14550", "udpin:0.0.0.0:14550"),
+        ("udpin://0.0.0.0:14550", "udpin:0.0.0.0:14550"),
+        ("udp://:14540", "udpin:0.0.0.0:14540"),  # MAVSDK: listen on every interface
+        ("udp:127.0.0.1:14550", "udpin:127.0.0.1:14550"),  # pymavlink: udp listens
+        ("udpout:127.0.0.1:14550", "udpout:127.0.0.1:14550"),
+        ("udpout://192.168.1.12:14550", "udpout:192.168.1.12:14550"),
+        ("tcp:127.0.0.1:5760", "tcp:127.0.0.1:5760"),
+        ("tcp://localhost:5760", "tcp:localhost:5760"),
+        ("tcpout://sitl.local:5760", "tcp:sitl.local:5760"),
+        ("tcpin://:5760", "tcpin:0.0.0.0:5760"),
+        ("serial:///dev/ttyACM0:57600", "/dev/ttyACM0,57600"),
+        ("serial:///dev/serial/by-id/usb-ArduPilot-if00:115200",
+         "/dev/serial/by-id/usb-ArduPilot-if00,115200"),
+        ("serial:///dev/ttyUSB0", "/dev/ttyUSB0,57600"),
+        ("/dev/ttyACM0,921600", "/dev/ttyACM0,921600"),
+        ("/dev/ttyACM0", "/dev/ttyACM0,57600"),
+        ("COM3,57600", "COM3,57600"),
+        ("serial://COM3:115200", "COM3,115200"),
+    ],
+)  # fmt: skip
+def test_both_spellings_give_pymavlinks_string(written: str, opened: str) -> None:
+    assert pymavlink_url(written) == opened
+    assert pymavlink_url(opened) == opened  # idempotent: a checked string passes again
+
+
+@pytest.mark.parametrize(
+    ("written", "reason"),
+    [
+        ("udpin:127.0.0.1:99999", "the port must be an integer within [0, 65535]"),
+        ("udpout://127.0.0.1:0", "the port must be an integer within [1, 65535]"),
+        ("tcp:127.0.0.1:0", "the port must be an integer within [1, 65535]"),
+        ("udp://:port", "the port must be an integer within [0, 65535]"),
+        ("udpout::14550", "udpout needs a host"),
+        ("tcp://:5760", "tcp needs a host"),
+        ("udp://[::1]:14540", "IPv6 addresses cannot be used"),
+        ("udpin:300.1.1.1:14550", "'300.1.1.1' is not an IPv4 address"),
+        ("udpout:bad_host!:14550", "'bad_host!' is not a host name or an IPv4 address"),
+        ("udp://host:14540/path", "must be udp://HOST:PORT and nothing more"),
+        ("udpin:0.0.0.0", "must be udpin:HOST:PORT"),
+        ("/dev/ttyACM0,fast", "the baud rate must be an integer"),
+        ("serial://ttyACM0:57600", "the serial device must be a path"),
+        ("serial:/dev/ttyS0", "must be a MAVLink endpoint such as"),
+        ("http://example.com:80", "must be a MAVLink endpoint such as"),
+        ("udpin: 0.0.0.0:14550", "must not contain spaces"),
+        ("", "must be a MAVLink endpoint such as"),
+    ],
+)
+def test_a_bad_endpoint_names_the_setting_and_the_text(written: str, reason: str) -> None:
+    with pytest.raises(ConfigError) as caught:
+        parse_endpoint(written, field="--connect")
+    assert caught.value.field == "--connect" and caught.value.value == written
+    assert caught.value.reason.startswith(reason)
+    assert str(caught.value).startswith(f"--connect: {reason}")
+
+
+def test_a_non_string_is_refused() -> None:
+    with pytest.raises(ConfigError, match=r"^companion.connect: must be a MAVLink endpoint"):
+        parse_endpoint(14550, field="companion.connect")
+
+
+hosts = st.one_of(
+    st.ip_addresses(v=4).map(str),
+    st.from_regex(r"\A[a-z][a-z0-9-]{0,20}[a-z0-9](\.[a-z][a-z0-9]{0,10}){0,2}\Z"),
+)
+ports = st.integers(1, 65535)
+mavsdk_scheme = {EndpointKind.UDP_IN: "udpin", EndpointKind.UDP_OUT: "udpout",
+                 EndpointKind.TCP: "tcpout", EndpointKind.TCP_IN: "tcpin"}  # fmt: skip
+
+
+@given(st.sampled_from(sorted(mavsdk_scheme)), hosts, ports)
+def test_any_host_and_port_read_the_same_in_either_spelling(
+    kind: EndpointKind, host: str, port: int
+) -> None:
+    mavproxy = parse_endpoint(f"{kind.value}:{host}:{port}")
+    mavsdk = parse_endpoint(f"{mavsdk_scheme[kind]}://{host}:{port}")
+    assert mavproxy == mavsdk == Endpoint(kind=kind, host=host, port=port)
+    assert parse_endpoint(mavsdk.pymavlink) == mavsdk
+
+
+@given(st.one_of(st.integers(max_value=-1), st.integers(min_value=65536)))
+def test_every_port_outside_the_range_is_refused(port: int) -> None:
+    for text in (f"udpin:127.0.0.1:{port}", f"udpout://127.0.0.1:{port}"):
+        with pytest.raises(ConfigError, match="port must be an integer within"):
+            parse_endpoint(text)
+
+
+def test_port_0_is_any_free_port_for_a_listener_only() -> None:
+    assert pymavlink_url("udpin://127.0.0.1:0") == "udpin:127.0.0.1:0"
+    assert pymavlink_url("tcpin:127.0.0.1:0") == "tcpin:127.0.0.1:0"
+    with pytest.raises(ConfigError, match=r"within \[1, 65535\]"):
+        pymavlink_url("udpout:127.0.0.1:0")
+
+
+def _free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+def test_mavsdk_urls_open_real_links_over_loopback() -> None:
+    """``udpin://`` and ``udpout://`` as MAVSDK writes them, through pymavlink, on 127.0.0.1:
+    a heartbeat sent on one arrives on the other."""
+    port = _free_udp_port()
+    listen_url = pymavlink_url(f"udpin://127.0.0.1:{port}")
+    send_url = pymavlink_url(f"udpout://127.0.0.1:{port}")
+    with (
+        open_link(listen_url, system_id=255, component_id=190) as listener,
+        open_link(send_url, system_id=7, component_id=1) as sender,
+    ):
+        heard = []
+        deadline = time.monotonic() + 10.0
+        while not heard and time.monotonic() < deadline:
+            sender.send(sender.mav.heartbeat_encode(2, 3, 0, 0, 0))
+            listener.wait_readable(0.1)
+            heard = [m for m in listener.recv_messages() if m.get_type() == "HEARTBEAT"]
+    assert heard and heard[0].get_srcSystem() == 7
+
+
+def test_the_stubs_connect_setting_takes_either_spelling() -> None:
+    from sitl_stub import StubSettings
+
+    assert StubSettings(connect="udpout://127.0.0.1:14550").connect == "udpout:127.0.0.1:14550"
+    with pytest.raises(ConfigError, match=r"^connect: udpout needs a host"):
+        StubSettings(connect="udpout://:14550")

@@ -17,8 +17,9 @@ assumptions named; tests/test_backup.py checks each step):
 3. **Three backup policies**, feedbacks on the actuator alone (no clock): STRAIGHT commands
    a_c = -(C / a_max) a, integrated continuously (the turn dies out, then a straight line);
    LEFT and RIGHT hold a_c = -C or +C (a hard turn) until the first control step at which
-   STRAIGHT is certified, then STRAIGHT; a turn with no such step within a revolution after
-   it has converged circles for ever.
+   STRAIGHT is certified, then STRAIGHT; a turn with no such step before it has turned half
+   a revolution after converging circles for ever (its certificate says so; flown, it may
+   still leave later, where STRAIGHT is certified, which is safe too).
 4. **Certificates.** For each policy, the least gap (less the margin) along its flight for
    all time, from below: the flight is integrated control step by control step (the
    actuator linear over each, as flown) and sampled every m steps (m dt within
@@ -55,7 +56,7 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-from ezcompanion.guidance._jit import jit
+from ezcompanion.guidance._jit import jit, jit_inline
 from ezcompanion.guidance.actuator import actuator_rate, advance_one
 
 __all__ = [
@@ -95,6 +96,10 @@ _N_BACKUPS = 3
 _RESIDUAL_RAD = 5e-4
 _MAX_SAMPLES = 4000
 _EXIT_EVERY = 1
+# A turn looks for its exit over this much of its converged circle, then circles (looking
+# further would only find exits that its flight, by its rule, takes anyway: those are
+# certified where they are taken).
+_EXIT_SEARCH_RAD = math.pi
 # The nominal's weight looks this many samples ahead (a fixed time, whatever the step).
 _PREVIEW_SAMPLES = 4
 
@@ -138,7 +143,7 @@ class ShieldSettings:
 # 1. gaps: least distance from look-ahead points to the reach discs, closed form
 
 
-@jit
+@jit_inline
 def _dip(mur: float, dist: float, speed: float, amax: float, av_rate: float, step: float
          ) -> float:
     """How far below the least of its two sample values the gap of one zone can dip between
@@ -158,7 +163,7 @@ def _dip(mur: float, dist: float, speed: float, amax: float, av_rate: float, ste
     return min(first, 0.125 * curve * step * step)
 
 
-@jit
+@jit_inline
 def _av_rate_bound(s: FloatArray) -> float:
     """A bound on |d a_v / dt| along any flow: the actuator's slew C + p1 a_max, and with a
     lag the initial mismatch |a - a_v| <= 2 a_max over tau, whichever is larger."""
@@ -167,7 +172,7 @@ def _av_rate_bound(s: FloatArray) -> float:
     return float(max(slew, 2.0 * s[S_AMAX] / tau)) if tau > 0.0 else float(slew)
 
 
-@jit
+@jit_inline
 def _point_gap(
     zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
     n: float, e: float, cos_h: float, sin_h: float, eps: float, speed: float, amax: float,
@@ -188,7 +193,7 @@ def _point_gap(
     return best
 
 
-@jit
+@jit_inline
 def _segment_gap(
     zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
     n: float, e: float, cos_h: float, sin_h: float, start_m: float, stop_m: float,
@@ -243,7 +248,7 @@ def _annulus_gap(
     return best
 
 
-@jit
+@jit_inline
 def _arc_end(
     n: float, e: float, heading: float, accel: float, speed: float, duration_s: float
 ) -> tuple[float, float, float]:
@@ -257,7 +262,7 @@ def _arc_end(
     return n + chord * math.cos(mid), e + chord * math.sin(mid), heading + turn
 
 
-@jit
+@jit_inline
 def _abandon_gap(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, heading: float, accel: float, speed: float,
@@ -318,7 +323,7 @@ def _advance_straighten(a: float, dt_s: float, accel_max: float, p1: float, n: i
     return a
 
 
-@jit
+@jit_inline
 def _lag_response(a0: float, a1: float, av0: float, tau: float, t: float, dt: float
                   ) -> tuple[float, float]:
     """a_v(t) and its integral over [0, t] for a_v' = (a - a_v) / tau, a linear from a0 to a1
@@ -333,7 +338,7 @@ def _lag_response(a0: float, a1: float, av0: float, tau: float, t: float, dt: fl
     return av, integral
 
 
-@jit
+@jit_inline
 def _fly(n: float, e: float, h: float, a0: float, a1: float, av0: float, speed: float,
          tau: float, dt: float) -> tuple[float, float, float, float]:
     """The vehicle over dt while the actuator moves linearly from a0 to a1: position by
@@ -388,7 +393,7 @@ def acceptance_level_m(s: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: 
     return theta
 
 
-@jit
+@jit_inline
 def _residual_turn_rad(s: FloatArray, a: float, av: float, limit: float, speed: float) -> float:
     """A bound on the heading change still to come once the actuator is at a and the flown
     acceleration at av, converging to ``limit`` (0: STRAIGHT, a*: a turn), measured from the
@@ -479,7 +484,7 @@ def turn_certificate(
             leave = -math.inf
         if leave >= exit_level:
             return min(best, leave)
-        if converged and turned >= 2.0 * math.pi:
+        if converged and turned >= _EXIT_SEARCH_RAD:
             break
         converged = converged or _residual_turn_rad(s, a, av, limit, speed) < _RESIDUAL_RAD
         h0 = h

@@ -6,7 +6,6 @@ import argparse
 import io
 import json
 import threading
-import time
 from pathlib import Path
 from typing import Any
 
@@ -62,12 +61,15 @@ class Monitor:
 
 
 def fly(pub: Any, ticks: int = 40) -> list[Any]:
-    """Publish an engagement at the loop's pace, then its interception."""
+    """Publish an engagement, each tick out before the next (the publisher sends the newest
+    tick it holds: a faster loop would have some skipped), then its interception."""
     commands = list(engagement(ticks))
     pub.publish_event(Event(EventKind.ENGAGED, commands[0].time_s, "guiding in GUIDED"))
+    assert wait_for(lambda: pub.samples_published == 1)
     for command in commands:
+        before = pub.samples_published
         pub.publish_tick(command)
-        time.sleep(0.002)
+        assert wait_for(lambda before=before: pub.samples_published == before + 2)  # type: ignore[misc]
     pub.publish_event(Event(EventKind.INTERCEPTED, commands[-1].time_s, "within 0.1 m"))
     return commands
 
@@ -76,7 +78,7 @@ def test_the_live_table_shows_margins_mode_accelerations_and_outcome(tmp_path: P
     endpoint = free_endpoint()
     record = tmp_path / "engagement.jsonl"
     status = {"phase": "guiding", "scenario": SCENARIO_RAW}
-    with publisher(endpoint, status=lambda: status) as pub:
+    with publisher(endpoint, status=lambda: status, publish_rate_hz=1000.0) as pub:
         monitor = Monitor(endpoint, record=record, refresh_hz=20.0)
         assert wait_for(lambda: pub.has_subscribers("guidance") and pub.has_subscribers("event"))
         assert wait_for(lambda: "yes" in monitor.text())  # alive, and its status asked
@@ -113,7 +115,7 @@ def test_the_live_table_shows_margins_mode_accelerations_and_outcome(tmp_path: P
 
 def test_json_lines_are_the_raw_samples() -> None:
     endpoint = free_endpoint()
-    with publisher(endpoint) as pub:
+    with publisher(endpoint, publish_rate_hz=1000.0) as pub:
         monitor = Monitor(endpoint, json_lines=True, vehicle="vehicle1")
         assert wait_for(lambda: pub.has_subscribers("guidance") and pub.has_subscribers("event"))
         fly(pub, ticks=5)

@@ -198,3 +198,44 @@ def test_monitor_through_a_router_and_replay_with_a_plot(tmp_path: Path) -> None
     args = parse(["monitor", "--replay", str(record), "--plot", str(png)])
     assert run_telemetry_command(args) == 0
     assert png.stat().st_size > 10_000
+
+
+def test_replay_of_a_missing_or_broken_file_is_one_line_and_exit_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from ezcompanion.cli import main
+
+    binary = tmp_path / "binary.jsonl"
+    binary.write_bytes(b"\x89PNG\r\n\x1a\n\xff\xfe\x00" * 40)
+    not_samples = tmp_path / "list.jsonl"
+    not_samples.write_text('{"key": "ezcompanion/v/state", "payload": {}}\n[1, 2]\n')
+    cases = {
+        tmp_path / "missing.jsonl": "recording: no such file",
+        binary: "not text",
+        not_samples: "list.jsonl:2: not a recorded sample",
+    }
+    for path, error in cases.items():
+        assert main(["monitor", "--replay", str(path)]) == 2
+        out, err = capsys.readouterr()
+        assert out == "" and err.count("\n") == 1 and error in err, err
+        assert "Traceback" not in err
+
+
+def test_replay_with_json_prints_the_recorded_lines(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from ezcompanion.cli import main
+
+    record = tmp_path / "r.jsonl"
+    lines = [
+        {"key": "ezcompanion/a/guidance", "encoding": "e", "payload": {"seq": 1}},
+        {"key": "ezcompanion/b/guidance", "encoding": "e", "payload": {"seq": 2}},
+        {"key": "ezcompanion/a/alive", "encoding": "", "payload": True},
+    ]
+    record.write_text("".join(json.dumps(line) + "\n" for line in lines))
+    assert main(["monitor", "--replay", str(record), "--json", "--vehicle", "a"]) == 0
+    out = capsys.readouterr().out
+    assert [json.loads(text) for text in out.splitlines()] == [lines[0], lines[2]]
+    assert main(["monitor", "--replay", str(record)]) == 0  # the table, for both vehicles
+    table = capsys.readouterr().out
+    assert "ezcompanion monitor" in table and "{" not in table

@@ -182,7 +182,7 @@ def test_monitor_through_a_router_and_replay_with_a_plot(tmp_path: Path) -> None
     try:
         with publisher(
             endpoint, vehicle_id="alpha", mode="client", connect=[endpoint],
-            status=lambda: {"scenario": SCENARIO_RAW},
+            status=lambda: {"scenario": SCENARIO_RAW}, publish_rate_hz=1000.0,
         ) as pub:  # fmt: skip
             monitor = Monitor(endpoint, record=record, conf={"mode": "client"})
             assert wait_for(lambda: pub.has_subscribers("guidance"))
@@ -211,7 +211,7 @@ def test_replay_of_a_missing_or_broken_file_is_one_line_and_exit_2(
     not_samples.write_text('{"key": "ezcompanion/v/state", "payload": {}}\n[1, 2]\n')
     cases = {
         tmp_path / "missing.jsonl": "recording: no such file",
-        binary: "not text",
+        binary: "not UTF-8 text",
         not_samples: "list.jsonl:2: not a recorded sample",
     }
     for path, error in cases.items():

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import io
 import json
+import socket
 import threading
 from pathlib import Path
 from typing import Any
@@ -172,12 +173,22 @@ def test_the_commands_parse_with_defaults_and_ignore_others() -> None:
         run_telemetry_command(parse(["monitor", "--connect", "localhost:7447"]))
 
 
+def _accepts(host: str, port: int) -> bool:
+    try:
+        socket.create_connection((host, port), timeout=0.5).close()
+    except OSError:
+        return False
+    return True
+
+
 def test_monitor_through_a_router_and_replay_with_a_plot(tmp_path: Path) -> None:
     endpoint = free_endpoint()
     stop = threading.Event()
     router = threading.Thread(target=run_router, args=(router_config(listen=[endpoint]),),
                               kwargs={"stop": stop})  # fmt: skip
     router.start()
+    host, port = endpoint.removeprefix("tcp/").split(":")
+    assert wait_for(lambda: _accepts(host, int(port)))  # clients cannot wait for a router
     record = tmp_path / "rec.jsonl"
     try:
         with publisher(

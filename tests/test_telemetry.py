@@ -242,9 +242,9 @@ def test_events_are_published_in_order_with_their_data(endpoint: str) -> None:
 def test_ticks_faster_than_the_publish_rate_go_out_as_the_newest_at_that_rate(
     endpoint: str,
 ) -> None:
-    """The loop hands over 200 ticks, one every 2 ms: the publisher sends the first at once
-    and then, once a period (20 Hz here), the newest tick it holds; the others are skipped
-    and counted. Nothing queues: what is sent last is the loop's last tick."""
+    """The loop hands over 200 ticks, one every 2 ms: once a period (20 Hz here) the
+    publisher sends the newest tick it holds; the others are skipped and counted. Nothing
+    queues: what is sent last is the loop's last tick."""
     commands = list(engagement(200))
     got = Collector()
     with publisher(endpoint) as pub, zenoh.open(peer(endpoint)) as session:
@@ -260,12 +260,12 @@ def test_ticks_faster_than_the_publish_rate_go_out_as_the_newest_at_that_rate(
         release(sub)
     published = pub.samples_published // 2
     assert published + pub.ticks_skipped == len(commands)
-    # at most one a period after the first, and the one close() sent
+    # at most one a period, and the one close() sent
     assert 2 <= published <= elapsed_s * 20.0 + 2, (published, elapsed_s)
     assert published < len(commands) / 2
     times = [g["time_s"] for g in got.of("guidance")]
-    assert times[0] == commands[0].time_s and times[-1] == commands[-1].time_s
-    assert times == sorted(times)
+    assert times[-1] == commands[-1].time_s
+    assert times == sorted(set(times))
     assert all(g["sent_unix_s"] >= g["wall_time_unix_s"] for g in got.of("guidance"))
 
 

@@ -67,10 +67,9 @@ def fly(pub: Any, ticks: int = 40) -> list[Any]:
     commands = list(engagement(ticks))
     pub.publish_event(Event(EventKind.ENGAGED, commands[0].time_s, "guiding in GUIDED"))
     assert wait_for(lambda: pub.samples_published == 1)
-    for command in commands:
-        before = pub.samples_published
+    for sent, command in enumerate(commands, start=1):
         pub.publish_tick(command)
-        assert wait_for(lambda before=before: pub.samples_published == before + 2)  # type: ignore[misc]
+        assert wait_for(lambda sent=sent: pub.ticks_published == sent)  # type: ignore[misc]
     pub.publish_event(Event(EventKind.INTERCEPTED, commands[-1].time_s, "within 0.1 m"))
     return commands
 

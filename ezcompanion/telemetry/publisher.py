@@ -106,11 +106,12 @@ class TelemetryPublisher:
         self._closing = False
         self._closed = False
         self.ticks_skipped = 0  # replaced in the slot by a newer tick before being sent
-        self.samples_published = 0
+        self.samples_published = 0  # puts of any sample
+        self.ticks_published = 0  # ticks taken from the slot and sent to their subscribers
         self.updates_refused = 0
         self._seq = 0
-        self.last_state: dict[str, Any] | None = None
-        self.last_guidance: dict[str, Any] | None = None
+        # the last tick sent, for the status reply: (seq, command, wall_unix_s, zone_names)
+        self._last_tick: tuple[int, TickCommand, float, tuple[str, ...]] | None = None
 
         conf = session_config(settings)
         self.warnings = exposure_warnings(conf, settings.scenario_updates)
@@ -231,16 +232,32 @@ class TelemetryPublisher:
         self._recent_events.append(payload)
         self._put(self._event_pub, payload)
 
-    def _send_tick(self, command: TickCommand, wall_unix_s: float, names: Sequence[str]) -> None:
+    def _send_tick(self, command: TickCommand, wall_unix_s: float, names: tuple[str, ...]) -> None:
         seq = self._next_seq()
-        # guidance first: it is what monitors wait for (state follows ~0.1 ms later)
-        guidance = guidance_payload(self.vehicle_id, seq, command, wall_unix_s, names)
-        guidance["sent_unix_s"] = time.time()
-        self._put(self._guidance_pub, guidance)
-        state = state_payload(self.vehicle_id, seq, command, wall_unix_s)
-        state["sent_unix_s"] = time.time()
-        self._put(self._state_pub, state)
-        self.last_state, self.last_guidance = state, guidance
+        self._last_tick = (seq, command, wall_unix_s, names)
+        # each sample is built only when someone subscribes to it (the status reply builds
+        # the last ones when asked); guidance first: it is what monitors wait for
+        if self.has_subscribers("guidance"):
+            guidance = guidance_payload(self.vehicle_id, seq, command, wall_unix_s, names)
+            guidance["sent_unix_s"] = time.time()
+            self._put(self._guidance_pub, guidance)
+        if self.has_subscribers("state"):
+            state = state_payload(self.vehicle_id, seq, command, wall_unix_s)
+            state["sent_unix_s"] = time.time()
+            self._put(self._state_pub, state)
+        self.ticks_published += 1
+
+    @property
+    def last_state(self) -> dict[str, Any] | None:
+        """The ``state`` sample of the last tick sent (None before the first)."""
+        last = self._last_tick
+        return None if last is None else state_payload(self.vehicle_id, last[0], *last[1:3])
+
+    @property
+    def last_guidance(self) -> dict[str, Any] | None:
+        """The ``guidance`` sample of the last tick sent (None before the first)."""
+        last = self._last_tick
+        return None if last is None else guidance_payload(self.vehicle_id, *last)
 
     def _next_seq(self) -> int:
         self._seq += 1
@@ -287,6 +304,7 @@ class TelemetryPublisher:
                 "warnings": list(self.warnings),
             },
             "samples_published": self.samples_published,
+            "ticks_published": self.ticks_published,
             "ticks_skipped": self.ticks_skipped,
             "updates_refused": self.updates_refused,
             "last_state": self.last_state,

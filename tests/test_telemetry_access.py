@@ -85,6 +85,7 @@ def pki(tmp_path_factory: pytest.TempPathFactory) -> Pki:
         "vehicle1": (ca, ("127.0.0.1", "localhost")),
         "operator": (ca, ("operator.local",)),
         "monitor": (ca, ("monitor.local",)),
+        "router": (ca, ("127.0.0.1", "localhost")),
         "forged": (other, ("operator.local",)),
     }
     for name, (authority, identities) in issued.items():
@@ -149,7 +150,10 @@ def replies(
     """Every reply to one query (ok payloads decoded; errors as ("err", text)), after the
     session is connected to the service, or (``connects=False``) has failed to be."""
     with zenoh.open(conf) as session:
-        linked = wait_for(lambda: bool(list(session.info.peers_zid())), 5.0 if connects else 1.0)
+        info = session.info
+        linked = wait_for(
+            lambda: bool([*info.peers_zid(), *info.routers_zid()]), 5.0 if connects else 1.0
+        )
         assert linked is connects, "connected" if linked else "not connected"
         got = list(session.get(key_expr, payload=payload, timeout=timeout_s))
     return [
@@ -352,6 +356,99 @@ def test_with_logins_only_the_operator_user_changes_the_scenario(logins: Path) -
     assert accepted == [{"ok": True}]
     taken = service.inbox.take()
     assert taken is not None and taken.target.east_m == -2.0
+
+
+def router_config(endpoint: str, pki: Pki) -> dict[str, Any]:
+    """The router of docs/telemetry.md: mTLS, and an ACL letting every fleet member watch
+    and only the operator's certificate send a scenario query."""
+    fleet = ["put", "delete", "declare_subscriber", "declare_queryable", "reply",
+             "liveliness_token", "liveliness_query", "declare_liveliness_subscriber"]  # fmt: skip
+    allow = {"permission": "allow"}
+    return {
+        "mode": "router",
+        "listen": {"endpoints": [endpoint]},
+        "scouting": {"multicast": {"enabled": False}},
+        "transport": {
+            "link": {
+                "tls": {
+                    "root_ca_certificate": pki.ca(),
+                    "listen_certificate": pki.tls("router")["certificate"],
+                    "listen_private_key": pki.tls("router")["private_key"],
+                    "enable_mtls": True,
+                }
+            }
+        },
+        "access_control": {
+            "enabled": True,
+            "default_permission": "deny",
+            "rules": [
+                {
+                    "id": "fleet",
+                    **allow,
+                    "flows": ["ingress", "egress"],
+                    "messages": fleet,
+                    "key_exprs": ["ezcompanion/**"],
+                },
+                {
+                    "id": "status",
+                    **allow,
+                    "flows": ["ingress", "egress"],
+                    "messages": ["query"],
+                    "key_exprs": ["ezcompanion/*/status"],
+                },
+                {
+                    "id": "scenario-out",
+                    **allow,
+                    "flows": ["egress"],
+                    "messages": ["query"],
+                    "key_exprs": ["ezcompanion/*/scenario"],
+                },
+                {
+                    "id": "scenario-in",
+                    **allow,
+                    "flows": ["ingress"],
+                    "messages": ["query"],
+                    "key_exprs": ["ezcompanion/*/scenario"],
+                },
+            ],
+            "subjects": [{"id": "anyone"}, {"id": "operators", "cert_common_names": ["operator"]}],
+            "policies": [
+                {"rules": ["fleet", "status", "scenario-out"], "subjects": ["anyone"]},
+                {"rules": ["scenario-in"], "subjects": ["operators"]},
+            ],
+        },
+    }
+
+
+def test_through_a_router_its_acl_decides_who_updates(pki: Pki, tmp_path: Path) -> None:
+    """The vehicle, a client of the router, takes updates from the router's certificate;
+    the router lets the scenario query through from the operator's certificate only."""
+    endpoint = tls_endpoint()
+    conf_file = tmp_path / "router.json5"
+    conf_file.write_text(json.dumps(router_config(endpoint, pki)))
+    vehicle = telemetry_settings(
+        {
+            "mode": "client",
+            "connect": [endpoint],
+            "tls": pki.tls("vehicle1"),
+            "scenario_updates": {"enabled": True, "cert_common_names": ["router"]},
+        }
+    )
+
+    def member(name: str) -> zenoh.Config:
+        return session_config(
+            telemetry_settings({"mode": "client", "tls": pki.tls(name)}, connect=(endpoint,),
+                               listen=())
+        )  # fmt: skip
+
+    update = json.dumps(MOVED).encode()
+    with zenoh.open(zenoh.Config.from_file(str(conf_file))), Service(vehicle) as service:
+        assert watches(member("monitor"), service)
+        monitor = replies(member("monitor"), SCENARIO_KEY, update)
+        assert service.offered == []
+        operator = replies(member("operator"), SCENARIO_KEY, update)
+    assert monitor == [] and operator == [{"ok": True}]
+    assert len(service.offered) == 1
 
 
 # --- bounded updates ---------------------------------------------------------------------

@@ -587,7 +587,8 @@ def test_bounded_is_one_short_line(text: str) -> None:
         ("tcp/0.0.0.0:7447", False),
         ("tcp/[::]:7447", False),
         ("udp/10.0.0.2:7447", False),
-        ("tcp/127.0.0.1.example.com:7447", True),  # a name: resolves where it resolves
+        ("tcp/127.0.0.1.example.com:7447", False),  # a name: resolves where it resolves
+        ("tcp/[::ffff:10.0.0.1]:7447", False),
         ("tls/vehicle.local:7447", False),
     ],
 )

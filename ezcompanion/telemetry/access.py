@@ -33,6 +33,7 @@ Pure settings and configuration: the session is opened in :mod:`.settings`.
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import re
 from collections.abc import Iterable, Mapping, Sequence
@@ -370,7 +371,12 @@ def is_loopback(endpoint: str) -> bool:
     if match is None:
         return False
     host = (match.group("v6") or match.group("host") or "").lower()
-    return host == "localhost" or host == "::1" or host.startswith("127.")
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:  # a host name: it resolves where it resolves
+        return False
 
 
 def exposure_warnings(conf: zenoh.Config, updates: UpdateSettings) -> tuple[str, ...]:

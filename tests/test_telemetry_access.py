@@ -41,7 +41,7 @@ from ezcompanion.telemetry import (
     session_config,
     telemetry_settings,
 )
-from ezcompanion.telemetry.access import exposure_warnings, is_loopback
+from ezcompanion.telemetry.exposure import exposure_warnings, is_loopback
 from ezcompanion.telemetry.settings import release
 from ezcompanion.telemetry.updates import bounded, nesting_depth
 

@@ -34,7 +34,7 @@ import ezcompanion
 from ezcompanion.errors import ConfigError
 from ezcompanion.service.events import Event
 from ezcompanion.service.loop import TickCommand
-from ezcompanion.telemetry.access import exposure_warnings
+from ezcompanion.telemetry.exposure import exposure_warnings
 from ezcompanion.telemetry.schema import (
     SCHEMAS,
     event_payload,

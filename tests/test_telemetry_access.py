@@ -43,7 +43,7 @@ from ezcompanion.telemetry import (
 )
 from ezcompanion.telemetry.exposure import exposure_warnings, is_loopback
 from ezcompanion.telemetry.settings import release
-from ezcompanion.telemetry.updates import bounded, nesting_depth
+from ezcompanion.telemetry.updates import bounded, decode_update, nesting_depth
 
 SCENARIO_KEY = key("vehicle1", "scenario")
 # the measured attack: the defenders 1.5 m east, the target at (4, -2)
@@ -566,6 +566,16 @@ def _depth(value: object) -> int:
 def test_nesting_depth_is_the_json_depth_whatever_the_strings_hold(value: object) -> None:
     assert nesting_depth(json.dumps(value).encode())[0] == _depth(value)
     assert nesting_depth(json.dumps(value, ensure_ascii=False).encode())[0] == _depth(value)
+
+
+@given(st.binary(max_size=300) | _json.map(lambda v: json.dumps(v).encode()))
+def test_any_payload_decodes_to_an_object_or_one_config_error(raw: bytes) -> None:
+    try:
+        data = decode_update(raw, max_bytes=200, max_depth=3)
+    except ConfigError as exc:
+        assert "\n" not in str(exc) and exc.field  # one line, naming what is wrong
+    else:
+        assert isinstance(data, dict) and len(raw) <= 200 and _depth(data) <= 3
 
 
 @given(st.text())

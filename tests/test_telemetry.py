@@ -230,9 +230,11 @@ def test_events_are_published_in_order_with_their_data(endpoint: str) -> None:
         assert wait_for(lambda: pub.has_subscribers("event"))
         pub.publish_event(Event(EventKind.ENGAGED, 3.0, "guiding in GUIDED", {"setpoints": 0}))
         pub.publish_event(Event(EventKind.INTERCEPTED, 9.5, "done", {"miss_distance_m": 0.07}))
-        assert wait_for(lambda: len(got.samples) == 2)
+        pub.publish_event(Event(EventKind.SCENARIO, 9.6, "new scenario " + "n" * 60_000))
+        assert wait_for(lambda: len(got.samples) == 3)
         release(sub)
-    first, second = got.of("event")
+    first, second, long = got.of("event")
+    assert long["message"].startswith("new scenario nnn") and len(long["message"]) <= 500
     assert got.samples[0][1] == "application/json;ezcompanion.event.v1"
     assert (first["kind"], first["time_s"], first["data"]) == ("engaged", 3.0, {"setpoints": 0})
     assert (second["kind"], second["data"]["miss_distance_m"]) == ("intercepted", 0.07)

@@ -12,6 +12,8 @@ tick (``wall_time_unix_s``) and from the put (``sent_unix_s``) to its callback. 
 - ``telemetry``: the real path, ``TelemetryPublisher.publish_tick`` every tick, the
   publisher thread encoding and putting at ``publish_rate_hz`` (default 20 Hz);
 - ``every tick``: the same at the loop's rate (what publishing every tick costs);
+- ``slow 20ms, cb``: the subscriber of the measurement that filed issue 13, sleeping 20 ms
+  in its callback (then a 300 ms backlog at 50 Hz);
 - ``slow, latest``: a subscriber taking one sample every 100 ms (two publish periods) from
   zenoh's ``RingChannel(1)``: the age of what it takes, in publish periods;
 - ``slow, callback``: the same consumer in the callback (zenoh queues behind it).
@@ -48,7 +50,7 @@ from ezcompanion.telemetry import TelemetryPublisher, TelemetrySettings, session
 from ezcompanion.telemetry.schema import guidance_payload, key
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "paper_scenario1.yaml"
-SLOW_S = 0.1  # what the slow consumer spends on each sample
+SLOW_S = 0.1  # what the slow consumer spends on each sample (default)
 
 
 def free_endpoint() -> str:
@@ -67,7 +69,7 @@ def percentile(values: list[float], q: float) -> float:
 # --- the subscriber process ---------------------------------------------------------------
 
 
-def subscriber(endpoint: str, seconds: float, leaf: str, how: str) -> None:
+def subscriber(endpoint: str, seconds: float, leaf: str, how: str, slow_s: float) -> None:
     """Collect (tick-to-receive, put-to-receive) of ``leaf`` samples for ``seconds``; print
     them as JSON. ``how``: ``callback``, ``slow-callback`` or ``slow-latest``."""
     delays: list[tuple[float, float]] = []
@@ -79,7 +81,7 @@ def subscriber(endpoint: str, seconds: float, leaf: str, how: str) -> None:
 
     def slow(sample: zenoh.Sample) -> None:
         note(sample)
-        time.sleep(SLOW_S)
+        time.sleep(slow_s)
 
     conf = session_config(TelemetrySettings(listen=(), connect=(endpoint,)))
     with zenoh.open(conf) as session:
@@ -91,7 +93,7 @@ def subscriber(endpoint: str, seconds: float, leaf: str, how: str) -> None:
                 sample = ring.try_recv()
                 if sample is not None:
                     note(sample)
-                time.sleep(SLOW_S)
+                time.sleep(slow_s)
             ring.undeclare()  # type: ignore[no-untyped-call]
         else:
             sub = session.declare_subscriber(
@@ -189,6 +191,7 @@ def condition(
     *,
     publish_hz: float,
     how: str = "callback",
+    slow_s: float = SLOW_S,
     raw_size: int | None = None,
 ) -> dict[str, Any]:
     endpoint = free_endpoint()
@@ -196,7 +199,7 @@ def condition(
     leaf = "raw" if raw_size is not None else "guidance"
     child = subprocess.Popen(
         [sys.executable, __file__, "--subscriber", endpoint, "--seconds", str(seconds + 2.0),
-         "--leaf", leaf, "--how", how],
+         "--leaf", leaf, "--how", how, "--slow", str(slow_s)],
         stdout=subprocess.PIPE,
         text=True,
     )  # fmt: skip
@@ -276,6 +279,14 @@ def main(rate_hz: float, seconds: float, publish_hz: float) -> None:
         condition("zenoh alone", rate_hz, seconds, publish_hz=publish_hz, raw_size=size),
         condition("telemetry", rate_hz, seconds, publish_hz=publish_hz),
         condition("every tick", rate_hz, seconds, publish_hz=rate_hz * 1.5),
+        condition(
+            "slow 20ms, cb",
+            rate_hz,
+            seconds,
+            publish_hz=publish_hz,
+            how="slow-callback",
+            slow_s=0.02,
+        ),
         condition("slow, latest", rate_hz, seconds, publish_hz=publish_hz, how="slow-latest"),
         condition("slow, callback", rate_hz, seconds, publish_hz=publish_hz, how="slow-callback"),
     ]
@@ -306,8 +317,9 @@ if __name__ == "__main__":
     parser.add_argument("--subscriber", help=argparse.SUPPRESS)
     parser.add_argument("--leaf", default="guidance", help=argparse.SUPPRESS)
     parser.add_argument("--how", default="callback", help=argparse.SUPPRESS)
+    parser.add_argument("--slow", type=float, default=SLOW_S, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.subscriber:
-        subscriber(args.subscriber, args.seconds, args.leaf, args.how)
+        subscriber(args.subscriber, args.seconds, args.leaf, args.how, args.slow)
     else:
         main(args.rate, args.seconds, args.publish_rate)

@@ -249,6 +249,11 @@ def test_access_settings_are_cross_checked(pki: Pki, logins: Path, tmp_path: Pat
     bad = tmp_path / "users.txt"
     bad.write_text("operator:pw\njust-a-name\n")
     assert "credentials_file:2" in error(auth={"credentials_file": str(bad)})
+    binary = tmp_path / "binary.pw"
+    binary.write_bytes(b"\xff\xfe\x00")
+    assert "password_file: cannot be read" in error(
+        auth={"user": "vehicle1", "password_file": str(binary)}
+    )
     with pytest.raises(ConfigError, match="needs a tls/ or quic/ endpoint"):
         telemetry_settings(
             {"tls": pki.tls("vehicle1"), "scenario_updates": {"enabled": True,

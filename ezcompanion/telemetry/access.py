@@ -67,6 +67,13 @@ def _existing_file(name: str, value: object) -> None:
         raise ConfigError(name, value, "must be an existing file")
 
 
+def _read(name: str, path: str) -> str:
+    try:
+        return Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(name, path, f"cannot be read: {exc}") from None
+
+
 def _names(name: str, value: object) -> None:
     if not isinstance(value, tuple) or not all(
         isinstance(v, str) and _USER.match(v) for v in value
@@ -121,7 +128,7 @@ class AuthSettings:
         if self.credentials_file is None:
             return ()
         found = []
-        text = Path(self.credentials_file).read_text(encoding="utf-8", errors="replace")
+        text = _read("credentials_file", self.credentials_file)
         for number, line in enumerate(text.splitlines(), start=1):
             if not line.strip():
                 continue
@@ -137,7 +144,7 @@ class AuthSettings:
         """This side's password, from ``password_file`` (surrounding blanks stripped)."""
         if self.password_file is None:
             return ""
-        return Path(self.password_file).read_text(encoding="utf-8").strip()
+        return _read("password_file", self.password_file).strip()
 
 
 @dataclass(frozen=True, kw_only=True)

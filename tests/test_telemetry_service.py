@@ -115,7 +115,7 @@ def test_a_monitor_follows_the_engagement_and_a_scenario_update_moves_a_defender
                 "listen": [endpoint, operator_endpoint],
                 "tls": pki.tls("vehicle1"),
                 "scenario_updates": {"enabled": True, "cert_common_names": ["operator"]},
-                "publish_rate_hz": 50.0,
+                "publish_rate_hz": 50.0,  # the loop's: 20 samples each side of the update
             }
         ),
         during=monitor,

@@ -1,41 +1,39 @@
-"""What the zenoh telemetry costs the guidance loop, and how late its samples arrive.
+"""What the zenoh telemetry costs the guidance loop, and how late its samples arrive, next to
+zenoh's own put/subscribe of a payload of the same size.
 
 A guidance loop (``GuidanceLoop`` on synthetic states, a far target so the engagement never
-ends) ticks at the rate under test on its deadlines, publishing every tick through
-``TelemetryPublisher``. A subscriber runs as its own process on loopback (this program with
-``--subscriber``) and, for each guidance sample, takes the time from ``publish_tick`` (the
-sample's ``wall_time_unix_s``) to its callback: one-way latency including the hand-off to the
-publisher thread, JSON and zenoh. Conditions:
+ends) ticks at ``--rate`` on its deadlines. A subscriber runs as its own process on tcp
+loopback (this program with ``--subscriber``) and, for each sample, takes the time from the
+tick (``wall_time_unix_s``) and from the put (``sent_unix_s``) to its callback. Conditions:
 
-- ``zenoh alone``: the same loop putting a small JSON directly (zenoh's own latency here);
-- ``telemetry``: the publisher with a subscriber that takes each sample at once;
-- ``slow subscriber``: the same, the subscriber sleeping 20 ms in every callback;
-- ``no telemetry``: the loop alone, the reference for the loop's rate.
+- ``no telemetry``: the loop alone, the reference for the loop's rate and CPU;
+- ``zenoh alone``: the loop thread puts, at the publish rate, a payload of the guidance
+  sample's size (zenoh's own latency for that size: the floor);
+- ``telemetry``: the real path, ``TelemetryPublisher.publish_tick`` every tick, the
+  publisher thread encoding and putting at ``publish_rate_hz`` (default 20 Hz);
+- ``every tick``: the same at the loop's rate (what publishing every tick costs);
+- ``slow 20ms, cb``: the subscriber of the measurement that filed issue 13, sleeping 20 ms
+  in its callback (then a 300 ms backlog at 50 Hz);
+- ``slow, latest``: a subscriber taking one sample every 100 ms (two publish periods) from
+  zenoh's ``RingChannel(1)``: the age of what it takes, in publish periods;
+- ``slow, callback``: the same consumer in the callback (zenoh queues behind it).
 
-Prints, per condition: the cost of ``publish_tick`` to the loop (p50/p99/max us), the loop's
-achieved rate and its change against ``no telemetry``, how late the ticks ran (p99), and the
-one-way latency (p50/p99 ms) with the share of samples received.
+Prints, per condition: the loop's rate and its change, how late its ticks ran (p99), the
+cost of the call in the loop (p50/p99/max us), the process CPU per tick (all threads: the
+loop, the publisher thread, zenoh's) and its ratio to ``no telemetry``, and the latency
+tick-to-receive and put-to-receive (p50/p99 ms) with the share of ticks received. The
+telemetry put-to-receive p99 is printed as a ratio to zenoh alone's (target <= 1.5x), and
+the slow subscribers' sample age in publish periods (target: at most 2).
 
-Also counts the garbage collector's full (generation 2) collections during each condition and
-its longest pause: a full collection stops every thread, the loop's too, for milliseconds
-when the heap holds numba's and numpy's objects. ``--freeze-gc`` calls ``gc.freeze()``
-after start-up (what a long-running service should do), which takes the start-up objects
-out of the collector's reach.
-
-Targets: publish cost <= 50 us; one-way latency p99 <= 1 ms at 50 Hz; a subscriber sleeping
-20 ms per sample changes the loop rate by < 1 %.
-
-    python bench/bench_telemetry.py [--seconds 10] [--rate 50] [--freeze-gc]
+    python bench/bench_telemetry.py [--seconds 10] [--rate 50] [--publish-rate 20]
 """
 
 from __future__ import annotations
 
 import argparse
-import gc
 import json
 import math
 import socket
-import statistics
 import subprocess
 import sys
 import time
@@ -49,9 +47,10 @@ from ezcompanion.config import scenario_from_dict
 from ezcompanion.service.loop import GuidanceLoop, TickCommand
 from ezcompanion.service.state import VehicleState
 from ezcompanion.telemetry import TelemetryPublisher, TelemetrySettings, session_config
-from ezcompanion.telemetry.schema import key
+from ezcompanion.telemetry.schema import guidance_payload, key
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "paper_scenario1.yaml"
+SLOW_S = 0.1  # what the slow consumer spends on each sample (default)
 
 
 def free_endpoint() -> str:
@@ -70,40 +69,40 @@ def percentile(values: list[float], q: float) -> float:
 # --- the subscriber process ---------------------------------------------------------------
 
 
-def subscriber(endpoint: str, seconds: float, sleep_s: float, leaf: str) -> None:
-    """Collect latencies of ``leaf`` samples for ``seconds``; print them as JSON."""
-    latencies: list[float] = []
+def subscriber(endpoint: str, seconds: float, leaf: str, how: str, slow_s: float) -> None:
+    """Collect (tick-to-receive, put-to-receive) of ``leaf`` samples for ``seconds``; print
+    them as JSON. ``how``: ``callback``, ``slow-callback`` or ``slow-latest``."""
+    delays: list[tuple[float, float]] = []
 
-    def on_sample(sample: zenoh.Sample) -> None:
+    def note(sample: zenoh.Sample) -> None:
         now = time.time()
         payload = json.loads(sample.payload.to_bytes())
-        latencies.append(now - payload["wall_time_unix_s"])
-        if sleep_s:
-            time.sleep(sleep_s)
+        delays.append((now - payload["wall_time_unix_s"], now - payload["sent_unix_s"]))
+
+    def slow(sample: zenoh.Sample) -> None:
+        note(sample)
+        time.sleep(slow_s)
 
     conf = session_config(TelemetrySettings(listen=(), connect=(endpoint,)))
     with zenoh.open(conf) as session:
-        sub = session.declare_subscriber(key("bench", leaf), on_sample)
-        print("ready", flush=True)
-        time.sleep(seconds)
-        sub.undeclare()  # type: ignore[no-untyped-call]
-    print(json.dumps(latencies), flush=True)
-
-
-class GcPauses:
-    """Full collections and the longest pause of any collection, while installed."""
-
-    def __init__(self) -> None:
-        self.full = 0
-        self.longest_s = 0.0
-        self._start = 0.0
-
-    def __call__(self, phase: str, info: dict[str, int]) -> None:
-        if phase == "start":
-            self._start = time.perf_counter()
-            return
-        self.longest_s = max(self.longest_s, time.perf_counter() - self._start)
-        self.full += info["generation"] == 2
+        if how == "slow-latest":
+            ring = session.declare_subscriber(key("bench", leaf), zenoh.handlers.RingChannel(1))
+            print("ready", flush=True)
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                sample = ring.try_recv()
+                if sample is not None:
+                    note(sample)
+                time.sleep(slow_s)
+            ring.undeclare()  # type: ignore[no-untyped-call]
+        else:
+            sub = session.declare_subscriber(
+                key("bench", leaf), slow if how == "slow-callback" else note
+            )
+            print("ready", flush=True)
+            time.sleep(seconds)
+            sub.undeclare()  # type: ignore[no-untyped-call]
+    print(json.dumps(delays), flush=True)
 
 
 # --- the loop -----------------------------------------------------------------------------
@@ -131,17 +130,14 @@ def state_at(loop: GuidanceLoop, t: float) -> VehicleState:
     )
 
 
-def run_loop(
-    rate_hz: float, seconds: float, publish: Any | None
-) -> tuple[float, list[float], list[float]]:
-    """Tick on deadlines for ``seconds``; returns (rate_hz, publish costs s, lateness s)."""
+def run_loop(rate_hz: float, seconds: float, publish: Any | None) -> dict[str, Any]:
+    """Tick on deadlines for ``seconds``, calling ``publish(command)`` after each tick."""
     loop = make_loop(rate_hz)
-    pauses = GcPauses()
-    gc.callbacks.append(pauses)
     period = 1.0 / rate_hz
     costs: list[float] = []
     lateness: list[float] = []
     start = time.monotonic()
+    cpu0 = time.process_time()
     deadline = start
     ticks = 0
     while (now := time.monotonic()) - start < seconds:
@@ -157,41 +153,68 @@ def run_loop(
             publish(command)
             costs.append(time.perf_counter() - t0)
         ticks += 1
+    cpu = time.process_time() - cpu0
     rate = ticks / (time.monotonic() - start)
-    gc.callbacks.remove(pauses)
-    LAST_GC.update(full=pauses.full, longest_ms=pauses.longest_s * 1e3)
-    return rate, costs, lateness
+    return {"rate_hz": rate, "costs": costs, "lateness": lateness, "ticks": ticks, "cpu_s": cpu}
 
 
-LAST_GC: dict[str, float] = {}
+def guidance_size(rate_hz: float) -> int:
+    """Bytes of one guidance sample as the publisher sends it."""
+    loop = make_loop(rate_hz)
+    command = loop.tick(state_at(loop, 0.0), 0.0)
+    assert isinstance(command, TickCommand)
+    payload = guidance_payload("bench", 1, command, time.time(), ())
+    payload["sent_unix_s"] = time.time()
+    return len(json.dumps(payload, separators=(",", ":")).encode())
+
+
+def raw_putter(pub: zenoh.Publisher, size: int, publish_hz: float) -> Any:
+    """A loop-side put of a ``size``-byte JSON at most ``publish_hz`` times a second."""
+    pad = "x" * max(0, size - 80)
+    state = {"next_s": 0.0}
+
+    def put(_command: TickCommand) -> None:
+        now = time.monotonic()
+        if now < state["next_s"]:
+            return
+        state["next_s"] = now + 1.0 / publish_hz
+        wall = time.time()
+        pub.put(json.dumps({"wall_time_unix_s": wall, "sent_unix_s": wall, "pad": pad}))
+
+    return put
 
 
 def condition(
-    name: str, rate_hz: float, seconds: float, *, sleep_s: float = 0.0, raw: bool = False
+    name: str,
+    rate_hz: float,
+    seconds: float,
+    *,
+    publish_hz: float,
+    how: str = "callback",
+    slow_s: float = SLOW_S,
+    raw_size: int | None = None,
 ) -> dict[str, Any]:
     endpoint = free_endpoint()
-    settings = TelemetrySettings(listen=(endpoint,), vehicle_id="bench")
-    leaf = "raw" if raw else "guidance"
+    settings = TelemetrySettings(listen=(endpoint,), vehicle_id="bench", publish_rate_hz=publish_hz)
+    leaf = "raw" if raw_size is not None else "guidance"
     child = subprocess.Popen(
         [sys.executable, __file__, "--subscriber", endpoint, "--seconds", str(seconds + 2.0),
-         "--sleep", str(sleep_s), "--leaf", leaf],
+         "--leaf", leaf, "--how", how, "--slow", str(slow_s)],
         stdout=subprocess.PIPE,
         text=True,
     )  # fmt: skip
     assert child.stdout is not None
     try:
-        if raw:
+        if raw_size is not None:
             with zenoh.open(session_config(settings)) as session:
                 pub = session.declare_publisher(
-                    key("bench", "raw"), congestion_control=zenoh.CongestionControl.DROP
+                    key("bench", "raw"),
+                    congestion_control=zenoh.CongestionControl.DROP,
+                    express=True,
                 )
                 assert child.stdout.readline().strip() == "ready"
                 _wait_matching(pub)
-
-                def put_raw(command: TickCommand) -> None:
-                    pub.put(json.dumps({"wall_time_unix_s": time.time(), "t": command.time_s}))
-
-                result = run_loop(rate_hz, seconds, put_raw)
+                row = run_loop(rate_hz, seconds, raw_putter(pub, raw_size, publish_hz))
         else:
             with TelemetryPublisher(
                 settings, status=dict, on_scenario=lambda data: None
@@ -199,20 +222,11 @@ def condition(
                 assert child.stdout.readline().strip() == "ready"
                 while not telemetry.has_subscribers("guidance"):
                     time.sleep(0.01)
-                result = run_loop(rate_hz, seconds, telemetry.publish_tick)
-        latencies = json.loads(child.stdout.readline())
+                row = run_loop(rate_hz, seconds, telemetry.publish_tick)
+        delays = json.loads(child.stdout.readline())
     finally:
         child.wait(timeout=seconds + 10.0)
-    rate, costs, lateness = result
-    return {
-        "gc": dict(LAST_GC),
-        "name": name,
-        "rate_hz": rate,
-        "costs": costs,
-        "lateness": lateness,
-        "latencies": latencies,
-        "ticks": len(lateness),
-    }
+    return {**row, "name": name, "publish_hz": publish_hz, "delays": delays}
 
 
 def _wait_matching(publisher: zenoh.Publisher) -> None:
@@ -222,73 +236,90 @@ def _wait_matching(publisher: zenoh.Publisher) -> None:
         status = publisher.matching_status
 
 
-def report(row: dict[str, Any], reference_hz: float | None) -> None:
+def report(row: dict[str, Any], reference: dict[str, Any] | None) -> None:
     us = [c * 1e6 for c in row["costs"]]
-    ms = [latency * 1e3 for latency in row["latencies"]]
     late_ms = [v * 1e3 for v in row["lateness"]]
-    change = (
-        f"{100.0 * (row['rate_hz'] - reference_hz) / reference_hz:+.2f} %"
-        if reference_hz
-        else "(reference)"
-    )
+    tick_ms = [d[0] * 1e3 for d in row["delays"]]
+    put_ms = [d[1] * 1e3 for d in row["delays"]]
+    cpu_us = 1e6 * row["cpu_s"] / row["ticks"]
+    if reference is None:
+        change, ratio = "(reference)", ""
+    else:
+        change = f"{100.0 * (row['rate_hz'] - reference['rate_hz']) / reference['rate_hz']:+.2f} %"
+        ratio = f" ({cpu_us / (1e6 * reference['cpu_s'] / reference['ticks']):4.2f}x)"
     cost = (
-        f"{percentile(us, 0.5):6.1f} / {percentile(us, 0.99):6.1f} / {max(us):7.1f}"
+        f"{percentile(us, 0.5):5.1f} / {percentile(us, 0.99):6.1f} / {max(us):7.1f}"
         if us
-        else f"{'-':>6}   {'-':>6}   {'-':>7}"
+        else f"{'-':>5}   {'-':>6}   {'-':>7}"
     )
     latency = (
-        f"{percentile(ms, 0.5):6.3f} / {percentile(ms, 0.99):6.3f} ms "
-        f"({100.0 * len(ms) / row['ticks']:5.1f} % received)"
-        if ms
+        f"tick {percentile(tick_ms, 0.5):6.2f} / {percentile(tick_ms, 0.99):6.2f} ms, put "
+        f"{percentile(put_ms, 0.5):6.3f} / {percentile(put_ms, 0.99):6.3f} ms "
+        f"({len(put_ms)} of {row['ticks']} ticks)"
+        if put_ms
         else "-"
     )
     print(
-        f"{row['name']:<16} {row['rate_hz']:8.3f} Hz {change:>12}   late p99 "
-        f"{percentile(late_ms, 0.99):6.3f} ms   publish p50/p99/max {cost} us   "
-        f"latency p50/p99 {latency}   gc: {row['gc']['full']:.0f} full, longest pause "
-        f"{row['gc']['longest_ms']:.1f} ms"
+        f"{row['name']:<15} {row['rate_hz']:7.2f} Hz {change:>11}  late p99 "
+        f"{percentile(late_ms, 0.99):6.3f} ms  call p50/p99/max {cost} us  CPU/tick "
+        f"{cpu_us:6.1f} us{ratio:8}  latency p50/p99 {latency}"
     )
 
 
-def main(rate_hz: float, seconds: float, freeze_gc: bool) -> None:
+def main(rate_hz: float, seconds: float, publish_hz: float) -> None:
     make_loop(rate_hz)  # compile or load the law before anything is measured
-    if freeze_gc:
-        gc.collect()
-        gc.freeze()
+    size = guidance_size(rate_hz)
     print(
-        f"loop at {rate_hz:g} Hz for {seconds:g} s per condition; subscriber in its own "
-        f"process on tcp loopback; gc.freeze() {'after start-up' if freeze_gc else 'not used'}"
+        f"loop at {rate_hz:g} Hz, publishing at {publish_hz:g} Hz, {seconds:g} s per "
+        f"condition; subscriber in its own process on tcp loopback; guidance sample {size} B"
     )
-    rate, _, lateness = run_loop(rate_hz, seconds, None)
-    bare = {"gc": dict(LAST_GC), "name": "no telemetry", "rate_hz": rate, "costs": [],
-            "lateness": lateness, "latencies": [], "ticks": len(lateness)}  # fmt: skip
+    bare = {**run_loop(rate_hz, seconds, None), "name": "no telemetry", "delays": []}
     rows = [
         bare,
-        condition("zenoh alone", rate_hz, seconds, raw=True),
-        condition("telemetry", rate_hz, seconds),
-        condition("slow subscriber", rate_hz, seconds, sleep_s=0.02),
+        condition("zenoh alone", rate_hz, seconds, publish_hz=publish_hz, raw_size=size),
+        condition("telemetry", rate_hz, seconds, publish_hz=publish_hz),
+        condition("every tick", rate_hz, seconds, publish_hz=rate_hz * 1.5),
+        condition(
+            "slow 20ms, cb",
+            rate_hz,
+            seconds,
+            publish_hz=publish_hz,
+            how="slow-callback",
+            slow_s=0.02,
+        ),
+        condition("slow, latest", rate_hz, seconds, publish_hz=publish_hz, how="slow-latest"),
+        condition("slow, callback", rate_hz, seconds, publish_hz=publish_hz, how="slow-callback"),
     ]
-    reference = rows[0]["rate_hz"]
     for row in rows:
-        report(row, None if row is rows[0] else reference)
-    slow = rows[3]
+        report(row, None if row is bare else bare)
+    raw, telemetry = rows[1], rows[2]
+    raw_p99 = percentile([d[1] for d in raw["delays"]], 0.99)
+    tel_p99 = percentile([d[1] for d in telemetry["delays"]], 0.99)
     print(
-        f"slow subscriber: received {len(slow['latencies'])} of {slow['ticks']} samples "
-        f"(it can take at most {1.0 / 0.02:.0f} per second); median latency "
-        f"{statistics.median(slow['latencies']) * 1e3 if slow['latencies'] else math.nan:.1f} ms"
+        f"put-to-receive p99: telemetry {tel_p99 * 1e3:.3f} ms, zenoh alone "
+        f"{raw_p99 * 1e3:.3f} ms: {tel_p99 / raw_p99:.2f}x (target <= 1.5x)"
     )
+    period_s = 1.0 / publish_hz
+    for row in rows[4:]:
+        ages = [d[1] / period_s for d in row["delays"]]
+        print(
+            f"{row['name']}: took {len(ages)} samples; age at taking p50/p99/max "
+            f"{percentile(ages, 0.5):.2f} / {percentile(ages, 0.99):.2f} / "
+            f"{max(ages, default=math.nan):.2f} publish periods (target <= 2)"
+        )
 
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--rate", type=float, default=50.0)
-    parser.add_argument("--freeze-gc", action="store_true", help="gc.freeze() after start-up")
+    parser.add_argument("--publish-rate", type=float, default=20.0)
     parser.add_argument("--subscriber", help=argparse.SUPPRESS)
-    parser.add_argument("--sleep", type=float, default=0.0, help=argparse.SUPPRESS)
     parser.add_argument("--leaf", default="guidance", help=argparse.SUPPRESS)
+    parser.add_argument("--how", default="callback", help=argparse.SUPPRESS)
+    parser.add_argument("--slow", type=float, default=SLOW_S, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.subscriber:
-        subscriber(args.subscriber, args.seconds, args.sleep, args.leaf)
+        subscriber(args.subscriber, args.seconds, args.leaf, args.how, args.slow)
     else:
-        main(args.rate, args.seconds, args.freeze_gc)
+        main(args.rate, args.seconds, args.publish_rate)

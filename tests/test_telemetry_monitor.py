@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import io
 import json
+import socket
 import threading
-import time
 from pathlib import Path
 from typing import Any
 
@@ -62,12 +62,14 @@ class Monitor:
 
 
 def fly(pub: Any, ticks: int = 40) -> list[Any]:
-    """Publish an engagement at the loop's pace, then its interception."""
+    """Publish an engagement, each tick out before the next (the publisher sends the newest
+    tick it holds: a faster loop would have some skipped), then its interception."""
     commands = list(engagement(ticks))
     pub.publish_event(Event(EventKind.ENGAGED, commands[0].time_s, "guiding in GUIDED"))
-    for command in commands:
+    assert wait_for(lambda: pub.samples_published == 1)
+    for sent, command in enumerate(commands, start=1):
         pub.publish_tick(command)
-        time.sleep(0.002)
+        assert wait_for(lambda sent=sent: pub.ticks_published == sent)  # type: ignore[misc]
     pub.publish_event(Event(EventKind.INTERCEPTED, commands[-1].time_s, "within 0.1 m"))
     return commands
 
@@ -76,7 +78,7 @@ def test_the_live_table_shows_margins_mode_accelerations_and_outcome(tmp_path: P
     endpoint = free_endpoint()
     record = tmp_path / "engagement.jsonl"
     status = {"phase": "guiding", "scenario": SCENARIO_RAW}
-    with publisher(endpoint, status=lambda: status) as pub:
+    with publisher(endpoint, status=lambda: status, publish_rate_hz=1000.0) as pub:
         monitor = Monitor(endpoint, record=record, refresh_hz=20.0)
         assert wait_for(lambda: pub.has_subscribers("guidance") and pub.has_subscribers("event"))
         assert wait_for(lambda: "yes" in monitor.text())  # alive, and its status asked
@@ -113,7 +115,7 @@ def test_the_live_table_shows_margins_mode_accelerations_and_outcome(tmp_path: P
 
 def test_json_lines_are_the_raw_samples() -> None:
     endpoint = free_endpoint()
-    with publisher(endpoint) as pub:
+    with publisher(endpoint, publish_rate_hz=1000.0) as pub:
         monitor = Monitor(endpoint, json_lines=True, vehicle="vehicle1")
         assert wait_for(lambda: pub.has_subscribers("guidance") and pub.has_subscribers("event"))
         fly(pub, ticks=5)
@@ -170,17 +172,27 @@ def test_the_commands_parse_with_defaults_and_ignore_others() -> None:
         run_telemetry_command(parse(["monitor", "--connect", "localhost:7447"]))
 
 
+def _accepts(host: str, port: int) -> bool:
+    try:
+        socket.create_connection((host, port), timeout=0.5).close()
+    except OSError:
+        return False
+    return True
+
+
 def test_monitor_through_a_router_and_replay_with_a_plot(tmp_path: Path) -> None:
     endpoint = free_endpoint()
     stop = threading.Event()
     router = threading.Thread(target=run_router, args=(router_config(listen=[endpoint]),),
                               kwargs={"stop": stop})  # fmt: skip
     router.start()
+    host, port = endpoint.removeprefix("tcp/").split(":")
+    assert wait_for(lambda: _accepts(host, int(port)))  # clients cannot wait for a router
     record = tmp_path / "rec.jsonl"
     try:
         with publisher(
             endpoint, vehicle_id="alpha", mode="client", connect=[endpoint],
-            status=lambda: {"scenario": SCENARIO_RAW},
+            status=lambda: {"scenario": SCENARIO_RAW}, publish_rate_hz=1000.0,
         ) as pub:  # fmt: skip
             monitor = Monitor(endpoint, record=record, conf={"mode": "client"})
             assert wait_for(lambda: pub.has_subscribers("guidance"))
@@ -196,3 +208,44 @@ def test_monitor_through_a_router_and_replay_with_a_plot(tmp_path: Path) -> None
     args = parse(["monitor", "--replay", str(record), "--plot", str(png)])
     assert run_telemetry_command(args) == 0
     assert png.stat().st_size > 10_000
+
+
+def test_replay_of_a_missing_or_broken_file_is_one_line_and_exit_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from ezcompanion.cli import main
+
+    binary = tmp_path / "binary.jsonl"
+    binary.write_bytes(b"\x89PNG\r\n\x1a\n\xff\xfe\x00" * 40)
+    not_samples = tmp_path / "list.jsonl"
+    not_samples.write_text('{"key": "ezcompanion/v/state", "payload": {}}\n[1, 2]\n')
+    cases = {
+        tmp_path / "missing.jsonl": "recording: no such file",
+        binary: "not UTF-8 text",
+        not_samples: "list.jsonl:2: not a recorded sample",
+    }
+    for path, error in cases.items():
+        assert main(["monitor", "--replay", str(path)]) == 2
+        out, err = capsys.readouterr()
+        assert out == "" and err.count("\n") == 1 and error in err, err
+        assert "Traceback" not in err
+
+
+def test_replay_with_json_prints_the_recorded_lines(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from ezcompanion.cli import main
+
+    record = tmp_path / "r.jsonl"
+    lines = [
+        {"key": "ezcompanion/a/guidance", "encoding": "e", "payload": {"seq": 1}},
+        {"key": "ezcompanion/b/guidance", "encoding": "e", "payload": {"seq": 2}},
+        {"key": "ezcompanion/a/alive", "encoding": "", "payload": True},
+    ]
+    record.write_text("".join(json.dumps(line) + "\n" for line in lines))
+    assert main(["monitor", "--replay", str(record), "--json", "--vehicle", "a"]) == 0
+    out = capsys.readouterr().out
+    assert [json.loads(text) for text in out.splitlines()] == [lines[0], lines[2]]
+    assert main(["monitor", "--replay", str(record)]) == 0  # the table, for both vehicles
+    table = capsys.readouterr().out
+    assert "ezcompanion monitor" in table and "{" not in table

@@ -1,5 +1,6 @@
 """Zenoh telemetry from the real service during a loopback engagement (real sessions on
-127.0.0.1, a fresh port, no multicast)."""
+127.0.0.1, a fresh port, no multicast): a monitor on plain TCP watches, an operator with a
+TLS client certificate moves a defender."""
 
 from __future__ import annotations
 
@@ -12,11 +13,12 @@ import numpy as np
 import zenoh
 from test_service_loopback import CONFIG, fly
 from test_telemetry import Collector, _query, free_endpoint, peer, wait_for
+from test_telemetry_access import Pki, client, pki, tls_endpoint  # noqa: F401 (a fixture)
 
 from ezcompanion.config import load_scenario, scenario_update
 from ezcompanion.guidance import evaluate_law
 from ezcompanion.service.events import EventKind
-from ezcompanion.telemetry import TelemetrySettings, key
+from ezcompanion.telemetry import key, telemetry_settings
 from ezcompanion.telemetry.settings import release
 
 SCENARIO = CONFIG / "paper_scenario1.yaml"
@@ -71,8 +73,9 @@ def clearances(scenario: Any, sample: dict[str, Any]) -> list[float]:
 
 def test_a_monitor_follows_the_engagement_and_a_scenario_update_moves_a_defender(
     tmp_path: Path,
+    pki: Pki,  # noqa: F811 (the fixture)
 ) -> None:
-    endpoint = free_endpoint()
+    endpoint, operator_endpoint = free_endpoint(), tls_endpoint()
     got = Collector()
     alive: list[str] = []
     replies: dict[str, Any] = {}
@@ -88,12 +91,15 @@ def test_a_monitor_follows_the_engagement_and_a_scenario_update_moves_a_defender
             )
             assert wait_for(lambda: len(got.of("guidance")) >= 25, 30.0)
             moved = json.dumps(MOVED).encode()
-            replies["good"] = _query(session, key("vehicle1", "scenario"), moved)[1]
             bad = json.loads(moved)
             bad["defenders"][0]["speed_ratio"] = 1.5
-            replies["bad"] = _query(session, key("vehicle1", "scenario"), json.dumps(bad).encode())[
-                1
-            ]
+            # the monitor cannot change the scenario: zenoh's ACL keeps its query out
+            replies["monitor"] = list(session.get(key("vehicle1", "scenario"), payload=moved))
+            with zenoh.open(client(operator_endpoint, tls=pki.tls("operator"))) as operator:
+                assert wait_for(lambda: bool(list(operator.info.peers_zid())), 10.0)
+                scenario = key("vehicle1", "scenario")
+                replies["good"] = _query(operator, scenario, moved)[1]
+                replies["bad"] = _query(operator, scenario, json.dumps(bad).encode())[1]
             ended = threading.Event()
             service.events.add_sink(lambda e: ended.set() if e.kind is EventKind.ENDED else None)
             assert ended.wait(60.0)
@@ -104,10 +110,18 @@ def test_a_monitor_follows_the_engagement_and_a_scenario_update_moves_a_defender
     flight = fly(
         SCENARIO,
         tmp_path,
-        telemetry=TelemetrySettings(listen=(endpoint,)),
+        telemetry=telemetry_settings(
+            {
+                "listen": [endpoint, operator_endpoint],
+                "tls": pki.tls("vehicle1"),
+                "scenario_updates": {"enabled": True, "cert_common_names": ["operator"]},
+                "publish_rate_hz": 50.0,  # the loop's: 20 samples each side of the update
+            }
+        ),
         during=monitor,
         max_time_s=60.0,
     )
+    assert replies["monitor"] == []
     assert replies["good"] == {"ok": True}
     assert replies["bad"]["ok"] is False and "defenders[0].speed_ratio" in replies["bad"]["error"]
     assert alive[0] == "SampleKind.PUT" and alive[-1] == "SampleKind.DELETE"

@@ -7,7 +7,9 @@
 from __future__ import annotations
 
 import argparse
+import json
 import signal
+import sys
 import threading
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
@@ -82,20 +84,26 @@ def run_router(
 
 def replay(
     path: Path, *, scenario_yaml: Path | None, plot_png: Path | None, track_csv: Path | None,
-    vehicle: str | None,
+    vehicle: str | None, json_lines: bool = False,
 ) -> int:  # fmt: skip
-    """Show the end of a recording; with ``plot_png``/``track_csv``, draw or convert it."""
+    """Show the end of a recording (``json_lines``: print its lines, as ``monitor --json``
+    does live); with ``plot_png``/``track_csv``, draw or convert it."""
     view = MonitorView()
     for line in iter_recording(path):
         if vehicle is None or vehicle_of(line["key"])[0] == vehicle:
-            view.update(line["key"], line["payload"])
-    print(view.render())
+            if json_lines:
+                print(json.dumps(line, separators=(",", ":")))
+            else:
+                view.update(line["key"], line["payload"])
+    if not json_lines:
+        print(view.render())
+    notes = sys.stderr if json_lines else sys.stdout  # JSON lines stay JSON lines
     scenario = load_scenario(scenario_yaml) if scenario_yaml is not None else None
     if track_csv is not None:
         run = read_recording(path, scenario, vehicle=vehicle, track_csv=track_csv)
-        print(f"  wrote {track_csv} ({run.t_s.size} rows)")
+        print(f"  wrote {track_csv} ({run.t_s.size} rows)", file=notes)
     if plot_png is not None:
-        print(f"  wrote {plot_recording(path, plot_png, scenario, vehicle=vehicle)}")
+        print(f"  wrote {plot_recording(path, plot_png, scenario, vehicle=vehicle)}", file=notes)
     return 0
 
 
@@ -167,6 +175,7 @@ def run_telemetry_command(args: argparse.Namespace) -> int | None:
             plot_png=args.plot,
             track_csv=args.track,
             vehicle=vehicle,
+            json_lines=args.json,
         )
     conf = monitor_config(
         connect=args.connect or [DEFAULT_ENDPOINT],

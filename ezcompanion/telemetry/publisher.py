@@ -2,17 +2,19 @@
 
 ``TelemetryPublisher`` owns one zenoh session and everything declared on it; it is a
 context manager and ``close()`` undeclares and closes all of it. The guidance loop's thread
-only ever puts on a queue: ``publish_tick`` stores the tick's (immutable) ``TickCommand``
-with the wall time on a ``queue.SimpleQueue`` (a C queue: no Python-level locking on the
-loop's side), and a publisher thread builds the JSON and puts it. When that thread falls
-behind, it publishes only the newest ticks and counts the others as dropped; the loop never
-waits for it. Every publisher uses congestion control DROP, so a slow subscriber or a full
-network queue drops samples inside zenoh instead of blocking the publisher thread either.
+only ever stores: ``publish_tick`` puts the tick's (immutable) ``TickCommand`` with the wall
+time in a one-sample slot, replacing one not yet sent, and a publisher thread, waking
+``publish_rate_hz`` times a second, takes the newest tick there, builds the JSON and puts
+it. The loop never waits for it, nor wakes it. Every publisher uses congestion control
+DROP, so a slow subscriber or a full network queue drops samples inside zenoh instead of
+blocking the publisher thread either. Events are queued and all sent, as they come.
 
-The queryables run on zenoh's threads: ``status`` calls the status provider, ``scenario``
-decodes the query's JSON and hands it to ``on_scenario``, which must validate and queue it
-without blocking (``ezcompanion.service.inbox.ScenarioInbox`` does that: the loop takes the
-scenario between ticks).
+The queryables run on zenoh's threads: ``status`` calls the status provider; ``scenario``
+exists only when ``scenario_updates`` is enabled (zenoh's ACL then decides who reaches it,
+see :mod:`.access`), checks the payload's size and depth before it parses it
+(:mod:`.updates`) and hands the JSON object to ``on_scenario``, which must validate and
+queue it without blocking (``ezcompanion.service.inbox.ScenarioInbox`` does that: the loop
+takes the scenario between ticks). Updates are logged by size and digest, never whole.
 """
 
 from __future__ import annotations
@@ -29,8 +31,10 @@ from typing import Any
 import zenoh
 
 import ezcompanion
+from ezcompanion.errors import ConfigError
 from ezcompanion.service.events import Event
 from ezcompanion.service.loop import TickCommand
+from ezcompanion.telemetry.exposure import exposure_warnings
 from ezcompanion.telemetry.schema import (
     SCHEMAS,
     event_payload,
@@ -44,15 +48,13 @@ from ezcompanion.telemetry.settings import (
     release,
     session_config,
 )
+from ezcompanion.telemetry.updates import bounded, check_size, decode_update, describe
 
 __all__ = ["TelemetryPublisher", "encoding"]
 
 _log = logging.getLogger("ezcompanion.telemetry")
 
-# Ticks the publisher thread catches up on; older ones are dropped (0.16 s at 50 Hz).
-_TICK_BACKLOG = 8
-# Beyond this many queued items (the publisher thread starved), new ticks are dropped.
-_QUEUE_LIMIT = 256
+_REPLY_CHARS = 400  # an error in a scenario reply, at most
 _RECENT_EVENTS = 20  # kept for the status reply, so a late monitor sees how it started
 _CLOSE_TIMEOUT_S = 2.0
 
@@ -74,6 +76,8 @@ class TelemetryPublisher:
     None when it accepted it or a message saying why not. Both are called from zenoh's
     threads and must be quick and thread-safe. ``zone_names`` names the margins in the
     guidance samples (default D1, D2, ...); ``set_zone_names`` changes them with a scenario.
+    ``warnings`` holds a line for each way the session reaches beyond this machine (logged
+    at start).
     """
 
     def __init__(
@@ -89,20 +93,31 @@ class TelemetryPublisher:
         self._status = status
         self._on_scenario = on_scenario
         self._zone_names = tuple(zone_names)
-        # ("tick", command, wall_unix_s, zone_names) | ("event", event, wall_unix_s) | None
+        self._scenario_key = key(vid, "scenario")
+        self._period_s = 1.0 / settings.publish_rate_hz
+        # the newest tick not yet sent: (command, wall_unix_s, zone_names)
+        self._latest: tuple[TickCommand, float, tuple[str, ...]] | None = None
+        self._slot_lock = threading.Lock()
+        # ("event", event, wall_unix_s) | None (close)
         self._queue: queue.SimpleQueue[tuple[Any, ...] | None] = queue.SimpleQueue()
         self._recent_events: collections.deque[dict[str, Any]] = collections.deque(
             maxlen=_RECENT_EVENTS
         )
         self._closing = False
         self._closed = False
-        self.ticks_dropped = 0
-        self.samples_published = 0
+        self.ticks_skipped = 0  # replaced in the slot by a newer tick before being sent
+        self.samples_published = 0  # puts of any sample
+        self.ticks_published = 0  # ticks taken from the slot and sent to their subscribers
+        self.updates_refused = 0
         self._seq = 0
-        self.last_state: dict[str, Any] | None = None
-        self.last_guidance: dict[str, Any] | None = None
+        # the last tick sent, for the status reply: (seq, command, wall_unix_s, zone_names)
+        self._last_tick: tuple[int, TickCommand, float, tuple[str, ...]] | None = None
 
-        self.session = open_session(session_config(settings))
+        conf = session_config(settings)
+        self.warnings = exposure_warnings(conf, settings.scenario_updates)
+        for line in self.warnings:
+            _log.warning("%s", line)
+        self.session = open_session(conf)
         try:
             drop = zenoh.CongestionControl.DROP
             self._state_pub = self.session.declare_publisher(
@@ -121,8 +136,10 @@ class TelemetryPublisher:
                 priority=zenoh.Priority.DATA_HIGH,
             )
             self._status_q = self.session.declare_queryable(key(vid, "status"), self._on_status)
-            self._scenario_q = self.session.declare_queryable(
-                key(vid, "scenario"), self._on_scenario_query
+            self._scenario_q = (
+                self.session.declare_queryable(self._scenario_key, self._on_scenario_query)
+                if settings.scenario_updates.enabled
+                else None
             )
             self._token = self.session.liveliness().declare_token(key(vid, "alive"))
         except BaseException:
@@ -134,16 +151,19 @@ class TelemetryPublisher:
     # --- the loop's side: cheap ---------------------------------------------------------------
 
     def publish_tick(self, command: TickCommand) -> None:
-        """Queue one tick's state and guidance samples (microseconds, never blocks)."""
+        """Offer one tick's state and guidance samples (a microsecond, never blocks, never
+        wakes a thread): it replaces a tick not yet sent, and goes out within one publish
+        period."""
         if self._closing:
             return
-        if self._queue.qsize() >= _QUEUE_LIMIT:
-            self.ticks_dropped += 1
-            return
-        self._queue.put(("tick", command, time.time(), self._zone_names))
+        item = (command, time.time(), self._zone_names)
+        with self._slot_lock:
+            replaced, self._latest = self._latest, item
+        if replaced is not None:
+            self.ticks_skipped += 1
 
     def publish_event(self, event: Event) -> None:
-        """Queue one event sample (an ``EventLog`` sink)."""
+        """Queue one event sample (an ``EventLog`` sink); every event is sent."""
         if not self._closing:
             self._queue.put(("event", event, time.time()))
 
@@ -162,22 +182,18 @@ class TelemetryPublisher:
     # --- life cycle ------------------------------------------------------------------------
 
     def close(self) -> None:
-        """Publish what is queued, then undeclare everything and close the session."""
+        """Publish the newest tick and the queued events, then undeclare everything and
+        close the session."""
         if self._closed:
             return
         self._closing = True
         self._queue.put(None)
         self._thread.join(_CLOSE_TIMEOUT_S)
         self._closed = True
-        release(
-            self._token,
-            self._scenario_q,
-            self._status_q,
-            self._event_pub,
-            self._guidance_pub,
-            self._state_pub,
-            self.session,
-        )
+        entities = [self._token, self._status_q, self._event_pub, self._guidance_pub]
+        if self._scenario_q is not None:
+            entities.insert(1, self._scenario_q)
+        release(*entities, self._state_pub, self.session)
 
     def __enter__(self) -> TelemetryPublisher:
         return self
@@ -188,39 +204,60 @@ class TelemetryPublisher:
     # --- the publisher thread --------------------------------------------------------------
 
     def _run(self) -> None:
+        # Once a period the thread takes the newest tick from the slot. The loop never wakes
+        # it (waking a thread costs the loop ~10 us: it waits for the GIL meanwhile).
+        next_put_s = time.monotonic()
         while True:
-            items = [self._queue.get()]
-            while True:  # take whatever else is waiting
-                try:
-                    items.append(self._queue.get_nowait())
-                except queue.Empty:
-                    break
-            ticks = sum(1 for item in items if item is not None and item[0] == "tick")
-            skip = max(0, ticks - _TICK_BACKLOG)  # behind: only the newest ticks
-            self.ticks_dropped += skip
-            for item in items:
-                if item is None:
-                    return
-                if item[0] == "event":
-                    self._send_event(item[1], item[2])
-                elif skip:
-                    skip -= 1
-                else:
-                    self._send_tick(item[1], item[2], item[3])
+            try:
+                item = self._queue.get(timeout=max(0.0, next_put_s - time.monotonic()))
+            except queue.Empty:
+                next_put_s = max(next_put_s + self._period_s, time.monotonic())
+                self._send_latest()
+                continue
+            if item is None:
+                self._send_latest()
+                return
+            self._send_event(item[1], item[2])
+
+    def _send_latest(self) -> bool:
+        with self._slot_lock:
+            item, self._latest = self._latest, None
+        if item is None:
+            return False
+        self._send_tick(*item)
+        return True
 
     def _send_event(self, event: Event, wall_unix_s: float) -> None:
         payload = event_payload(self.vehicle_id, self._next_seq(), event, wall_unix_s)
         self._recent_events.append(payload)
         self._put(self._event_pub, payload)
 
-    def _send_tick(self, command: TickCommand, wall_unix_s: float, names: Sequence[str]) -> None:
+    def _send_tick(self, command: TickCommand, wall_unix_s: float, names: tuple[str, ...]) -> None:
         seq = self._next_seq()
-        # guidance first: it is what monitors wait for (state follows ~0.1 ms later)
-        guidance = guidance_payload(self.vehicle_id, seq, command, wall_unix_s, names)
-        self._put(self._guidance_pub, guidance)
-        state = state_payload(self.vehicle_id, seq, command, wall_unix_s)
-        self._put(self._state_pub, state)
-        self.last_state, self.last_guidance = state, guidance
+        self._last_tick = (seq, command, wall_unix_s, names)
+        # each sample is built only when someone subscribes to it (the status reply builds
+        # the last ones when asked); guidance first: it is what monitors wait for
+        if self.has_subscribers("guidance"):
+            guidance = guidance_payload(self.vehicle_id, seq, command, wall_unix_s, names)
+            guidance["sent_unix_s"] = time.time()
+            self._put(self._guidance_pub, guidance)
+        if self.has_subscribers("state"):
+            state = state_payload(self.vehicle_id, seq, command, wall_unix_s)
+            state["sent_unix_s"] = time.time()
+            self._put(self._state_pub, state)
+        self.ticks_published += 1
+
+    @property
+    def last_state(self) -> dict[str, Any] | None:
+        """The ``state`` sample of the last tick sent (None before the first)."""
+        last = self._last_tick
+        return None if last is None else state_payload(self.vehicle_id, last[0], *last[1:3])
+
+    @property
+    def last_guidance(self) -> dict[str, Any] | None:
+        """The ``guidance`` sample of the last tick sent (None before the first)."""
+        last = self._last_tick
+        return None if last is None else guidance_payload(self.vehicle_id, *last)
 
     def _next_seq(self) -> int:
         self._seq += 1
@@ -243,6 +280,7 @@ class TelemetryPublisher:
 
     def _status_reply(self) -> dict[str, Any]:
         s = self.settings
+        updates = s.scenario_updates
         reply: dict[str, Any] = {
             "vehicle_id": self.vehicle_id,
             "version": ezcompanion.__version__,
@@ -252,9 +290,23 @@ class TelemetryPublisher:
                 "listen": list(s.listen),
                 "connect": list(s.connect),
                 "config_file": s.config_file,
+                "publish_rate_hz": s.publish_rate_hz,
+                "tls": s.tls is not None,
+                "client_auth": s.tls is not None and s.tls.client_auth,
+                "logins": s.auth is not None and s.auth.credentials_file is not None,
+                "scenario_updates": {
+                    "enabled": updates.enabled,
+                    "users": list(updates.users),
+                    "cert_common_names": list(updates.cert_common_names),
+                    "max_bytes": updates.max_bytes,
+                    "max_depth": updates.max_depth,
+                },
+                "warnings": list(self.warnings),
             },
             "samples_published": self.samples_published,
-            "ticks_dropped": self.ticks_dropped,
+            "ticks_published": self.ticks_published,
+            "ticks_skipped": self.ticks_skipped,
+            "updates_refused": self.updates_refused,
             "last_state": self.last_state,
             "last_guidance": self.last_guidance,
             "recent_events": list(self._recent_events),
@@ -262,28 +314,39 @@ class TelemetryPublisher:
         try:
             reply.update(self._status())
         except Exception as exc:  # a broken provider must not take the queryable down
-            reply["status_error"] = f"{type(exc).__name__}: {exc}"
+            reply["status_error"] = bounded(f"{type(exc).__name__}: {exc}")
             _log.warning("telemetry: status provider failed: %s", reply["status_error"])
         return reply
 
     def _on_scenario_query(self, query: zenoh.Query) -> None:
         with query:
-            error = self._scenario_error(query.payload)
+            error, digest = self._scenario_error(query)
+            if error is None:
+                _log.info("telemetry: scenario update accepted (%s)", digest)
+            else:
+                self.updates_refused += 1
+                _log.warning("telemetry: scenario update refused (%s): %s", digest, error)
             reply = {"ok": True} if error is None else {"ok": False, "error": error}
-            query.reply(query.key_expr, _dumps(reply), encoding=encoding("scenario"))
-        if error is not None:
-            _log.warning("telemetry: scenario update refused: %s", error)
+            query.reply(self._scenario_key, _dumps(reply), encoding=encoding("scenario"))
 
-    def _scenario_error(self, payload: zenoh.ZBytes | None) -> str | None:
+    def _scenario_error(self, query: zenoh.Query) -> tuple[str | None, str]:
+        """(why the update is refused or None, its size and digest for the log)."""
+        asked = str(query.key_expr)
+        if asked != self._scenario_key:
+            return f"query {self._scenario_key} itself, not {bounded(asked, 80)}", "-"
+        payload = query.payload
         if payload is None:
-            return "send the scenario as the query's payload (a JSON object)"
+            return "send the scenario as the query's payload (a JSON object)", "no payload"
+        updates = self.settings.scenario_updates
         try:
-            data = json.loads(payload.to_bytes())
-        except (ValueError, UnicodeDecodeError) as exc:
-            return f"the payload is not JSON: {exc}"
-        if not isinstance(data, dict):
-            return f"the payload must be a JSON object (a scenario), not {type(data).__name__}"
+            check_size(len(payload), updates.max_bytes)  # before it is copied out of zenoh
+            raw = payload.to_bytes()
+            digest = describe(raw)
+            data = decode_update(raw, max_bytes=updates.max_bytes, max_depth=updates.max_depth)
+        except ConfigError as exc:
+            return bounded(str(exc), _REPLY_CHARS), f"{len(payload)} bytes"
         try:
-            return self._on_scenario(data)
+            error = self._on_scenario(data)
         except Exception as exc:  # reported to the querier; its frames are not kept
-            return f"the update could not be handled: {type(exc).__name__}: {exc}"
+            error = f"the update could not be handled: {type(exc).__name__}: {exc}"
+        return (None if error is None else bounded(error, _REPLY_CHARS)), digest

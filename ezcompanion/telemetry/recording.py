@@ -36,14 +36,31 @@ _RENAMED = {"t_s": "time_s", "heading_rad": "course_rad"}
 
 
 def iter_recording(path: str | Path) -> Iterator[dict[str, Any]]:
-    """The recording's lines, decoded, in order."""
-    with Path(path).open(encoding="utf-8") as handle:
-        for number, text in enumerate(handle, start=1):
-            if text.strip():
-                try:
-                    yield json.loads(text)
-                except ValueError as exc:
-                    raise ConfigError(f"{path}:{number}", text[:80], f"not JSON: {exc}") from None
+    """The recording's lines, decoded, in order: each an object with a telemetry ``key``
+    and a ``payload`` (anything else is a ConfigError naming the file and line)."""
+    if not Path(path).is_file():
+        raise ConfigError("recording", str(path), "no such file")
+    with Path(path).open(encoding="utf-8", errors="strict") as handle:
+        try:
+            for number, text in enumerate(handle, start=1):
+                if text.strip():
+                    yield _line(f"{path}:{number}", text)
+        except UnicodeDecodeError as exc:
+            raise ConfigError(str(path), "binary data", f"not UTF-8 text: {exc}") from None
+
+
+def _line(where: str, text: str) -> dict[str, Any]:
+    try:
+        line = json.loads(text)
+    except ValueError as exc:
+        raise ConfigError(where, text[:80], f"not JSON: {exc}") from None
+    if not isinstance(line, dict) or "key" not in line or "payload" not in line:
+        raise ConfigError(where, text[:80], "not a recorded sample ({key, payload, ...})")
+    try:
+        vehicle_of(str(line["key"]))
+    except ValueError as exc:
+        raise ConfigError(where, line["key"], str(exc)) from None
+    return line
 
 
 def _samples(path: str | Path, leaf: str, vehicle: str | None) -> list[dict[str, Any]]:

@@ -18,6 +18,7 @@ from typing import Any, SupportsFloat
 from ezcompanion.guidance.controller import GuidanceMode
 from ezcompanion.service.events import Event
 from ezcompanion.service.loop import TickCommand
+from ezcompanion.telemetry.updates import bounded
 
 __all__ = [
     "KEY_PREFIX",
@@ -41,6 +42,7 @@ SCHEMAS = {
     "status": "ezcompanion.status.v1",
     "scenario": "ezcompanion.scenario_reply.v1",
 }
+EVENT_MESSAGE_CHARS = 500
 _MODE_NAMES = {int(m): m.name.lower() for m in GuidanceMode}
 
 
@@ -157,13 +159,15 @@ def guidance_payload(
 def event_payload(
     vehicle_id: str, seq: int, event: Event, wall_time_unix_s: float
 ) -> dict[str, Any]:
-    """One service event (schema ``ezcompanion.event.v1``); ``data`` as the event gives it."""
+    """One service event (schema ``ezcompanion.event.v1``); ``data`` as the event gives it,
+    the message on one line of at most ``EVENT_MESSAGE_CHARS`` (a scenario's name is in
+    one, and an update's name is bounded only by the update's size)."""
     return {
         "vehicle_id": vehicle_id,
         "seq": seq,
         "kind": event.kind.value,
         "time_s": event.time_s,
         "wall_time_unix_s": wall_time_unix_s,
-        "message": event.message,
+        "message": bounded(event.message, EVENT_MESSAGE_CHARS),
         "data": dict(event.data),
     }

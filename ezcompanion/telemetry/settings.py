@@ -10,10 +10,15 @@ Layout (every key optional)::
       multicast_scouting: false       # find peers on the LAN by UDP multicast
       config_file: null               # any zenoh json5 config instead of the keys above
       vehicle_id: vehicle1            # the <vehicle> chunk of every key
+      publish_rate_hz: 20.0           # state and guidance samples a second, at most
+      tls: {...}                      # certificates (ezcompanion.telemetry.access)
+      auth: {...}                     # user-password logins (ezcompanion.telemetry.access)
+      scenario_updates: {...}         # off unless enabled (ezcompanion.telemetry.access)
 
 A client cannot listen: in client mode ``listen`` defaults to nothing, and giving it is an
-error. With ``config_file`` the file is the whole session configuration (zenoh's own
-format); ``mode``, ``listen``, ``connect`` and ``multicast_scouting`` are then not applied.
+error. With ``config_file`` the file is the base of the session configuration (zenoh's own
+format); ``mode``, ``listen``, ``connect`` and ``multicast_scouting`` are then not applied,
+while ``tls``, ``auth`` and ``scenario_updates`` still are, on top of it.
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ from __future__ import annotations
 import json
 import re
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +34,16 @@ import zenoh
 
 from ezcompanion.config import build_dataclass
 from ezcompanion.errors import ConfigError
+from ezcompanion.telemetry.access import (
+    AuthSettings,
+    TlsSettings,
+    UpdateSettings,
+    apply_access,
+    auth_settings,
+    check_access,
+    tls_settings,
+    update_settings,
+)
 
 __all__ = [
     "DEFAULT_ENDPOINT",
@@ -58,6 +73,10 @@ class TelemetrySettings:
     multicast_scouting: bool = False
     config_file: str | None = None
     vehicle_id: str = "vehicle1"
+    publish_rate_hz: float = 20.0
+    tls: TlsSettings | None = None
+    auth: AuthSettings | None = None
+    scenario_updates: UpdateSettings = field(default_factory=UpdateSettings)
 
     def __post_init__(self) -> None:
         for name in ("enabled", "multicast_scouting"):
@@ -86,15 +105,36 @@ class TelemetrySettings:
             raise ConfigError(
                 "vehicle_id", self.vehicle_id, "must be letters, digits, '_', '.' or '-'"
             )
+        rate = self.publish_rate_hz
+        if not isinstance(rate, float | int) or isinstance(rate, bool) or not 0.1 <= rate <= 1000:
+            raise ConfigError("publish_rate_hz", rate, "must be a number in [0.1, 1000]")
+        for name, kind in (("tls", TlsSettings), ("auth", AuthSettings)):
+            if not isinstance(getattr(self, name), kind | None):
+                raise ConfigError(name, getattr(self, name), "must be a mapping")
+        if not isinstance(self.scenario_updates, UpdateSettings):
+            raise ConfigError("scenario_updates", self.scenario_updates, "must be a mapping")
+        check_access(
+            self.scenario_updates,
+            self.tls,
+            self.auth,
+            (*self.listen, *self.connect),
+            f"ezcompanion/{self.vehicle_id}/scenario",
+        )
 
 
 def telemetry_settings(raw: Mapping[str, Any], **overrides: Any) -> TelemetrySettings:
     """The ``telemetry:`` section ``raw`` with command-line ``overrides`` (None = unset).
 
-    Lists become tuples; a single endpoint string is taken as a list of one.
+    Lists become tuples; a single endpoint string is taken as a list of one. ``tls``,
+    ``auth`` and ``scenario_updates`` are mappings (``ezcompanion.telemetry.access``).
     """
     values = dict(raw)
     values.update({key: value for key, value in overrides.items() if value is not None})
+    for name, parse in (("tls", tls_settings), ("auth", auth_settings)):
+        if name in values and not isinstance(values[name], TlsSettings | AuthSettings):
+            values[name] = parse(values[name])
+    if "scenario_updates" in values and not isinstance(values["scenario_updates"], UpdateSettings):
+        values["scenario_updates"] = update_settings(values["scenario_updates"])
     for name in ("listen", "connect"):
         if name in values:
             given = values[name]
@@ -109,17 +149,26 @@ def telemetry_settings(raw: Mapping[str, Any], **overrides: Any) -> TelemetrySet
 
 
 def session_config(settings: TelemetrySettings) -> zenoh.Config:
-    """The zenoh configuration for ``settings``: its file, or mode, endpoints and scouting."""
+    """The zenoh configuration for ``settings``: its file, or mode, endpoints and scouting;
+    then its TLS, logins and (scenario updates on) access-control list."""
     if settings.config_file is not None:
         try:
-            return zenoh.Config.from_file(settings.config_file)
+            conf = zenoh.Config.from_file(settings.config_file)
         except zenoh.ZError as exc:
             raise ConfigError("telemetry.config_file", settings.config_file, str(exc)) from None
-    conf = zenoh.Config()
-    conf.insert_json5("mode", json.dumps(settings.mode))
-    conf.insert_json5("listen/endpoints", json.dumps(list(settings.listen)))
-    conf.insert_json5("connect/endpoints", json.dumps(list(settings.connect)))
-    conf.insert_json5("scouting/multicast/enabled", json.dumps(settings.multicast_scouting))
+    else:
+        conf = zenoh.Config()
+        conf.insert_json5("mode", json.dumps(settings.mode))
+        conf.insert_json5("listen/endpoints", json.dumps(list(settings.listen)))
+        conf.insert_json5("connect/endpoints", json.dumps(list(settings.connect)))
+        conf.insert_json5("scouting/multicast/enabled", json.dumps(settings.multicast_scouting))
+    apply_access(
+        conf,
+        vehicle_id=settings.vehicle_id,
+        updates=settings.scenario_updates,
+        tls=settings.tls,
+        auth=settings.auth,
+    )
     return conf
 
 

@@ -9,6 +9,11 @@ captured or at ``duration_s``; the batch is compacted to the active runs as they
 the cost follows the engagements still flying. No time series is kept: each run's metrics
 are updated in place every step.
 
+The vehicle's response (:mod:`ezcompanion.validation.response`): each run flies its
+lagged lateral acceleration a_f at its flown speed, and the controller is given the
+measured state (flown speed, measured course rate a_f / v_f) and the run's lag in its
+parameters. With no lag and a speed factor of 1 this is the ideal vehicle above, exactly.
+
 Each run only ever sees its own zones, target and state, so its result does not depend on
 the rest of the batch, on compaction or on chunking (a test checks this).
 """
@@ -17,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from typing import Protocol
 
 import numpy as np
@@ -26,6 +31,7 @@ import numpy.typing as npt
 from ezcompanion.errors import ConfigError
 from ezcompanion.guidance import GuidanceController, GuidanceParams, KinematicState, LawName
 from ezcompanion.sim.kinematics import rk4_step, unicycle_rates
+from ezcompanion.validation.response import flown_accel_m_s2
 from ezcompanion.validation.scenarios import ScenarioBatch
 
 __all__ = ["BatchSettings", "Policy", "RunMetrics", "StepResult", "law_policy", "simulate_batch"]
@@ -98,37 +104,72 @@ class Policy(Protocol):
 
 
 class _LawPolicy:
-    """The guidance law itself, through ``GuidanceController``."""
+    """The guidance law itself, through ``GuidanceController``: one controller per group of
+    runs that share a response lag, each told its lag (``GuidanceParams.response_lag_s``)."""
 
-    def __init__(self, controller: GuidanceController) -> None:
-        self.controller = controller
+    def __init__(self, groups: list[tuple[IntArray, GuidanceController]], size: int) -> None:
+        self.groups = groups
+        self.size = size
 
     def step(self, state: KinematicState, dt_s: float) -> StepResult:
-        out = self.controller.step(state, dt_s)
-        return StepResult(
-            accel_start_m_s2=out.accel_lat_m_s2,
-            accel_end_m_s2=out.accel_lat_cmd_m_s2,
-            clearance_m=out.law.clearance_m.min(axis=-1),
-            range_to_target_m=out.law.range_to_target_m,
-            captured=out.captured,
-        )
+        if len(self.groups) == 1:
+            out = self.groups[0][1].step(state, dt_s)
+            return StepResult(
+                accel_start_m_s2=out.accel_lat_m_s2,
+                accel_end_m_s2=out.accel_lat_cmd_m_s2,
+                clearance_m=out.law.clearance_m.min(axis=-1),
+                range_to_target_m=out.law.range_to_target_m,
+                captured=out.captured,
+            )
+        fields_ = [np.empty(self.size) for _ in range(4)]
+        captured = np.empty(self.size, dtype=bool)
+        rate = state.course_rate_rad_s
+        for rows, controller in self.groups:
+            part = KinematicState(
+                np.asarray(state.north_m)[rows], np.asarray(state.east_m)[rows],
+                np.asarray(state.course_rad)[rows], np.asarray(state.speed_m_s)[rows],
+                None if rate is None else np.asarray(rate)[rows],
+            )  # fmt: skip
+            out = controller.step(part, dt_s)
+            fields_[0][rows] = out.accel_lat_m_s2
+            fields_[1][rows] = out.accel_lat_cmd_m_s2
+            fields_[2][rows] = out.law.clearance_m.min(axis=-1)
+            fields_[3][rows] = out.law.range_to_target_m
+            captured[rows] = out.captured
+        return StepResult(*fields_, captured=captured)
 
     def keep(self, scenarios: ScenarioBatch, mask: BoolArray) -> _LawPolicy:
-        old = self.controller
-        new = GuidanceController(
-            zones=scenarios.zones(), target=scenarios.targets(), params=old.params, law=old.law
-        )
-        new.reset(old.accel_m_s2[mask])
-        return _LawPolicy(new)
+        position = np.cumsum(mask) - 1  # old row -> new row
+        groups = []
+        for rows, old in self.groups:
+            kept = rows[mask[rows]]
+            if kept.size == 0:
+                continue
+            new_rows = position[kept]
+            part = scenarios.subset(new_rows)
+            new = GuidanceController(
+                zones=part.zones(), target=part.targets(), params=old.params, law=old.law
+            )
+            new.reset(old.accel_m_s2[mask[rows]])
+            groups.append((new_rows, new))
+        return _LawPolicy(groups, int(np.count_nonzero(mask)))
 
 
 def law_policy(scenarios: ScenarioBatch, params: GuidanceParams, law: LawName) -> Policy:
-    """The law ``law`` with ``params`` for ``scenarios``, actuator at rest (a = 0)."""
-    controller = GuidanceController(
-        zones=scenarios.zones(), target=scenarios.targets(), params=params, law=law
-    )
-    controller.reset(np.zeros(len(scenarios)))
-    return _LawPolicy(controller)
+    """The law ``law`` with ``params`` for ``scenarios``, actuator at rest (a = 0); runs with
+    a response lag get it in ``params.response_lag_s`` (one controller per lag level)."""
+    groups = []
+    lags = scenarios.response_lag_s
+    for lag in np.unique(lags):
+        rows = np.flatnonzero(lags == lag)
+        part = scenarios if rows.size == len(scenarios) else scenarios.subset(rows)
+        chosen = replace(params, response_lag_s=float(lag)) if lag > 0.0 else params
+        controller = GuidanceController(
+            zones=part.zones(), target=part.targets(), params=chosen, law=law
+        )
+        controller.reset(np.zeros(rows.size))
+        groups.append((rows, controller))
+    return _LawPolicy(groups, len(scenarios))
 
 
 @dataclass(frozen=True, eq=False)
@@ -218,9 +259,11 @@ def simulate_batch(
     live = np.ones(size, dtype=bool)  # rows still flying; the others are frozen
     active = scenarios
     x = np.vstack([scenarios.north_m, scenarios.east_m, scenarios.course_rad])
-    speed = scenarios.speed_m_s.copy()
+    speed = scenarios.flown_speed_m_s.copy()
+    lag = scenarios.response_lag_s.copy()
+    flown = np.zeros(size)  # a_f, the flown lateral acceleration
     for k in range(steps + 1):
-        out = policy.step(KinematicState(x[0], x[1], x[2], speed), dt)
+        out = policy.step(KinematicState(x[0], x[1], x[2], speed, flown / speed), dt)
         rows = index[live]
         clear = out.clearance_m[live]
         min_clear[rows] = np.minimum(min_clear[rows], clear)
@@ -255,9 +298,12 @@ def simulate_batch(
             active = active.subset(live)
             policy = policy.keep(active, live)
             index, x, speed, a0, a1 = index[live], x[:, live], speed[live], a0[live], a1[live]
+            lag, flown = lag[live], flown[live]
             live = np.ones(remaining, dtype=bool)
-        x_next = _advance(x, speed, a0, (a1 - a0) / dt, k * dt, dt)
+        slope = (a1 - a0) / dt
+        x_next = _advance(x, speed, a0, slope, flown, lag, k * dt, dt)
         x = np.where(live, x_next, x)
+        flown = np.where(live, flown_accel_m_s2(a0, slope, flown, lag, dt), flown)
     return RunMetrics(
         run_index=scenarios.run_index.copy(),
         intercepted=intercepted,
@@ -273,11 +319,20 @@ def simulate_batch(
 
 
 def _advance(
-    x: FloatArray, speed: FloatArray, a0: FloatArray, slope: FloatArray, t0: float, dt: float
+    x: FloatArray,
+    speed: FloatArray,
+    a0: FloatArray,
+    slope: FloatArray,
+    flown: FloatArray,
+    lag: FloatArray,
+    t0: float,
+    dt: float,
 ) -> FloatArray:
-    """RK4 over the batch with a = a0 + slope (t - t0) over the step."""
+    """RK4 over the batch with a = a0 + slope (t - t0) commanded over the step and its
+    lagged a_f (from ``flown`` at t0, closed form) flown."""
 
     def rates(t: float, state: FloatArray) -> FloatArray:
-        return unicycle_rates(state, speed, a0 + slope * (t - t0))  # type: ignore[arg-type]
+        accel = flown_accel_m_s2(a0, slope, flown, lag, t - t0)
+        return unicycle_rates(state, speed, accel)  # type: ignore[arg-type]
 
     return rk4_step(rates, t0, x, dt)

@@ -34,7 +34,15 @@ from ezcompanion.sim.kinematics import rk4_step, unicycle_rates
 from ezcompanion.validation.response import flown_accel_m_s2
 from ezcompanion.validation.scenarios import ScenarioBatch
 
-__all__ = ["BatchSettings", "Policy", "RunMetrics", "StepResult", "law_policy", "simulate_batch"]
+__all__ = [
+    "AbandonCheck",
+    "BatchSettings",
+    "Policy",
+    "RunMetrics",
+    "StepResult",
+    "law_policy",
+    "simulate_batch",
+]
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
@@ -91,6 +99,24 @@ class StepResult:
     captured: BoolArray
 
 
+class AbandonCheck(Protocol):
+    """Is each setpoint safe to keep flying if no other follows (issue 9 item 2)?
+
+    Called every step with the runs still flying, their measured state and the lateral
+    acceleration just commanded; returns one flag per run (True: safe to abandon here).
+    Provided by the guidance side; ``None`` in ``simulate_batch`` skips the check."""
+
+    def __call__(
+        self,
+        scenarios: ScenarioBatch,
+        state: KinematicState,
+        accel_cmd_m_s2: FloatArray,
+        params: GuidanceParams,
+    ) -> BoolArray:
+        """One flag per run."""
+        ...
+
+
 class Policy(Protocol):
     """A guidance policy over a batch: the law's controller, or a comparison filter."""
 
@@ -136,7 +162,7 @@ class _LawPolicy:
             fields_[2][rows] = out.law.clearance_m.min(axis=-1)
             fields_[3][rows] = out.law.range_to_target_m
             captured[rows] = out.captured
-        return StepResult(*fields_, captured=captured)
+        return StepResult(fields_[0], fields_[1], fields_[2], fields_[3], captured)
 
     def keep(self, scenarios: ScenarioBatch, mask: BoolArray) -> _LawPolicy:
         position = np.cumsum(mask) - 1  # old row -> new row
@@ -182,6 +208,8 @@ class RunMetrics:
     approach to the target. ``max_accel_ratio``: max |a| / a_max. ``time_at_bound_s``:
     time with |a| >= bound_ratio a_max. ``accel_variation_m_s2``: total variation of a
     over the run (sum of |a_k+1 - a_k|), a measure of chattering.
+    ``abandon_unsafe_steps``: steps after the first second at which the abandon check
+    said the setpoint was not safe to keep flying (-1: no check was run).
     """
 
     run_index: IntArray
@@ -194,6 +222,7 @@ class RunMetrics:
     max_accel_ratio: FloatArray
     time_at_bound_s: FloatArray
     accel_variation_m_s2: FloatArray
+    abandon_unsafe_steps: IntArray
 
     def __len__(self) -> int:
         return int(self.run_index.shape[0])
@@ -238,9 +267,12 @@ def simulate_batch(
     accel_max_m_s2: float,
     settings: BatchSettings = BatchSettings(),
     progress: Progress | None = None,
+    abandon: AbandonCheck | None = None,
+    params: GuidanceParams | None = None,
 ) -> RunMetrics:
     """Fly every run of ``scenarios`` under ``policy``; ``progress(steps)`` is called with
-    the lockstep steps just done, ``settings.steps + 1`` in all (for a progress bar)."""
+    the lockstep steps just done, ``settings.steps + 1`` in all (for a progress bar).
+    ``abandon`` (with the law's ``params``) is checked at every step after the first second."""
     size = len(scenarios)
     dt = settings.dt_s
     steps = settings.steps
@@ -254,6 +286,8 @@ def simulate_batch(
     bound_steps = np.zeros(size, dtype=np.int64)
     variation = np.zeros(size)
     last_accel = np.full(size, np.nan)  # a at the end of each run's previous step
+    unsafe_steps = np.full(size, 0 if abandon is not None else -1, dtype=np.int64)
+    check_from = round(1.0 / dt)
 
     index = np.arange(size)  # row of the policy's batch -> position in the full batch
     live = np.ones(size, dtype=bool)  # rows still flying; the others are frozen
@@ -263,8 +297,13 @@ def simulate_batch(
     lag = scenarios.response_lag_s.copy()
     flown = np.zeros(size)  # a_f, the flown lateral acceleration
     for k in range(steps + 1):
-        out = policy.step(KinematicState(x[0], x[1], x[2], speed, flown / speed), dt)
+        state = KinematicState(x[0], x[1], x[2], speed, flown / speed)
+        out = policy.step(state, dt)
         rows = index[live]
+        if abandon is not None and k >= check_from:
+            chosen = params if params is not None else GuidanceParams()
+            ok = np.asarray(abandon(active, state, out.accel_end_m_s2, chosen), dtype=bool)
+            unsafe_steps[rows] += ~ok[live]
         clear = out.clearance_m[live]
         min_clear[rows] = np.minimum(min_clear[rows], clear)
         inside_steps[rows] += clear < 0.0
@@ -315,6 +354,7 @@ def simulate_batch(
         max_accel_ratio=max_accel / accel_max_m_s2,
         time_at_bound_s=(bound_steps * dt).astype(np.float64),
         accel_variation_m_s2=variation,
+        abandon_unsafe_steps=unsafe_steps,
     )
 
 

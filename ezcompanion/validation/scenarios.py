@@ -155,7 +155,7 @@ class ScenarioDistribution:
             raise ConfigError(
                 "ideal_response_probability", self.ideal_response_probability, "in [0, 1]"
             )
-        if not (0.0 < self.speed_factor[0] and self.speed_factor[1] <= 1.0):
+        if not (self.speed_factor[0] > 0.0 and self.speed_factor[1] <= 1.0):
             raise ConfigError("speed_factor", self.speed_factor, "must lie inside (0, 1]")
         if self.heading_error_max_deg > 180.0:
             raise ConfigError("heading_error_max_deg", self.heading_error_max_deg, "<= 180")

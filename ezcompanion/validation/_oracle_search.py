@@ -97,31 +97,31 @@ def command_of(mode: int, s: FloatArray, g: FloatArray) -> float:
 
 
 @jit
+def _turned(a0: float, slope: float, af0: float, tau: float, t: float) -> float:
+    """The integral of a_f over [0, t] (m/s): course change times speed, closed form."""
+    ramp = a0 * t + 0.5 * slope * t * t
+    if tau <= 0.0:
+        return ramp
+    return ramp - slope * tau * t + (af0 - a0 + slope * tau) * tau * (1.0 - math.exp(-t / tau))
+
+
+@jit
 def step(s: FloatArray, command: float, g: FloatArray) -> None:
     """Advance ``s`` in place by one step with ``command`` held: the saturation model
-    (``advance_one``), a linear over the step, a_f lagged in closed form, RK4 on position
-    and course."""
+    (``advance_one``), a linear over the step, a_f lagged and the course in closed form,
+    the position by Simpson's rule on the exact course (RK4 for a time-only rate)."""
     dt, v, tau = g[G_DT], g[G_V], g[G_TAU]
     a0, af0 = s[3], s[4]
     a1 = advance_one(a0, command, dt, g[G_AMAX], g[G_P1], int(g[G_N]), g[G_CMD])
     slope = (a1 - a0) / dt
-    n, e, c = s[0], s[1], s[2]
-    h = 0.5 * dt
-    am = _flown(a0, slope, af0, tau, h)
-    ae = _flown(a0, slope, af0, tau, dt)
-    k1c = af0 / v
-    k1n, k1e = v * math.cos(c), v * math.sin(c)
-    c2 = c + h * k1c
-    k2n, k2e, k2c = v * math.cos(c2), v * math.sin(c2), am / v
-    c3 = c + h * k2c
-    k3n, k3e, k3c = v * math.cos(c3), v * math.sin(c3), am / v
-    c4 = c + dt * k3c
-    k4n, k4e, k4c = v * math.cos(c4), v * math.sin(c4), ae / v
-    s[0] = n + dt / 6.0 * (k1n + 2.0 * k2n + 2.0 * k3n + k4n)
-    s[1] = e + dt / 6.0 * (k1e + 2.0 * k2e + 2.0 * k3e + k4e)
-    s[2] = c + dt / 6.0 * (k1c + 2.0 * k2c + 2.0 * k3c + k4c)
+    c = s[2]
+    cm = c + _turned(a0, slope, af0, tau, 0.5 * dt) / v
+    ce = c + _turned(a0, slope, af0, tau, dt) / v
+    s[0] += v * dt / 6.0 * (math.cos(c) + 4.0 * math.cos(cm) + math.cos(ce))
+    s[1] += v * dt / 6.0 * (math.sin(c) + 4.0 * math.sin(cm) + math.sin(ce))
+    s[2] = ce
     s[3] = a1
-    s[4] = ae
+    s[4] = _flown(a0, slope, af0, tau, dt)
     s[5] += dt
 
 

@@ -25,7 +25,8 @@ At every node a terminal primitive is tried:
   limit or an orbit that makes no progress.
 
 Every command is held over a step of ``dt_s`` and integrated with the same models as the
-batch simulator (``advance_one``; a_f in closed form; RK4). Safety between samples: the
+batch simulator (``advance_one``; a_f and the course in closed form; Simpson's rule, which
+is RK4 for a time-only rate, on the position). Safety between samples: the
 disc clearance f(t) = |p + mu R u - d| - (R + c) changes at most at L = v + mu R a_max / v
 (|p_dot| = v, |u_dot| = |a_f| / v < a_max / v), so samples with f > L dt / 2 imply f > 0
 in between; that is the ``margin`` every sample must clear.
@@ -295,9 +296,10 @@ def replay_witness(
     tail_s: float = 60.0,
 ) -> Replay:
     """Fly ``w`` with the reference kinematics: ``sim.kinematics.rk4_step`` on
-    (north, east, course, a_f) at ``substep_s``, the saturation model by ``advance_one``,
-    and the true clearance r - rho(sigma) of ``guidance.zones`` at every substep; for a
-    safety witness, ``tail_s`` more of a_c = 0 at 10 ms (the proof covers for ever)."""
+    (north, east, course, a_f) at ``substep_s``, the saturation model by ``advance_one``
+    once per held command (the law's discrete-time actuator, a linear in between), and
+    the true clearance r - rho(sigma) of ``guidance.zones`` at every substep; for a
+    safety witness, ``tail_s`` more of a_c = 0 (the proof covers for ever)."""
     k = w.position
     v = float(scenarios.flown_speed_m_s[k])
     tau = float(scenarios.response_lag_s[k])
@@ -318,11 +320,17 @@ def replay_witness(
     if not w.intercept:
         schedule.append((0.0, tail_s, 0.01))
     for command, hold, sub in schedule:
+        # the actuator state advances as the law's does, once per held command (its
+        # discrete-time model); the kinematics take substeps with a linear between
         pieces = max(1, round(hold / sub))
         h = hold / pieces
-        for _ in range(pieces):
-            a1 = advance_one(a, command, h, amax, p1, n_pow, limit)
-            slope = (a1 - a) / h
+        steps = max(1, round(hold / w.dt_s))
+        for piece in range(pieces):
+            if piece % max(1, pieces // steps) == 0:
+                a_start = a
+                a_end = advance_one(a, command, hold / steps, amax, p1, n_pow, limit)
+                slope = (a_end - a_start) / (hold / steps)
+            a1 = a + slope * h
 
             def rates(
                 time: float, state: FloatArray, a0: float = a, slope: float = slope,

@@ -137,7 +137,7 @@ def test_campaign_merge_is_the_same_for_any_chunking() -> None:
     this process is in tests/test_validation_campaign.py)."""
     base = CampaignSpec(
         runs=30, seed=4, policies=("robust", "qp-filter"), map_runs=0,
-        settings=BatchSettings(duration_s=12.0), workers=1, chunk_runs=30, oracle=False,
+        settings=BatchSettings(duration_s=8.0), workers=1, chunk_runs=30, oracle=False,
     )  # fmt: skip
     one = run_campaign(base)
     two = run_campaign(dataclasses.replace(base, chunk_runs=13))

@@ -32,25 +32,38 @@ def _strip(report: dict) -> dict:  # type: ignore[type-arg]
 
 
 def test_a_local_dask_cluster_gives_the_in_process_report(tmp_path: Path) -> None:
-    """The same seeded chunks on a 2-worker LocalCluster (loopback) and in this process:
-    identical per-run arrays and identical reports, oracle included."""
+    """The same seeded chunks on a 2-worker LocalCluster (loopback), on an existing cluster
+    reached by its scheduler's address, and in this process: identical per-run arrays and
+    identical reports, oracle included."""
+    from distributed import LocalCluster
+
     spec = CampaignSpec(
-        runs=24, seed=9, policies=("robust",), map_runs=6, chunk_runs=10, workers=1,
-        settings=BatchSettings(duration_s=10.0), chatter_runs=2,
+        runs=14, seed=9, policies=("robust",), map_runs=4, chunk_runs=6, workers=1,
+        settings=BatchSettings(duration_s=6.0), chatter_runs=1,
     )  # fmt: skip
     here = run_campaign(spec)
     dask = run_campaign(dataclasses.replace(spec, workers=2))
     assert here.cluster == "in process" and "LocalCluster, 2 workers" in dask.cluster
+    with LocalCluster(
+        n_workers=2, threads_per_worker=1, host="127.0.0.1", dashboard_address=None,
+        scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
+    ) as existing:  # fmt: skip
+        address = existing.scheduler_address
+        assert address.startswith("tcp://127.0.0.1:")
+        remote = run_campaign(dataclasses.replace(spec, scheduler=address))
+    assert remote.cluster == f"Dask cluster at {address}"
+    np.testing.assert_array_equal(remote.metrics["robust"].min_clearance_m,
+                                  here.metrics["robust"].min_clearance_m)  # fmt: skip
     assert here.oracle is not None and dask.oracle is not None
     np.testing.assert_array_equal(here.oracle.safe, dask.oracle.safe)
     np.testing.assert_array_equal(here.oracle.intercept, dask.oracle.intercept)
     for name, value in here.metrics["robust"].as_arrays().items():
         np.testing.assert_array_equal(value, dask.metrics["robust"].as_arrays()[name])
     reports = []
-    for result, folder in ((here, "here"), (dask, "dask")):
+    for result, folder in ((here, "here"), (dask, "dask"), (remote, "remote")):
         write_outputs(result, tmp_path / folder, figures=False)
         reports.append(json.loads((tmp_path / folder / "report.json").read_text()))
-    assert _strip(reports[0]) == _strip(reports[1])
+    assert _strip(reports[0]) == _strip(reports[1]) == _strip(reports[2])
     assert (tmp_path / "here" / "tables.md").read_text() == (
         tmp_path / "dask" / "tables.md"
     ).read_text()
@@ -153,9 +166,9 @@ def test_chattering_shows_a_stiff_loop_and_not_the_default() -> None:
     coarse step only (issue 9: total variation 188 m/s^2 against 2)."""
     dist = dataclasses.replace(ScenarioDistribution(), ideal_response_probability=1.0)
     batch = draw_scenarios(dist, 2026, 0, 3)
-    smooth = chattering(batch, "robust", PARAMS, duration_s=6.0)
+    smooth = chattering(batch, "robust", PARAMS, duration_s=4.0)
     stiff = chattering(
-        batch, "robust", dataclasses.replace(PARAMS, k_track_m_s3=20.0), duration_s=6.0
+        batch, "robust", dataclasses.replace(PARAMS, k_track_m_s3=20.0), duration_s=4.0
     )
     assert np.nanmax(smooth.ratio) < 1.5
     assert np.nanmedian(stiff.ratio) > 3.0

@@ -17,6 +17,7 @@ from ezcompanion.errors import ConfigError, EzCompanionError
 from ezcompanion.guidance import BlendMode, GuidanceParams
 from ezcompanion.validation.batch import BatchSettings
 from ezcompanion.validation.campaign import CampaignSpec, run_campaign
+from ezcompanion.validation.oracle import OracleSettings
 from ezcompanion.validation.output import write_outputs
 from ezcompanion.validation.policies import POLICIES
 from ezcompanion.validation.progress import ProgressBar
@@ -57,6 +58,10 @@ def add_validate_parser(subparsers: Any) -> None:
         help="run on an existing Dask cluster, e.g. tcp://10.0.0.5:8786 (default: a local one)",
     )  # fmt: skip
     p.add_argument("--no-oracle", action="store_true", help="skip the feasibility oracle")
+    p.add_argument(
+        "--oracle-budget", type=int, default=OracleSettings().intercept_budget_steps,
+        help="simulated steps the oracle may spend per run looking for a safe intercept",
+    )  # fmt: skip
     p.add_argument(
         "--chatter-runs", type=int, default=100,
         help="runs flown at 20 ms and 2 ms for the chattering line (0: none; default 100)",
@@ -110,6 +115,7 @@ def spec_from_args(args: argparse.Namespace) -> CampaignSpec:
         chunk_runs=args.chunk_runs,
         scheduler=args.scheduler,
         oracle=not args.no_oracle,
+        oracle_settings=OracleSettings(intercept_budget_steps=args.oracle_budget),
         chatter_runs=args.chatter_runs,
     )
 

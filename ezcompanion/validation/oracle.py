@@ -9,8 +9,9 @@ a = 0, at the run's flown speed, through the run's response lag a_f):
     of the target within the time limit, outside every zone until then?
 
 Method: a depth-first search over sequences of bounded-turn segments, each
-``segment_s`` long: hard left (a_c = -C), straight (a driven to 0 by a bounded feedback)
-and hard right (a_c = +C), up to ``depth`` segments, children ordered best first (the
+``segment_s`` long (0.5 s; 1 s for the intercept): hard left (a_c = -C), straight (a
+driven to 0 by a bounded feedback) and hard right (a_c = +C), up to ``depth`` segments (16;
+24 for the intercept), children ordered best first (the
 clearance at the segment's end for (a); closeness and heading to the target for (b)).
 At every node a terminal primitive is tried:
 
@@ -95,26 +96,37 @@ class Verdict(IntEnum):
 
 @dataclass(frozen=True, kw_only=True)
 class OracleSettings:
-    """The search: step ``dt_s``, segments of ``segment_s``, at most ``depth`` of them
-    before the terminal primitive, and a budget of simulated steps per question."""
+    """The search: step ``dt_s``; for safety, segments of ``segment_s``, at most ``depth``
+    of them before the terminal primitive; for the intercept, ``intercept_segment_s`` and
+    ``intercept_depth`` (longer: a detour around a zone takes longer than a turn away);
+    a budget of simulated steps per question."""
 
     dt_s: float = 0.01
     segment_s: float = 0.5
     depth: int = 16
+    intercept_segment_s: float = 1.0
+    intercept_depth: int = 24
     safe_budget_steps: int = 100_000
     intercept_budget_steps: int = 20_000
 
     def __post_init__(self) -> None:
-        for name in ("dt_s", "segment_s"):
+        for name in ("dt_s", "segment_s", "intercept_segment_s"):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0.0):
                 raise ConfigError(name, value, "must be a finite number > 0")
-        for name in ("depth", "safe_budget_steps", "intercept_budget_steps"):
+        for name in ("depth", "intercept_depth", "safe_budget_steps", "intercept_budget_steps"):
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
                 raise ConfigError(name, value, "must be an integer >= 1")
-        if self.segment_s < self.dt_s:
-            raise ConfigError("segment_s", self.segment_s, f"must be >= dt_s {self.dt_s}")
+        for name in ("segment_s", "intercept_segment_s"):
+            if getattr(self, name) < self.dt_s:
+                raise ConfigError(name, getattr(self, name), f"must be >= dt_s {self.dt_s}")
+
+    def segments(self, intercept: bool) -> tuple[float, int]:
+        """Segment length (s) and depth of the search for one question."""
+        if intercept:
+            return self.intercept_segment_s, self.intercept_depth
+        return self.segment_s, self.depth
 
 
 @dataclass(frozen=True, eq=False)
@@ -186,8 +198,9 @@ def _inputs(
     g[:, ks.G_RCAP] = 0.999 * params.intercept_radius_m  # a hair inside: robust to replay
     g[:, ks.G_DURATION] = duration_s if intercept else math.inf
     g[:, ks.G_MARGIN] = 0.5 * lipschitz * settings.dt_s + 1e-9
-    g[:, ks.G_SEG] = max(1, round(settings.segment_s / settings.dt_s))
-    g[:, ks.G_DEPTH] = settings.depth
+    segment_s, depth = settings.segments(intercept)
+    g[:, ks.G_SEG] = max(1, round(segment_s / settings.dt_s))
+    g[:, ks.G_DEPTH] = depth
     g[:, ks.G_BUDGET] = (
         settings.intercept_budget_steps if intercept else settings.safe_budget_steps
     )
@@ -205,7 +218,7 @@ def _search(
     starts, zones, g = _inputs(scenarios, params, settings, duration_s, intercept)
     size = len(scenarios)
     verdict = np.zeros(size, dtype=np.int64)
-    paths = np.zeros((size, settings.depth + 1), dtype=np.int64)
+    paths = np.zeros((size, settings.segments(intercept)[1] + 1), dtype=np.int64)
     depth = np.zeros(size, dtype=np.int64)
     spent = np.zeros(size, dtype=np.int64)
     ks.search_batch(starts, zones, g, intercept, verdict, paths, depth, spent)
@@ -260,7 +273,7 @@ def witness(
     starts, zones, g = _inputs(one, params, settings, duration_s, intercept)
     real = np.abs(zones[0, :, 0]) < 0.5 * PAD_M
     room = int(duration_s / settings.dt_s) + 2 + int(g[0, ks.G_SETTLE] / settings.dt_s)
-    room += (settings.depth + 1) * int(g[0, ks.G_SEG])
+    room += (settings.segments(intercept)[1] + 1) * int(g[0, ks.G_SEG])
     commands = np.zeros(room)
     used = ks.rollout(
         starts[0], np.ascontiguousarray(zones[0, real]), g[0], intercept, paths[0],

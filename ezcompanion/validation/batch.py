@@ -333,7 +333,8 @@ def simulate_batch(
             if progress is not None:
                 progress(steps - k)
             break
-        if remaining < _COMPACT_BELOW * index.shape[0] or remaining < _COMPACT_MIN:
+        shrunk = remaining < index.shape[0]  # compact only when a run has just finished
+        if shrunk and (remaining < _COMPACT_BELOW * index.shape[0] or remaining < _COMPACT_MIN):
             active = active.subset(live)
             policy = policy.keep(active, live)
             index, x, speed, a0, a1 = index[live], x[:, live], speed[live], a0[live], a1[live]
@@ -370,6 +371,13 @@ def _advance(
 ) -> FloatArray:
     """RK4 over the batch with a = a0 + slope (t - t0) commanded over the step and its
     lagged a_f (from ``flown`` at t0, closed form) flown."""
+
+    if not (lag > 0.0).any():  # the ideal vehicle: a flown as commanded
+
+        def ideal(t: float, state: FloatArray) -> FloatArray:
+            return unicycle_rates(state, speed, a0 + slope * (t - t0))  # type: ignore[arg-type]
+
+        return rk4_step(ideal, t0, x, dt)
 
     def rates(t: float, state: FloatArray) -> FloatArray:
         accel = flown_accel_m_s2(a0, slope, flown, lag, t - t0)

@@ -123,7 +123,7 @@ GUIDANCE_LIMITS: dict[str, dict[str, Bound]] = {
         "response_lag_s": Bound(0.0, 60.0),
         "track_boundary_layer_m_s2": Bound(0.0, ACCEL_LIMIT_M_S2, low_open=True),
         "cbf_blend_width_m_s": Bound(0.0, SPEED_LIMIT_M_S, low_open=True),
-        "command_limit_ratio": Bound(1.0, GAIN_LIMIT),
+        "command_limit_1_s": Bound(1.0, GAIN_LIMIT),
         "gradient_floor_m": FLOOR,
         "range_floor_m": FLOOR,
         "actuator_n": Bound(2, 32),

@@ -132,14 +132,15 @@ def test_a_known_infeasible_engagement_is_reported_as_entered() -> None:
         assert m.time_inside_s[0] > 0.0 and -m.min_clearance_m[0] > 0.05
 
 
-def test_campaign_merge_is_the_same_for_any_chunking_and_workers() -> None:
-    """Seeded chunks in two worker processes merge into the one-process result."""
+def test_campaign_merge_is_the_same_for_any_chunking() -> None:
+    """Seeded chunks of any size merge into the same result (the Dask cluster against
+    this process is in tests/test_validation_campaign.py)."""
     base = CampaignSpec(
         runs=30, seed=4, policies=("robust", "qp-filter"), map_runs=0,
-        settings=BatchSettings(duration_s=12.0), workers=1, chunk_runs=30,
+        settings=BatchSettings(duration_s=8.0), workers=1, chunk_runs=30, oracle=False,
     )  # fmt: skip
     one = run_campaign(base)
-    two = run_campaign(dataclasses.replace(base, workers=2, chunk_runs=13))
+    two = run_campaign(dataclasses.replace(base, chunk_runs=13))
     np.testing.assert_array_equal(one.scenarios.run_index, np.arange(30))
     np.testing.assert_array_equal(one.escape_margin_m, two.escape_margin_m)
     for policy in base.policies:

@@ -9,6 +9,11 @@ captured or at ``duration_s``; the batch is compacted to the active runs as they
 the cost follows the engagements still flying. No time series is kept: each run's metrics
 are updated in place every step.
 
+The vehicle's response (:mod:`ezcompanion.validation.response`): each run flies its
+lagged lateral acceleration a_f at its flown speed, and the controller is given the
+measured state (flown speed, measured course rate a_f / v_f) and the run's lag in its
+parameters. With no lag and a speed factor of 1 this is the ideal vehicle above, exactly.
+
 Each run only ever sees its own zones, target and state, so its result does not depend on
 the rest of the batch, on compaction or on chunking (a test checks this).
 """
@@ -17,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from typing import Protocol
 
 import numpy as np
@@ -26,9 +31,18 @@ import numpy.typing as npt
 from ezcompanion.errors import ConfigError
 from ezcompanion.guidance import GuidanceController, GuidanceParams, KinematicState, LawName
 from ezcompanion.sim.kinematics import rk4_step, unicycle_rates
+from ezcompanion.validation.response import flown_accel_m_s2
 from ezcompanion.validation.scenarios import ScenarioBatch
 
-__all__ = ["BatchSettings", "Policy", "RunMetrics", "StepResult", "law_policy", "simulate_batch"]
+__all__ = [
+    "AbandonCheck",
+    "BatchSettings",
+    "Policy",
+    "RunMetrics",
+    "StepResult",
+    "law_policy",
+    "simulate_batch",
+]
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
@@ -85,6 +99,24 @@ class StepResult:
     captured: BoolArray
 
 
+class AbandonCheck(Protocol):
+    """Is each setpoint safe to keep flying if no other follows (issue 9 item 2)?
+
+    Called every step with the runs still flying, their measured state and the lateral
+    acceleration just commanded; returns one flag per run (True: safe to abandon here).
+    Provided by the guidance side; ``None`` in ``simulate_batch`` skips the check."""
+
+    def __call__(
+        self,
+        scenarios: ScenarioBatch,
+        state: KinematicState,
+        accel_cmd_m_s2: FloatArray,
+        params: GuidanceParams,
+    ) -> BoolArray:
+        """One flag per run."""
+        ...
+
+
 class Policy(Protocol):
     """A guidance policy over a batch: the law's controller, or a comparison filter."""
 
@@ -98,34 +130,71 @@ class Policy(Protocol):
 
 
 class _LawPolicy:
-    """The guidance law itself, through ``GuidanceController``."""
+    """The guidance law itself, through ``GuidanceController``: one controller per group of
+    runs that share a response lag, each told its lag (``GuidanceParams.response_lag_s``)."""
 
-    def __init__(self, controller: GuidanceController) -> None:
-        self.controller = controller
+    def __init__(self, groups: list[tuple[IntArray, GuidanceController]], size: int) -> None:
+        self.groups = groups
+        self.size = size
 
     def step(self, state: KinematicState, dt_s: float) -> StepResult:
-        out = self.controller.step(state, dt_s)
-        return StepResult(
-            accel_start_m_s2=out.accel_lat_m_s2,
-            accel_end_m_s2=out.accel_lat_cmd_m_s2,
-            clearance_m=out.law.clearance_m.min(axis=-1),
-            range_to_target_m=out.law.range_to_target_m,
-            captured=out.captured,
-        )
+        if len(self.groups) == 1:
+            out = self.groups[0][1].step(state, dt_s)
+            return StepResult(
+                accel_start_m_s2=out.accel_lat_m_s2,
+                accel_end_m_s2=out.accel_lat_cmd_m_s2,
+                clearance_m=out.law.clearance_m.min(axis=-1),
+                range_to_target_m=out.law.range_to_target_m,
+                captured=out.captured,
+            )
+        fields_ = [np.empty(self.size) for _ in range(4)]
+        captured = np.empty(self.size, dtype=bool)
+        rate = state.course_rate_rad_s
+        for rows, controller in self.groups:
+            part = KinematicState(
+                np.asarray(state.north_m)[rows], np.asarray(state.east_m)[rows],
+                np.asarray(state.course_rad)[rows], np.asarray(state.speed_m_s)[rows],
+                None if rate is None else np.asarray(rate)[rows],
+            )  # fmt: skip
+            out = controller.step(part, dt_s)
+            fields_[0][rows] = out.accel_lat_m_s2
+            fields_[1][rows] = out.accel_lat_cmd_m_s2
+            fields_[2][rows] = out.law.clearance_m.min(axis=-1)
+            fields_[3][rows] = out.law.range_to_target_m
+            captured[rows] = out.captured
+        return StepResult(fields_[0], fields_[1], fields_[2], fields_[3], captured)
 
     def keep(self, scenarios: ScenarioBatch, mask: BoolArray) -> _LawPolicy:
-        return _LawPolicy(
-            self.controller.restrict(mask, zones=scenarios.zones(), target=scenarios.targets())
-        )
+        position = np.cumsum(mask) - 1  # old row -> new row
+        groups = []
+        for rows, old in self.groups:
+            kept = rows[mask[rows]]
+            if kept.size == 0:
+                continue
+            new_rows = position[kept]
+            part = scenarios.subset(new_rows)
+            # the same law for the runs kept, each run's internal state with it (actuator,
+            # and the backup law's model and held backup)
+            new = old.restrict(mask[rows], zones=part.zones(), target=part.targets())
+            groups.append((new_rows, new))
+        return _LawPolicy(groups, int(np.count_nonzero(mask)))
 
 
 def law_policy(scenarios: ScenarioBatch, params: GuidanceParams, law: LawName) -> Policy:
-    """The law ``law`` with ``params`` for ``scenarios``, actuator at rest (a = 0)."""
-    controller = GuidanceController(
-        zones=scenarios.zones(), target=scenarios.targets(), params=params, law=law
-    )
-    controller.reset(np.zeros(len(scenarios)))
-    return _LawPolicy(controller)
+    """The law ``law`` with ``params`` for ``scenarios``, actuator at rest (a = 0); runs with
+    a response lag get it in ``params.response_lag_s`` (one controller per lag level)."""
+    groups = []
+    lags = scenarios.response_lag_s
+    for lag in np.unique(lags):
+        rows = np.flatnonzero(lags == lag)
+        part = scenarios if rows.size == len(scenarios) else scenarios.subset(rows)
+        chosen = replace(params, response_lag_s=float(lag)) if lag > 0.0 else params
+        controller = GuidanceController(
+            zones=part.zones(), target=part.targets(), params=chosen, law=law
+        )
+        controller.reset(np.zeros(rows.size))
+        groups.append((rows, controller))
+    return _LawPolicy(groups, len(scenarios))
 
 
 @dataclass(frozen=True, eq=False)
@@ -138,6 +207,8 @@ class RunMetrics:
     approach to the target. ``max_accel_ratio``: max |a| / a_max. ``time_at_bound_s``:
     time with |a| >= bound_ratio a_max. ``accel_variation_m_s2``: total variation of a
     over the run (sum of |a_k+1 - a_k|), a measure of chattering.
+    ``abandon_unsafe_steps``: steps after the first second at which the abandon check
+    said the setpoint was not safe to keep flying (-1: no check was run).
     """
 
     run_index: IntArray
@@ -150,6 +221,7 @@ class RunMetrics:
     max_accel_ratio: FloatArray
     time_at_bound_s: FloatArray
     accel_variation_m_s2: FloatArray
+    abandon_unsafe_steps: IntArray
 
     def __len__(self) -> int:
         return int(self.run_index.shape[0])
@@ -194,9 +266,12 @@ def simulate_batch(
     accel_max_m_s2: float,
     settings: BatchSettings = BatchSettings(),
     progress: Progress | None = None,
+    abandon: AbandonCheck | None = None,
+    params: GuidanceParams | None = None,
 ) -> RunMetrics:
     """Fly every run of ``scenarios`` under ``policy``; ``progress(steps)`` is called with
-    the lockstep steps just done, ``settings.steps + 1`` in all (for a progress bar)."""
+    the lockstep steps just done, ``settings.steps + 1`` in all (for a progress bar).
+    ``abandon`` (with the law's ``params``) is checked at every step after the first second."""
     size = len(scenarios)
     dt = settings.dt_s
     steps = settings.steps
@@ -210,15 +285,24 @@ def simulate_batch(
     bound_steps = np.zeros(size, dtype=np.int64)
     variation = np.zeros(size)
     last_accel = np.full(size, np.nan)  # a at the end of each run's previous step
+    unsafe_steps = np.full(size, 0 if abandon is not None else -1, dtype=np.int64)
+    check_from = round(1.0 / dt)
 
     index = np.arange(size)  # row of the policy's batch -> position in the full batch
     live = np.ones(size, dtype=bool)  # rows still flying; the others are frozen
     active = scenarios
     x = np.vstack([scenarios.north_m, scenarios.east_m, scenarios.course_rad])
-    speed = scenarios.speed_m_s.copy()
+    speed = scenarios.flown_speed_m_s.copy()
+    lag = scenarios.response_lag_s.copy()
+    flown = np.zeros(size)  # a_f, the flown lateral acceleration
     for k in range(steps + 1):
-        out = policy.step(KinematicState(x[0], x[1], x[2], speed), dt)
+        state = KinematicState(x[0], x[1], x[2], speed, flown / speed)
+        out = policy.step(state, dt)
         rows = index[live]
+        if abandon is not None and k >= check_from:
+            chosen = params if params is not None else GuidanceParams()
+            ok = np.asarray(abandon(active, state, out.accel_end_m_s2, chosen), dtype=bool)
+            unsafe_steps[rows] += ~ok[live]
         clear = out.clearance_m[live]
         min_clear[rows] = np.minimum(min_clear[rows], clear)
         inside_steps[rows] += clear < 0.0
@@ -248,13 +332,17 @@ def simulate_batch(
             if progress is not None:
                 progress(steps - k)
             break
-        if remaining < _COMPACT_BELOW * index.shape[0] or remaining < _COMPACT_MIN:
+        shrunk = remaining < index.shape[0]  # compact only when a run has just finished
+        if shrunk and (remaining < _COMPACT_BELOW * index.shape[0] or remaining < _COMPACT_MIN):
             active = active.subset(live)
             policy = policy.keep(active, live)
             index, x, speed, a0, a1 = index[live], x[:, live], speed[live], a0[live], a1[live]
+            lag, flown = lag[live], flown[live]
             live = np.ones(remaining, dtype=bool)
-        x_next = _advance(x, speed, a0, (a1 - a0) / dt, k * dt, dt)
+        slope = (a1 - a0) / dt
+        x_next = _advance(x, speed, a0, slope, flown, lag, k * dt, dt)
         x = np.where(live, x_next, x)
+        flown = np.where(live, flown_accel_m_s2(a0, slope, flown, lag, dt), flown)
     return RunMetrics(
         run_index=scenarios.run_index.copy(),
         intercepted=intercepted,
@@ -266,15 +354,32 @@ def simulate_batch(
         max_accel_ratio=max_accel / accel_max_m_s2,
         time_at_bound_s=(bound_steps * dt).astype(np.float64),
         accel_variation_m_s2=variation,
+        abandon_unsafe_steps=unsafe_steps,
     )
 
 
 def _advance(
-    x: FloatArray, speed: FloatArray, a0: FloatArray, slope: FloatArray, t0: float, dt: float
+    x: FloatArray,
+    speed: FloatArray,
+    a0: FloatArray,
+    slope: FloatArray,
+    flown: FloatArray,
+    lag: FloatArray,
+    t0: float,
+    dt: float,
 ) -> FloatArray:
-    """RK4 over the batch with a = a0 + slope (t - t0) over the step."""
+    """RK4 over the batch with a = a0 + slope (t - t0) commanded over the step and its
+    lagged a_f (from ``flown`` at t0, closed form) flown."""
+
+    if not (lag > 0.0).any():  # the ideal vehicle: a flown as commanded
+
+        def ideal(t: float, state: FloatArray) -> FloatArray:
+            return unicycle_rates(state, speed, a0 + slope * (t - t0))  # type: ignore[arg-type]
+
+        return rk4_step(ideal, t0, x, dt)
 
     def rates(t: float, state: FloatArray) -> FloatArray:
-        return unicycle_rates(state, speed, a0 + slope * (t - t0))  # type: ignore[arg-type]
+        accel = flown_accel_m_s2(a0, slope, flown, lag, t - t0)
+        return unicycle_rates(state, speed, accel)  # type: ignore[arg-type]
 
     return rk4_step(rates, t0, x, dt)

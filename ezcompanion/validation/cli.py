@@ -16,8 +16,10 @@ from ezcompanion.config import build_dataclass
 from ezcompanion.errors import ConfigError, EzCompanionError
 from ezcompanion.guidance import BlendMode, GuidanceParams
 from ezcompanion.validation.batch import BatchSettings
-from ezcompanion.validation.campaign import POLICIES, CampaignSpec, run_campaign
+from ezcompanion.validation.campaign import CampaignSpec, run_campaign
+from ezcompanion.validation.oracle import OracleSettings
 from ezcompanion.validation.output import write_outputs
+from ezcompanion.validation.policies import POLICIES
 from ezcompanion.validation.progress import ProgressBar
 from ezcompanion.validation.scenarios import ScenarioDistribution
 
@@ -47,7 +49,23 @@ def add_validate_parser(subparsers: Any) -> None:
     p.add_argument("--dt", type=float, default=BatchSettings().dt_s, help="step (s)")
     p.add_argument("--duration", type=float, default=BatchSettings().duration_s, help="limit (s)")
     p.add_argument("--map-runs", type=int, default=2000, help="failure-map starts (0: none)")
-    p.add_argument("--workers", type=int, default=0, help="processes (0: one per core)")
+    p.add_argument(
+        "--workers", type=int, default=0,
+        help="local Dask worker processes (0: one per core; 1: run in this process)",
+    )  # fmt: skip
+    p.add_argument(
+        "--scheduler", default=None, metavar="ADDRESS",
+        help="run on an existing Dask cluster, e.g. tcp://10.0.0.5:8786 (default: a local one)",
+    )  # fmt: skip
+    p.add_argument("--no-oracle", action="store_true", help="skip the feasibility oracle")
+    p.add_argument(
+        "--oracle-budget", type=int, default=OracleSettings().intercept_budget_steps,
+        help="simulated steps the oracle may spend per run looking for a safe intercept",
+    )  # fmt: skip
+    p.add_argument(
+        "--chatter-runs", type=int, default=100,
+        help="runs flown at 20 ms and 2 ms for the chattering line (0: none; default 100)",
+    )  # fmt: skip
     p.add_argument("--chunk-runs", type=int, default=2500, help="runs per seeded chunk")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -95,6 +113,10 @@ def spec_from_args(args: argparse.Namespace) -> CampaignSpec:
         map_runs=args.map_runs,
         workers=args.workers,
         chunk_runs=args.chunk_runs,
+        scheduler=args.scheduler,
+        oracle=not args.no_oracle,
+        oracle_settings=OracleSettings(intercept_budget_steps=args.oracle_budget),
+        chatter_runs=args.chatter_runs,
     )
 
 

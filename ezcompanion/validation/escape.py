@@ -115,7 +115,7 @@ def escape_margin_m(
     rel[..., 1] = np.where(pad, PAD_M, zones[..., 1])
     out = np.empty(len(scenarios))
     _escape_kernel(
-        start, np.ascontiguousarray(scenarios.speed_m_s), np.ascontiguousarray(rel),
+        start, np.ascontiguousarray(scenarios.flown_speed_m_s), np.ascontiguousarray(rel),
         params.accel_max_m_s2, straight_s, dt_s, out,
     )  # fmt: skip
     return out

@@ -11,9 +11,16 @@ from typing import Any
 import numpy as np
 
 from ezcompanion.validation.campaign import CampaignResult
-from ezcompanion.validation.report import format_tables, strata, summarise, to_json_dict
+from ezcompanion.validation.report import (
+    GROUPS,
+    format_markdown,
+    format_tables,
+    strata,
+    summarise,
+    to_json_dict,
+)
 
-__all__ = ["summary_text", "write_outputs"]
+__all__ = ["markdown_tables", "summary_text", "write_outputs"]
 
 
 def _spec_dict(result: CampaignResult) -> dict[str, Any]:
@@ -30,60 +37,106 @@ def _spec_dict(result: CampaignResult) -> dict[str, Any]:
         "settings": dataclasses.asdict(spec.settings),
         "map_runs": spec.map_runs,
         "chunk_runs": spec.chunk_runs,
+        "oracle": dataclasses.asdict(spec.oracle_settings) if spec.oracle else None,
+        "chatter_runs": spec.chatter_runs,
+        "abandon_check": getattr(spec.abandon, "__qualname__", None),
     }
+
+
+def _map_rows(result: CampaignResult) -> list[Any]:
+    assert result.map is not None
+    size = len(result.map.scenarios)
+    labels = {"all": np.full(size, "paper layout")}
+    return summarise(result.map.metrics, labels, result.map.oracle, ("all",))
 
 
 def summary_text(result: CampaignResult) -> str:
     """The readable summary: the spec in one paragraph, then the tables."""
     spec = result.spec
-    labels = strata(result.scenarios, result.escape_margin_m)
+    labels = strata(result.scenarios, result.escape_margin_m, result.oracle)
     head = (
         f"{spec.runs} random engagements, seed {spec.seed}, dt {spec.settings.dt_s} s, "
         f"limit {spec.settings.duration_s} s, policies {', '.join(spec.policies)}; "
-        f"{result.wall_s:.1f} s wall.\nRates: % of runs [95% Wilson interval]; other columns: "
-        "medians (depth, time inside over runs that entered; miss over runs not intercepted; "
-        "t/t_line over runs intercepted).\n"
+        f"{result.wall_s:.1f} s wall ({result.cluster}).\nRates: % of runs [95% Wilson "
+        "interval], a zero count as 0/N (< its one-sided 95% upper bound); 'entered|safe "
+        "existed': entries among runs where the oracle found a safe manoeuvre; 'S+I/oracle': "
+        "safe intercepts over the oracle's feasible ones; 'no S+I|icpt existed': runs not "
+        "safely intercepted among those where the oracle found a safe intercept. Other "
+        "columns: medians (depth, time inside over runs that entered; miss over runs not "
+        "intercepted; t/t_line over runs intercepted).\n"
     )
-    text = head + "\n" + format_tables(summarise(result.metrics, labels))
+    text = head + _oracle_line(result) + "\n" + format_tables(
+        summarise(result.metrics, labels, result.oracle)
+    )
     if result.map is not None:
-        labels_map = {"all": np.full(len(result.map.scenarios), "paper layout")}
-        rows = summarise(result.map.metrics, labels_map | _empty_groups(labels_map))
         text += (f"\n\nFailure map: {len(result.map.scenarios)} starts around the paper's "
-                 "layout\n" + format_tables(rows, ("all",)))  # fmt: skip
+                 "layout\n" + format_tables(_map_rows(result), ("all",)))  # fmt: skip
+    for chatter in result.chattering:
+        text += "\n\nChattering: " + chatter.line()
     return text + "\n"
 
 
-def _empty_groups(labels: dict[str, Any]) -> dict[str, Any]:
-    from ezcompanion.validation.report import GROUPS
+def _oracle_line(result: CampaignResult) -> str:
+    oracle = result.oracle
+    if oracle is None:
+        return "Oracle: not run.\n"
+    size = len(oracle)
+    parts = []
+    for name, verdicts in (("safe manoeuvre", oracle.safe), ("safe intercept", oracle.intercept)):
+        found = int(np.count_nonzero(verdicts == 1))
+        exhausted = int(np.count_nonzero(verdicts == 0))
+        budget = int(np.count_nonzero(verdicts == -1))
+        parts.append(
+            f"{name} found in {found}/{size} runs ({exhausted} none in the family, "
+            f"{budget} budget spent)"
+        )
+    return "Oracle: " + "; ".join(parts) + ".\n"
 
-    size = len(next(iter(labels.values())))
-    return {g: np.full(size, "-") for g in GROUPS if g not in labels}
+
+def markdown_tables(result: CampaignResult) -> str:
+    """The headline tables in Markdown, for docs/validation.md."""
+    labels = strata(result.scenarios, result.escape_margin_m, result.oracle)
+    rows = summarise(result.metrics, labels, result.oracle)
+    groups = ("all", "layout x target", "start", "response", "oracle safe", "oracle intercept")
+    text = format_markdown(rows, [g for g in groups if g in GROUPS])
+    if result.map is not None:
+        text += "\n**failure map**\n\n" + format_markdown(_map_rows(result), ("all",))
+    for chatter in result.chattering:
+        text += "\n- chattering, " + chatter.line() + "\n"
+    return text
 
 
 def write_outputs(result: CampaignResult, out_dir: Path, *, figures: bool = True) -> list[Path]:
     """Write report.json, summary.txt, runs.npz and (optionally) the figures to ``out_dir``."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    labels = strata(result.scenarios, result.escape_margin_m)
+    labels = strata(result.scenarios, result.escape_margin_m, result.oracle)
     report: dict[str, Any] = {
         "spec": _spec_dict(result),
         "wall_s": result.wall_s,
+        "cluster": result.cluster,
         "machine": {"python": platform.python_version(), "processor": platform.machine()},
-        "strata": to_json_dict(summarise(result.metrics, labels)),
+        "strata": to_json_dict(summarise(result.metrics, labels, result.oracle)),
+        "chattering": [
+            {"policy": c.policy, "coarse_m_s2": c.coarse_m_s2.tolist(),
+             "fine_m_s2": c.fine_m_s2.tolist()} for c in result.chattering
+        ],
     }
     if result.map is not None:
-        size = len(result.map.scenarios)
-        map_labels = {"all": np.full(size, "paper layout")}
-        report["failure_map"] = to_json_dict(
-            summarise(result.map.metrics, map_labels | _empty_groups(map_labels))
-        )
-    written = [out_dir / "report.json", out_dir / "summary.txt", out_dir / "runs.npz"]
+        report["failure_map"] = to_json_dict(_map_rows(result))
+    written = [
+        out_dir / "report.json", out_dir / "summary.txt", out_dir / "runs.npz",
+        out_dir / "tables.md",
+    ]  # fmt: skip
     written[0].write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
     written[1].write_text(summary_text(result), encoding="utf-8")
+    written[3].write_text(markdown_tables(result), encoding="utf-8")
     arrays: dict[str, Any] = {
         f"scenario_{f.name}": getattr(result.scenarios, f.name)
         for f in dataclasses.fields(result.scenarios)
     }
     arrays["escape_margin_m"] = result.escape_margin_m
+    if result.oracle is not None:
+        arrays |= {f"oracle_{k}": getattr(result.oracle, k) for k in ("safe", "intercept")}
     for name, metrics in result.metrics.items():
         arrays |= {f"{name}_{k}": v for k, v in metrics.as_arrays().items()}
     np.savez_compressed(written[2], **arrays)

@@ -107,7 +107,7 @@ class QpFilterPolicy:
             speed_m_s=state.speed_m_s,
             accel_m_s2=0.0,
         )
-        self.terms = qp_terms(out, batch.speed_m_s, self.params)
+        self.terms = qp_terms(out, np.asarray(state.speed_m_s, dtype=np.float64), self.params)
         u = solve_cbf_qp(self.terms)
         self.accel_m_s2 = u
         return StepResult(

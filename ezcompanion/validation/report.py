@@ -1,7 +1,13 @@
 """Per-policy, per-stratum summaries of a campaign: rates with 95% Wilson intervals.
 
-Every rate is a ``Rate`` (count of trials, Wilson interval); continuous outcomes are a
-``Spread`` (median and 5th/95th percentiles) over the runs where they mean something:
+Every rate is a ``Rate`` (count of trials, Wilson interval; a zero count with its
+one-sided upper bound). Against the feasibility oracle (``oracle``): zone entries among
+the runs where a safe manoeuvre existed (a sound count of law failures), runs not safely
+intercepted among those where a safe intercept existed, and the safe-and-intercepted
+count over the oracle's count of feasible intercepts (its bound; a lower bound on what is
+possible, so a share above 1 means the law found intercepts the oracle did not).
+Continuous outcomes are a ``Spread`` (median and 5th/95th percentiles) over the runs
+where they mean something:
 depth and time inside over the runs that entered, miss distance over those not
 intercepted, time ratio over those intercepted.
 """
@@ -17,10 +23,20 @@ import numpy as np
 import numpy.typing as npt
 
 from ezcompanion.validation.batch import RunMetrics
+from ezcompanion.validation.oracle import OracleResult
+from ezcompanion.validation.response import ResponseClass
 from ezcompanion.validation.scenarios import Layout, ScenarioBatch, StartClass, TargetClass
 from ezcompanion.validation.stats import Rate, Spread
 
-__all__ = ["GROUPS", "StratumSummary", "format_tables", "strata", "summarise", "to_json_dict"]
+__all__ = [
+    "GROUPS",
+    "StratumSummary",
+    "format_markdown",
+    "format_tables",
+    "strata",
+    "summarise",
+    "to_json_dict",
+]
 
 StrArray = npt.NDArray[np.str_]
 
@@ -33,7 +49,11 @@ GROUPS = (
     "escape",
     "defenders",
     "heading error",
+    "response",
+    "oracle safe",
+    "oracle intercept",
 )
+BoolArray = npt.NDArray[np.bool_]
 
 
 @dataclass(frozen=True)
@@ -47,6 +67,11 @@ class StratumSummary:
     entered: Rate
     intercepted: Rate
     safe_and_intercepted: Rate
+    entered_where_safe_existed: Rate
+    unsafe_or_missed_where_intercept_existed: Rate
+    oracle_intercept: Rate
+    share_of_oracle_bound: float
+    abandon_ok: Rate
     reached_bound: Rate
     depth_m: Spread
     time_inside_s: Spread
@@ -58,9 +83,11 @@ class StratumSummary:
 
 
 def strata(
-    scenarios: ScenarioBatch, escape_margin_m: npt.NDArray[np.float64]
+    scenarios: ScenarioBatch,
+    escape_margin_m: npt.NDArray[np.float64],
+    oracle: OracleResult | None = None,
 ) -> dict[str, StrArray]:
-    """Each group's label per run."""
+    """Each group's label per run (the oracle's groups only with an oracle)."""
     size = len(scenarios)
     layout = np.array([Layout(v).name.lower() for v in range(len(Layout))])[scenarios.layout]
     target = np.array([t.name.lower() for t in TargetClass])[scenarios.target_class]
@@ -68,7 +95,14 @@ def strata(
     error_deg = np.degrees(np.abs(scenarios.heading_error_rad))
     edges = np.array([20.0, 40.0, 60.0])
     error_bins = np.array(["0-20 deg", "20-40 deg", "40-60 deg", "> 60 deg"])
-    return {
+    lag = scenarios.response_lag_s
+    lag_bins = np.array(["lag 0-0.4 s", "lag 0.5-0.8 s", "lag 0.9-1.4 s"])
+    response = np.where(
+        scenarios.response_class == ResponseClass.IDEAL,
+        "ideal",
+        lag_bins[np.searchsorted(np.array([0.45, 0.85]), lag, side="right")],
+    )
+    labels = {
         "all": np.full(size, "all"),
         "layout x target": np.char.add(np.char.add(layout, " / "), target),
         "layout": layout,
@@ -77,11 +111,28 @@ def strata(
         "escape": np.where(escape_margin_m >= 0.0, "escapable", "no escape"),
         "defenders": scenarios.defenders.astype(str),
         "heading error": error_bins[np.searchsorted(edges, error_deg, side="right")],
+        "response": response,
     }
+    if oracle is not None:
+        labels["oracle safe"] = np.where(oracle.safe_feasible, "safe existed", "none found")
+        labels["oracle intercept"] = np.where(
+            oracle.intercept_feasible, "intercept existed", "none found"
+        )
+    return labels
 
 
-def _summary(policy: str, group: str, level: str, m: RunMetrics) -> StratumSummary:
+def _summary(
+    policy: str,
+    group: str,
+    level: str,
+    m: RunMetrics,
+    safe_ok: BoolArray,
+    intercept_ok: BoolArray,
+) -> StratumSummary:
     entered = m.entered
+    safe_intercept = m.intercepted & ~entered
+    checked = (m.abandon_unsafe_steps >= 0) & ~entered
+    bound = int(np.count_nonzero(intercept_ok))
     return StratumSummary(
         policy=policy,
         group=group,
@@ -89,7 +140,14 @@ def _summary(policy: str, group: str, level: str, m: RunMetrics) -> StratumSumma
         runs=len(m),
         entered=Rate.of(entered),
         intercepted=Rate.of(m.intercepted),
-        safe_and_intercepted=Rate.of(m.intercepted & ~entered),
+        safe_and_intercepted=Rate.of(safe_intercept),
+        entered_where_safe_existed=Rate.of(entered[safe_ok]),
+        unsafe_or_missed_where_intercept_existed=Rate.of(~safe_intercept[intercept_ok]),
+        oracle_intercept=Rate.of(intercept_ok),
+        share_of_oracle_bound=(
+            float(np.count_nonzero(safe_intercept)) / bound if bound else math.nan
+        ),
+        abandon_ok=Rate.of(m.abandon_unsafe_steps[checked] == 0),
         reached_bound=Rate.of(m.time_at_bound_s > 0.0),
         depth_m=Spread.of(-m.min_clearance_m[entered]),
         time_inside_s=Spread.of(m.time_inside_s[entered]),
@@ -102,16 +160,27 @@ def _summary(policy: str, group: str, level: str, m: RunMetrics) -> StratumSumma
 
 
 def summarise(
-    metrics: Mapping[str, RunMetrics], labels: Mapping[str, StrArray]
+    metrics: Mapping[str, RunMetrics],
+    labels: Mapping[str, StrArray],
+    oracle: OracleResult | None = None,
+    groups: Sequence[str] = GROUPS,
 ) -> list[StratumSummary]:
-    """Summaries for every policy, group and level (levels sorted)."""
+    """Summaries for every policy, group and level (levels sorted); without an oracle the
+    oracle-relative rates are empty."""
     rows = []
-    for group in GROUPS:
+    size = len(next(iter(metrics.values())))
+    safe_ok = oracle.safe_feasible if oracle is not None else np.zeros(size, dtype=bool)
+    hit_ok = oracle.intercept_feasible if oracle is not None else np.zeros(size, dtype=bool)
+    for group in groups:
+        if group not in labels:
+            continue
         label = labels[group]
         for level in sorted(set(label.tolist())):
             mask = label == level
             for policy, m in metrics.items():
-                rows.append(_summary(policy, group, level, m.subset(mask)))
+                rows.append(
+                    _summary(policy, group, level, m.subset(mask), safe_ok[mask], hit_ok[mask])
+                )
     return rows
 
 
@@ -131,8 +200,11 @@ def to_json_dict(rows: Sequence[StratumSummary]) -> list[dict[str, Any]]:
 _COLUMNS = (
     ("runs", 6),
     ("entered EZ [95% CI]", 21),
+    ("entered|safe existed", 21),
     ("intercepted [95% CI]", 21),
     ("safe+intercept [95% CI]", 23),
+    ("S+I/oracle", 10),
+    ("no S+I|icpt existed", 21),
     ("depth m", 7),
     ("inside s", 8),
     ("miss m", 7),
@@ -147,8 +219,11 @@ def _cells(row: StratumSummary) -> list[str]:
     return [
         str(row.runs),
         row.entered.percent(),
+        row.entered_where_safe_existed.percent(),
         row.intercepted.percent(),
         row.safe_and_intercepted.percent(),
+        "-" if math.isnan(row.share_of_oracle_bound) else f"{row.share_of_oracle_bound:.3f}",
+        row.unsafe_or_missed_where_intercept_existed.percent(),
         _median(row.depth_m),
         _median(row.time_inside_s),
         _median(row.miss_distance_m),
@@ -177,3 +252,27 @@ def format_tables(rows: Sequence[StratumSummary], groups: Sequence[str] = GROUPS
             cells = " ".join(f"{c:>{w}}" for c, (_, w) in zip(_cells(r), _COLUMNS, strict=True))
             lines.append(f"{r.level + '  ' + r.policy:<{width}}" + cells)
     return "\n".join(lines[1:])
+
+
+def format_markdown(rows: Sequence[StratumSummary], groups: Sequence[str] = GROUPS) -> str:
+    """The headline columns as Markdown tables, one per group (for docs/validation.md)."""
+    head = (
+        "| stratum | policy | runs | entered | entered, safe existed | safe+intercepted "
+        "| of oracle bound | not S+I, intercept existed | TV m/s^2 |"
+    )
+    lines: list[str] = []
+    for group in groups:
+        chosen = [r for r in rows if r.group == group]
+        if not chosen:
+            continue
+        lines += ["", f"**{group}**", "", head, "| " + " | ".join(["---"] * 9) + " |"]
+        for r in chosen:
+            share = "-" if math.isnan(r.share_of_oracle_bound) else f"{r.share_of_oracle_bound:.3f}"
+            cells = [
+                r.level, r.policy, str(r.runs), r.entered.percent(),
+                r.entered_where_safe_existed.percent(), r.safe_and_intercepted.percent(), share,
+                r.unsafe_or_missed_where_intercept_existed.percent(),
+                _median(r.accel_variation_m_s2),
+            ]  # fmt: skip
+            lines.append("| " + " | ".join(c.strip() for c in cells) + " |")
+    return "\n".join(lines[1:]) + "\n"

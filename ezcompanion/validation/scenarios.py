@@ -33,6 +33,10 @@ invariant under translation and rotation, so nothing is lost). One run:
    Its clearance to the other zones must be >= 0.
 6. A geometry that fails its class's conditions is drawn again (the classes themselves are
    drawn once, so their shares are the configured ones).
+7. **Vehicle response** (``response``): ideal with probability
+   ``ideal_response_probability``, else a lag on the levels of ``response_lag_step_s`` in
+   ``response_lag_s`` and a speed factor uniform in ``speed_factor``; from a stream of its
+   own, so the geometry above is the same whatever the response.
 
 Runs are drawn in blocks of ``BLOCK_RUNS`` from ``SeedSequence(seed, spawn_key=(kind,
 block))``, so run i is the same whatever the chunking, worker count or total run count.
@@ -50,6 +54,7 @@ import numpy.typing as npt
 
 from ezcompanion.errors import ConfigError
 from ezcompanion.guidance import Target, ZoneSet
+from ezcompanion.validation.response import draw_response
 
 __all__ = [
     "BLOCK_RUNS",
@@ -118,6 +123,11 @@ class ScenarioDistribution:
     close_start_probability: float = 0.1
     close_lead_max_deg: float = 45.0
     close_clearance_m: tuple[float, float] = (0.05, 0.5)
+    # the vehicle's response (``ezcompanion.validation.response``)
+    ideal_response_probability: float = 0.2
+    response_lag_s: tuple[float, float] = (0.0, 1.4)
+    response_lag_step_s: float = 0.2
+    speed_factor: tuple[float, float] = (0.78, 1.0)
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -141,6 +151,12 @@ class ScenarioDistribution:
             raise ConfigError("target_near_probability", self.target_near_probability, "in [0, 1]")
         if not 0.0 <= self.close_start_probability <= 1.0:
             raise ConfigError("close_start_probability", self.close_start_probability, "in [0, 1]")
+        if not 0.0 <= self.ideal_response_probability <= 1.0:
+            raise ConfigError(
+                "ideal_response_probability", self.ideal_response_probability, "in [0, 1]"
+            )
+        if not (self.speed_factor[0] > 0.0 and self.speed_factor[1] <= 1.0):
+            raise ConfigError("speed_factor", self.speed_factor, "must lie inside (0, 1]")
         if self.heading_error_max_deg > 180.0:
             raise ConfigError("heading_error_max_deg", self.heading_error_max_deg, "<= 180")
 
@@ -166,6 +182,9 @@ class ScenarioBatch:
     target_class: IntArray
     start_class: IntArray
     heading_error_rad: FloatArray
+    response_lag_s: FloatArray  # tau of the vehicle's lag, commanded to flown a
+    speed_factor: FloatArray  # flown speed over commanded (``speed_m_s``)
+    response_class: IntArray  # ``response.ResponseClass``
 
     def __len__(self) -> int:
         return int(self.north_m.shape[0])
@@ -194,11 +213,31 @@ class ScenarioBatch:
         ]
 
     @property
+    def flown_speed_m_s(self) -> FloatArray:
+        """The speed the vehicle flies: commanded speed times the speed factor."""
+        return self.speed_m_s * self.speed_factor
+
+    @property
     def straight_line_time_s(self) -> FloatArray:
-        """Start-to-target distance over speed: the time of a straight, unthreatened flight."""
+        """Start-to-target distance over the flown speed: a straight, unthreatened flight."""
         dn = self.target_north_m - self.north_m
         de = self.target_east_m - self.east_m
-        return np.hypot(dn, de) / self.speed_m_s
+        return np.hypot(dn, de) / self.flown_speed_m_s
+
+    def with_response(
+        self, dist: ScenarioDistribution, seed: int, kind: int = _KIND_RANDOM
+    ) -> ScenarioBatch:
+        """The same runs with a vehicle response drawn per run (``response``)."""
+        lag, factor, cls = draw_response(
+            lag_s=dist.response_lag_s, lag_step_s=dist.response_lag_step_s,
+            speed_factor=dist.speed_factor, ideal_probability=dist.ideal_response_probability,
+            seed=seed, kind=kind, start=int(self.run_index.min()),
+            stop=int(self.run_index.max()) + 1, block_runs=BLOCK_RUNS,
+        )  # fmt: skip
+        pick = self.run_index - self.run_index.min()
+        values = {f.name: getattr(self, f.name) for f in fields(self)}
+        values |= {"response_lag_s": lag[pick], "speed_factor": factor[pick]}
+        return ScenarioBatch(**(values | {"response_class": cls[pick]}))
 
     def subset(self, index: IntArray | npt.NDArray[np.bool_]) -> ScenarioBatch:
         """The runs at ``index`` (integer positions or a mask)."""
@@ -407,6 +446,9 @@ def _pack(
         target_class=np.array([d[3] for d in draws], dtype=np.int64),
         start_class=np.array([d[4] for d in draws], dtype=np.int64),
         heading_error_rad=np.array([d[5] for d in draws]),
+        response_lag_s=np.zeros(size),
+        speed_factor=np.ones(size),
+        response_class=np.zeros(size, dtype=np.int64),
     )
 
 
@@ -417,4 +459,4 @@ def draw_scenarios(dist: ScenarioDistribution, seed: int, start: int, stop: int)
     blocks = range(start // BLOCK_RUNS, (stop - 1) // BLOCK_RUNS + 1)
     batch = ScenarioBatch.concat([_block(dist, seed, _KIND_RANDOM, b) for b in blocks])
     offset = blocks[0] * BLOCK_RUNS
-    return batch.subset(np.arange(start - offset, stop - offset))
+    return batch.subset(np.arange(start - offset, stop - offset)).with_response(dist, seed)

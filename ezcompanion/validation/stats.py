@@ -8,6 +8,11 @@ The Wilson interval for k successes in n trials at normal quantile z:
 It stays inside [0, 1], is not degenerate at k = 0 or k = n (unlike the normal
 approximation) and covers close to its nominal level for small n, which matters here:
 failure rates are often a handful of runs out of thousands.
+
+For a zero count the statement that matters is an upper bound: with 0 events in n trials
+the exact one-sided 95% (Clopper-Pearson) bound is 1 - 0.05^(1/n), about 3 / n (the "rule
+of three"): 0 in 100,000 runs bounds the rate below 0.003%. ``Rate.upper_95`` is that
+bound for any count (the one-sided exact bound), and ``Rate.percent`` states it for zeros.
 """
 
 from __future__ import annotations
@@ -20,7 +25,7 @@ import numpy.typing as npt
 
 from ezcompanion.errors import ConfigError
 
-__all__ = ["Z_95", "Rate", "Spread", "wilson_interval"]
+__all__ = ["Z_95", "Rate", "Spread", "upper_bound_95", "wilson_interval"]
 
 # two-sided 95%: the 0.975 quantile of the standard normal
 Z_95 = 1.959963984540054
@@ -39,6 +44,39 @@ def wilson_interval(successes: int, trials: int, z: float = Z_95) -> tuple[float
     centre = (p + 0.5 * z2_n) / (1.0 + z2_n)
     half = z / (1.0 + z2_n) * math.sqrt(p * (1.0 - p) / trials + 0.25 * z2_n / trials)
     return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def upper_bound_95(successes: int, trials: int) -> float:
+    """The exact one-sided 95% upper bound on the rate (Clopper-Pearson): the p at which
+    seeing at most ``successes`` in ``trials`` has probability 0.05."""
+    if trials <= 0:
+        raise ConfigError("trials", trials, "must be > 0")
+    if not 0 <= successes <= trials:
+        raise ConfigError("successes", successes, f"must be in [0, {trials}]")
+    if successes == trials:
+        return 1.0
+    if successes == 0:
+        return float(1.0 - 0.05 ** (1.0 / trials))
+    # bisection on the binomial CDF (monotone decreasing in p)
+    low, high = successes / trials, 1.0
+    for _ in range(80):
+        mid = 0.5 * (low + high)
+        if _binomial_cdf(successes, trials, mid) > 0.05:
+            low = mid
+        else:
+            high = mid
+    return high
+
+
+def _binomial_cdf(k: int, n: int, p: float) -> float:
+    log_q, log_p = math.log1p(-p), math.log(p)
+    terms = [
+        math.lgamma(n + 1) - math.lgamma(i + 1) - math.lgamma(n - i + 1)
+        + i * log_p + (n - i) * log_q
+        for i in range(k + 1)
+    ]  # fmt: skip
+    top = max(terms)
+    return float(math.exp(top) * sum(math.exp(t - top) for t in terms))
 
 
 @dataclass(frozen=True)
@@ -61,10 +99,18 @@ class Rate:
         low, high = wilson_interval(count, trials)
         return cls(count, trials, count / trials, low, high)
 
+    @property
+    def upper_95(self) -> float:
+        """The exact one-sided 95% upper bound on the rate (NaN for an empty sample)."""
+        return math.nan if self.trials == 0 else upper_bound_95(self.count, self.trials)
+
     def percent(self) -> str:
-        """``12.3% [11.1, 13.6]``, or ``-`` for an empty sample."""
+        """``12.3% [11.1, 13.6]``; a zero count as ``0/N (<0.0300%)`` with its one-sided
+        upper bound; ``-`` for an empty sample."""
         if self.trials == 0:
             return "-"
+        if self.count == 0:
+            return f"0/{self.trials} (<{_significant(100 * self.upper_95)}%)"
         return f"{100 * self.rate:5.1f}% [{100 * self.low:4.1f}, {100 * self.high:4.1f}]"
 
 
@@ -91,3 +137,11 @@ class Spread:
         if self.size == 0:
             return "-"
         return f"{self.median:{fmt}} [{self.p05:{fmt}}, {self.p95:{fmt}}]"
+
+
+def _significant(value: float, digits: int = 2) -> str:
+    """``value`` with ``digits`` significant digits, no exponent (0.0030, 1.5, 12)."""
+    if value <= 0.0 or not math.isfinite(value):
+        return f"{value:g}"
+    decimals = max(0, digits - 1 - math.floor(math.log10(value)))
+    return f"{value:.{decimals}f}"

@@ -1,0 +1,22 @@
+#!/bin/sh
+# Regenerates the numbers of docs/validation.md: every command and seed it quotes.
+# Run from the repository root with the project installed (make .venv/.installed):
+#   sh docs/validation/regenerate.sh            # the 10,000-run campaign and its figures
+#   FULL=1 sh docs/validation/regenerate.sh     # also the 100,000-run campaign (~5-15 min)
+# Add SCHEDULER=tcp://host:8786 to run on an existing Dask cluster instead of a local one.
+set -eu
+BIN=${BIN:-.venv/bin}
+OUT=${OUT:-validation-out}
+WHERE=""
+if [ -n "${SCHEDULER:-}" ]; then WHERE="--scheduler $SCHEDULER"; fi
+# shellcheck disable=SC2086
+"$BIN/ezcompanion" validate --runs 10000 --seed 2026 --map-runs 2000 --chatter-runs 100 \
+    --no-progress --out "$OUT" $WHERE
+cp "$OUT/summary.txt" "$OUT/tables.md" "$OUT"/*.png docs/validation/
+if [ -n "${FULL:-}" ]; then
+    # shellcheck disable=SC2086
+    "$BIN/ezcompanion" validate --runs 100000 --seed 2026 --law robust --map-runs 10000 \
+        --chatter-runs 0 --no-figures --no-progress --out "$OUT-100k" $WHERE
+    cp "$OUT-100k/tables.md" docs/validation/tables_100k.md
+    cp "$OUT-100k/summary.txt" docs/validation/summary_100k.txt
+fi

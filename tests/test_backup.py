@@ -29,6 +29,7 @@ from ezcompanion.guidance import (
     ez_boundary_point,
 )
 from ezcompanion.guidance import backup as bk
+from ezcompanion.guidance.abandon import ABANDON_PROFILES, abandon_gap_m
 from ezcompanion.guidance.controller import GuidanceStep
 from ezcompanion.sim.engine import SimResult, simulate
 
@@ -40,19 +41,7 @@ PARAMS = GuidanceParams()
 
 
 def settings_for(params: GuidanceParams) -> FloatArray:
-    return bk.ShieldSettings(
-        accel_max_m_s2=params.accel_max_m_s2,
-        p1_1_s=params.actuator_p1_1_s,
-        n=params.actuator_n,
-        command_limit_m_s3=params.command_limit_m_s3,
-        response_lag_s=params.response_lag_s,
-        margin_m=params.shield_margin_m,
-        band_m=params.shield_band_m,
-        prediction_step_ratio=params.prediction_step_ratio,
-        abandon_turn_s=params.abandon_turn_s,
-        abandon_hold_s=params.abandon_hold_s,
-        abandon_brake_m_s2=params.abandon_brake_m_s2,
-    ).packed
+    return bk.ShieldSettings.of(params).packed
 
 
 def true_gap(zones: ZoneSet, north: float, east: float, course: float) -> float:
@@ -479,3 +468,40 @@ def test_the_controller_reports_the_shield() -> None:
     robust.reset()
     other = robust.step(KinematicState(8.0, -4.0, 2.55, 1.0), 0.02)
     assert int(other.backup) == bk.BACKUP_NONE and math.isnan(float(other.shield_weight))
+
+
+# safe to abandon -------------------------------------------------------------------------
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    zones=layouts(),
+    north=st.floats(-8, 8),
+    east=st.floats(-8, 8),
+    course=st.floats(-math.pi, math.pi),
+    name=st.sampled_from(sorted(ABANDON_PROFILES)),
+)
+def test_the_abandon_gap_bounds_the_path_flown_when_the_companion_falls_silent(
+    zones: ZoneSet, north: float, east: float, course: float, name: str
+) -> None:
+    """Fly the abandon path densely (straight at v for the hold, then braking, the
+    look-ahead mu R v'/v shrinking with the speed v'; a stopped vehicle is inside the reach
+    disc): its least gap is never below the closed form's."""
+    profile = ABANDON_PROFILES[name]
+    params = dataclasses.replace(PARAMS, shield_margin_m=0.0)
+    at = {"north_m": np.array(north), "east_m": np.array(east), "course_rad": np.array(course)}
+    got = float(
+        abandon_gap_m(profile, params, zones, **at, accel_lat_m_s2=np.array(0.0),
+                      speed_m_s=np.array(1.0))
+    )
+    v, b, hold = 1.0, profile.brake_m_s2, profile.turn_s + profile.hold_s
+    t = np.linspace(0.0, hold + (v / b if b > 0 else 0.0), 20001)
+    speed = np.where(t <= hold, v, np.maximum(v - b * (t - hold), 0.0))
+    along = np.where(t <= hold, v * t, v * hold + v * (t - hold) - 0.5 * b * (t - hold) ** 2)
+    best = math.inf
+    for i in range(len(zones)):
+        ahead = along + float(zones.mu_range_m[0, i]) * speed / v
+        qn = north + ahead * math.cos(course) - zones.north_m[0, i]
+        qe = east + ahead * math.sin(course) - zones.east_m[0, i]
+        best = min(best, float((np.hypot(qn, qe) - zones.reach_m[0, i]).min()))
+    assert got <= best + 1e-6

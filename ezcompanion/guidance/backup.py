@@ -58,6 +58,7 @@ import numpy.typing as npt
 
 from ezcompanion.guidance._jit import jit, jit_inline
 from ezcompanion.guidance.actuator import actuator_rate, advance_one
+from ezcompanion.guidance.params import GuidanceParams
 
 __all__ = [
     "BACKUP_LEFT",
@@ -100,6 +101,8 @@ _EXIT_EVERY = 1
 # further would only find exits that its flight, by its rule, takes anyway: those are
 # certified where they are taken).
 _EXIT_SEARCH_RAD = math.pi
+# The abandon path's turn is checked at this many points.
+_ABANDON_ARC_SAMPLES = 8
 # The nominal's weight looks this many samples ahead (a fixed time, whatever the step).
 _PREVIEW_SAMPLES = 4
 
@@ -137,6 +140,24 @@ class ShieldSettings:
         p[S_AB_HOLD] = abandon_hold_s
         p[S_AB_BRAKE] = abandon_brake_m_s2
         self.packed = p
+
+    @classmethod
+    def of(cls, params: GuidanceParams, **abandon: float) -> ShieldSettings:
+        """The settings ``params`` give, with ``abandon_turn_s``, ``abandon_hold_s`` and
+        ``abandon_brake_m_s2`` overridden by ``abandon`` where given."""
+        return cls(
+            accel_max_m_s2=params.accel_max_m_s2,
+            p1_1_s=params.actuator_p1_1_s,
+            n=params.actuator_n,
+            command_limit_m_s3=params.command_limit_m_s3,
+            response_lag_s=params.response_lag_s,
+            margin_m=params.shield_margin_m,
+            band_m=params.shield_band_m,
+            prediction_step_ratio=params.prediction_step_ratio,
+            abandon_turn_s=abandon.get("abandon_turn_s", params.abandon_turn_s),
+            abandon_hold_s=abandon.get("abandon_hold_s", params.abandon_hold_s),
+            abandon_brake_m_s2=abandon.get("abandon_brake_m_s2", params.abandon_brake_m_s2),
+        )
 
 
 # ---------------------------------------------------------------------------------------
@@ -268,19 +289,33 @@ def _abandon_gap(
     kz: int, n: float, e: float, heading: float, accel: float, speed: float,
 ) -> float:
     """Least gap of the path the autopilot flies if no setpoint follows this state: the turn
-    goes on for ``abandon_turn_s`` (its end checked; the turn itself is on the sampled flow),
-    then straight for ``abandon_hold_s``, then braking at ``abandon_brake_m_s2`` to a stop
-    (or, without braking, the hold's end is the horizon). inf where no profile is set."""
+    goes on for ``abandon_turn_s`` (sampled at ``_ABANDON_ARC_SAMPLES`` points, each less
+    its first-order dip), then straight for ``abandon_hold_s``, then braking at
+    ``abandon_brake_m_s2`` to a stop (or, without braking, the hold's end is the horizon):
+    the straight part's look-ahead points from min(mu R, v hold) to v hold + v^2 / (2 b) +
+    mu R ahead, in closed form (a braking vehicle's look-ahead shrinks to its reach disc).
+    inf where no profile is set."""
     hold = s[S_AB_HOLD]
     if hold <= 0.0:
         return math.inf
-    n1, e1, h1 = _arc_end(n, e, heading, accel, speed, s[S_AB_TURN])
+    turn = s[S_AB_TURN]
+    best = math.inf
+    if turn > 0.0:
+        step = turn / _ABANDON_ARC_SAMPLES
+        amax = s[S_AMAX]
+        for j in range(_ABANDON_ARC_SAMPLES):
+            nj, ej, hj = _arc_end(n, e, heading, accel, speed, (j + 0.5) * step)
+            # a midpoint sample: only the first-order dip holds (an infinite rate bound)
+            gap = _point_gap(zn, ze, zmur, zreach, kz, nj, ej, math.cos(hj), math.sin(hj),
+                             s[S_EPS], speed, amax, math.inf, step)  # fmt: skip
+            best = min(best, gap)
+    n1, e1, h1 = _arc_end(n, e, heading, accel, speed, turn)
     brake = s[S_AB_BRAKE]
     stop = speed * hold + (0.5 * speed * speed / brake if brake > 0.0 else 0.0)
-    return _segment_gap(
+    return min(best, _segment_gap(
         zn, ze, zmur, zreach, kz, n1, e1, math.cos(h1), math.sin(h1), speed * hold, stop,
         True, s[S_EPS], 0.0,
-    )  # fmt: skip
+    ))  # fmt: skip
 
 
 def lookahead_gap(
@@ -691,3 +726,25 @@ def shield_batch(
                 s, zn, ze, zmur, zreach, 0 if shared else k, n[k], e[k], h[k], a[k], av[k],
                 speed[k], nominal[k], dt, int(current[k]), out, k,
             )  # fmt: skip
+
+
+@jit
+def abandon_gap_batch(
+    s: FloatArray,
+    zn: FloatArray,
+    ze: FloatArray,
+    zmur: FloatArray,
+    zreach: FloatArray,
+    n: FloatArray,
+    e: FloatArray,
+    h: FloatArray,
+    a: FloatArray,
+    speed: FloatArray,
+    out: FloatArray,
+) -> None:
+    """``_abandon_gap`` for every vehicle (zone row k, or 0 if shared) into ``out``."""
+    shared = zn.shape[0] == 1
+    for k in range(n.shape[0]):
+        out[k] = _abandon_gap(
+            s, zn, ze, zmur, zreach, 0 if shared else k, n[k], e[k], h[k], a[k], speed[k]
+        )

@@ -133,20 +133,7 @@ class GuidanceController:
         self._accel = np.zeros(1)
         self._flown = np.zeros(1)  # the model's flown lateral acceleration (backup law)
         self._backup = np.full(1, BACKUP_NONE, dtype=np.int8)
-        prm = self.params
-        self._shield = ShieldSettings(
-            accel_max_m_s2=prm.accel_max_m_s2,
-            p1_1_s=prm.actuator_p1_1_s,
-            n=prm.actuator_n,
-            command_limit_m_s3=prm.command_limit_m_s3,
-            response_lag_s=prm.response_lag_s,
-            margin_m=prm.shield_margin_m,
-            band_m=prm.shield_band_m,
-            prediction_step_ratio=prm.prediction_step_ratio,
-            abandon_turn_s=prm.abandon_turn_s,
-            abandon_hold_s=prm.abandon_hold_s,
-            abandon_brake_m_s2=prm.abandon_brake_m_s2,
-        ).packed
+        self._shield = ShieldSettings.of(self.params).packed
 
     @property
     def accel_m_s2(self) -> FloatArray:

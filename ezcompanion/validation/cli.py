@@ -15,6 +15,8 @@ from typing import Any
 from ezcompanion.config import build_dataclass
 from ezcompanion.errors import ConfigError, EzCompanionError
 from ezcompanion.guidance import BlendMode, GuidanceParams
+from ezcompanion.guidance.abandon import ABANDON_PROFILES
+from ezcompanion.validation.abandon import AbandonChecker
 from ezcompanion.validation.batch import BatchSettings
 from ezcompanion.validation.campaign import CampaignSpec, run_campaign
 from ezcompanion.validation.oracle import OracleSettings
@@ -65,6 +67,11 @@ def add_validate_parser(subparsers: Any) -> None:
     p.add_argument(
         "--chatter-runs", type=int, default=100,
         help="runs flown at 20 ms and 2 ms for the chattering line (0: none; default 100)",
+    )  # fmt: skip
+    p.add_argument(
+        "--abandon", choices=sorted(ABANDON_PROFILES), default=None,
+        help="check after the first second that every setpoint is safe to keep flying with "
+        "this autopilot's behaviour when the companion falls silent (default: not checked)",
     )  # fmt: skip
     p.add_argument("--chunk-runs", type=int, default=2500, help="runs per seeded chunk")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
@@ -117,6 +124,7 @@ def spec_from_args(args: argparse.Namespace) -> CampaignSpec:
         oracle=not args.no_oracle,
         oracle_settings=OracleSettings(intercept_budget_steps=args.oracle_budget),
         chatter_runs=args.chatter_runs,
+        abandon=AbandonChecker(args.abandon) if args.abandon else None,
     )
 
 

@@ -147,6 +147,9 @@ class GuidanceParams:
     # blended out over shield_band_m above the acceptance level
     shield_margin_m: float = 0.1
     shield_band_m: float = 0.05
+    # ... and its nominal's own safety share fades out within this many turn radii
+    # (v^2 / a_max) beyond one of the target, so that it arrives (0: no fade)
+    safety_fade_turn_radii: float = 4.0
     prediction_step_ratio: float = 0.05
     # what the autopilot flies if the companion falls silent (0 s: not checked): the turn goes
     # on for abandon_turn_s, then straight for abandon_hold_s, then braking (0: none)
@@ -188,6 +191,7 @@ class GuidanceParams:
             _non_negative(name, getattr(self, name))
         _positive("shield_band_m", self.shield_band_m)
         _non_negative("shield_margin_m", self.shield_margin_m)
+        _non_negative("safety_fade_turn_radii", self.safety_fade_turn_radii)
         _finite("prediction_step_ratio", self.prediction_step_ratio)
         if not 0.0 < self.prediction_step_ratio <= 0.25:
             raise ConfigError(

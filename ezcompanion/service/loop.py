@@ -8,50 +8,16 @@ the budget, or when the engagement is over; a state the law must not see never r
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from enum import StrEnum
 
 from ezcompanion.config import Scenario
-from ezcompanion.guidance import GuidanceController, GuidanceStep, KinematicState, LawName
-from ezcompanion.service.state import VehicleState
+from ezcompanion.guidance import GuidanceController, KinematicState, LawName
+from ezcompanion.records import Hold, TickCommand, VehicleState
 
 __all__ = ["GuidanceLoop", "Hold", "TickCommand"]
 
 # Below this fraction of the nominal speed the velocity has no usable direction (yaw stands
 # in for course) and the law is fed this fraction of the nominal speed instead.
 _MIN_SPEED_FRACTION = 0.5
-
-
-class Hold(StrEnum):
-    """Why a tick sends nothing."""
-
-    NO_TELEMETRY = "no position yet"
-    STALE = "position older than the budget"
-    CAPTURED = "the engagement is over"
-
-
-@dataclass(frozen=True)
-class TickCommand:
-    """What one tick asks of the vehicle, with what the law saw."""
-
-    time_s: float
-    dt_s: float
-    state: VehicleState
-    course_rad: float  # measured course the law used
-    speed_m_s: float  # speed the law used (measured, at least half the nominal)
-    nominal_speed_m_s: float  # the speed to fly (the scenario's constant speed)
-    accel_lat_m_s2: float  # lateral acceleration to fly (the actuator state at the step's end)
-    step: GuidanceStep
-
-    @property
-    def captured(self) -> bool:
-        """This step reached the intercept radius: the engagement is over, send nothing."""
-        return bool(self.step.captured)
-
-    @property
-    def turn_rate_rad_s(self) -> float:
-        """Course rate that the lateral acceleration gives at the law's speed."""
-        return self.accel_lat_m_s2 / self.speed_m_s
 
 
 class GuidanceLoop:

@@ -28,6 +28,7 @@ import math
 from dataclasses import dataclass, field
 
 from ezcompanion.config import GeoOrigin
+from ezcompanion.records import VehicleState
 from ezcompanion.wire import (
     Message,
     cm_s_to_m_s,
@@ -46,39 +47,6 @@ _REBOOT_BACKSTEP_S = 10.0
 _FROZEN_AFTER_M = 0.1
 # moves smaller than this do not count as moving (quantisation: GLOBAL_POSITION_INT is 1e-7 deg)
 _STILL_M = 0.02
-
-
-@dataclass(frozen=True)
-class VehicleState:
-    """The vehicle as the companion last saw it (local NED of the scenario, SI).
-
-    ``*_time_s`` are companion clock times of arrival; ``age_s`` gives how old each is.
-    """
-
-    north_m: float
-    east_m: float
-    down_m: float
-    velocity_north_m_s: float
-    velocity_east_m_s: float
-    yaw_rad: float  # where the nose points, clockwise from north
-    position_time_s: float
-    attitude_time_s: float
-    position_source: str  # "local" or "global"
-
-    @property
-    def ground_speed_m_s(self) -> float:
-        """Horizontal speed over the ground."""
-        return math.hypot(self.velocity_north_m_s, self.velocity_east_m_s)
-
-    def course_rad(self, min_speed_m_s: float) -> float:
-        """Course over ground, or yaw when slower than ``min_speed_m_s`` (no direction)."""
-        if self.ground_speed_m_s >= min_speed_m_s:
-            return math.atan2(self.velocity_east_m_s, self.velocity_north_m_s)
-        return self.yaw_rad
-
-    def age_s(self, now_s: float) -> float:
-        """Age of the position (the part the law cannot do without)."""
-        return now_s - self.position_time_s
 
 
 @dataclass

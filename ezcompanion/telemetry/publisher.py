@@ -29,8 +29,7 @@ from typing import Any
 import zenoh
 
 import ezcompanion
-from ezcompanion.service.events import Event
-from ezcompanion.service.loop import TickCommand
+from ezcompanion.records import Event, TickCommand
 from ezcompanion.telemetry.schema import (
     SCHEMAS,
     event_payload,

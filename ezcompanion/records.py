@@ -22,6 +22,9 @@ class VehicleState:
     """The vehicle as the companion last saw it (local NED of the scenario, SI).
 
     ``*_time_s`` are companion clock times of arrival; ``age_s`` gives how old each is.
+    ``position_time_s`` is the arrival of the last sample that moved (a position re-sent
+    unchanged while its velocity says it moves does not refresh it).
+    ``course_rate_rad_s`` is the measured rate of the course over ground (None: unknown).
     """
 
     north_m: float
@@ -33,6 +36,7 @@ class VehicleState:
     position_time_s: float
     attitude_time_s: float
     position_source: str  # "local" or "global"
+    course_rate_rad_s: float | None = None
 
     @property
     def ground_speed_m_s(self) -> float:
@@ -56,6 +60,10 @@ class Hold(StrEnum):
     NO_TELEMETRY = "no position yet"
     STALE = "position older than the budget"
     CAPTURED = "the engagement is over"
+    GATE = "position outside the estimate gate"
+    DISAGREE = "local and global positions disagree"
+    ORIGIN = "the vehicle's origin changed during the engagement"
+    SPOOF = "conflicting heartbeats from the vehicle's id"
 
 
 @dataclass(frozen=True)
@@ -101,6 +109,9 @@ class EventKind(StrEnum):
     SCENARIO = "scenario"
     INTERCEPTED = "intercepted"
     ENDED = "ended"
+    ALARM = "alarm"  # input refused as untrusted (data: cause)
+    VEHICLE_REFUSED = "vehicle_refused"  # no single vehicle to lock on: named, not guided
+    ABORTED = "aborted"  # guidance ended for good: the input stayed untrusted (data: cause)
 
 
 @dataclass(frozen=True)

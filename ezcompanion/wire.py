@@ -42,6 +42,8 @@ __all__ = [
     "POSITION_TARGET_VELOCITY",
     "POSITION_TARGET_VELOCITY_YAW_RATE",
     "URL_SCHEMES",
+    "Address",
+    "Frame",
     "Link",
     "LinkStats",
     "Message",
@@ -80,6 +82,10 @@ mavlink: Any = mavutil.mavlink
 
 #: A decoded MAVLink message (a pymavlink message object; fields are attributes).
 Message = Any
+
+#: A transport address: ``(host, port)`` of a UDP peer; None where the link has one peer
+#: only (TCP, serial).
+Address = tuple[str, int] | None
 
 URL_SCHEMES = ("udpin", "udpout", "udp", "tcpin", "tcp")
 _DEFAULT_BAUD = 57600
@@ -277,6 +283,20 @@ class LinkStats:
     rejected_unsigned: int
 
 
+@dataclass(frozen=True)
+class Frame:
+    """One decoded message and the transport address it came from."""
+
+    message: Message
+    source: Address
+
+    @property
+    def mavlink1(self) -> bool:
+        """The frame was MAVLink 1 (no signature, no extensions)."""
+        buf = self.message.get_msgbuf()
+        return bool(buf) and buf[0] == mavlink.PROTOCOL_MARKER_V1
+
+
 class Link:
     """One MAVLink connection (a context manager): non-blocking receive, raw and encoded send.
 
@@ -318,6 +338,8 @@ class Link:
         except (OSError, ValueError, ImportError) as exc:
             raise ConfigError("connect", self.url, f"cannot be opened: {exc}") from exc
         self._conn.mav.robust_parsing = True
+        self._udp = isinstance(self._conn, mavutil.mavudp)
+        self._peer: tuple[str, int] | None = None
         self._messages = 0
         self._bad = 0
 
@@ -386,21 +408,48 @@ class Link:
         return list(readable)
 
     def recv_messages(self, max_reads: int = 64) -> list[Message]:
-        """Every complete, valid message available now, without blocking.
+        """Every complete, valid message available now, without blocking (see :meth:`recv`)."""
+        return [frame.message for frame in self.recv(max_reads)]
+
+    def recv(self, max_reads: int = 64) -> list[Frame]:
+        """Every complete, valid message available now with its source, without blocking.
 
         Frames with bad CRC, bad length, bad signature or unknown ids are dropped and
-        counted; nothing raises for what a peer sends.
+        counted; nothing raises for what a peer sends. A UDP datagram is parsed on its own
+        (a frame never spans two senders' datagrams).
         """
-        out: list[Message] = []
+        out: list[Frame] = []
         for _ in range(max_reads):
             chunk = self._read_chunk()
             if chunk is None:
                 break
-            out.extend(self._parse(chunk))
+            data, source = chunk
+            out.extend(Frame(msg, source) for msg in self._parse(data))
         return out
 
-    def _read_chunk(self) -> bytes | None:
+    # the peer
+    def lock_peer(self, address: Address) -> None:
+        """Send only to ``address`` from now on (UDP; pymavlink's ``udpin`` would answer
+        every sender it has heard). None unlocks."""
+        self._peer = address
+
+    @property
+    def peer(self) -> Address:
+        """The locked peer, if any."""
+        return self._peer
+
+    def _read_chunk(self) -> tuple[bytes, Address] | None:
         conn = self._conn
+        if self._udp:
+            try:
+                data, source = conn.port.recvfrom(65535)
+            except OSError:
+                return None
+            if not data:
+                return None
+            # never mix bytes of two datagrams in the parser
+            self._reset_parser()
+            return bytes(data), (str(source[0]), int(source[1]))
         try:
             data = conn.recv(4096)
         except OSError:
@@ -414,7 +463,7 @@ class Link:
             return None
         if not data:
             return None
-        return bytes(data)
+        return bytes(data), None
 
     def _parse(self, chunk: bytes) -> list[Message]:
         out: list[Message] = []
@@ -426,10 +475,16 @@ class Link:
                 msg = mav.parse_char(b"")
         except Exception:
             self._bad += 1
-            mav.buf = bytearray()
-            mav.buf_index = 0
-            mav.expected_length = mavlink.HEADER_LEN_V1 + 2
+            self._reset_parser(count_partial=False)
         return out
+
+    def _reset_parser(self, *, count_partial: bool = True) -> None:
+        mav = self._conn.mav
+        if count_partial and len(mav.buf) - mav.buf_index > 0:
+            self._bad += 1  # a partial frame left over
+        mav.buf = bytearray()
+        mav.buf_index = 0
+        mav.expected_length = mavlink.HEADER_LEN_V1 + 2
 
     def _keep(self, msg: Message, out: list[Message]) -> None:
         kind = msg.get_type()
@@ -450,9 +505,13 @@ class Link:
         return buf
 
     def write(self, buf: bytes) -> None:
-        """Send already packed bytes; a peer that is not there yet is not an error."""
+        """Send already packed bytes (to the locked peer only, once there is one); a peer
+        that is not there yet is not an error."""
         with contextlib.suppress(OSError):
-            self._conn.write(buf)
+            if self._udp and self._peer is not None:
+                self._conn.port.sendto(buf, self._peer)
+            else:
+                self._conn.write(buf)
 
     def send(self, msg: Message) -> None:
         """Pack and send ``msg`` now."""

@@ -104,7 +104,7 @@ def fly(
         tlog=str(tmp_path / "companion.tlog"),
         **companion,
     )
-    events = EventLog()
+    events = EventLog(lambda e: print(e.line()))  # shown when a test fails
     listening = threading.Event()
     events.add_sink(lambda e: listening.set() if e.kind is EventKind.LISTENING else None)
     service = CompanionService(scenario, settings, events=events, telemetry=telemetry)

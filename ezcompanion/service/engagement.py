@@ -107,6 +107,18 @@ class Engagement:
             setpoints_sent=self.setpoints_sent,
         )
 
+    def abort(self, now: float, cause: Hold, lasted_s: float) -> None:
+        """End guidance for good: the input stayed untrusted for ``lasted_s``."""
+        self.failsafe(now, cause)
+        self.done = True
+        self.events.emit(
+            EventKind.ABORTED,
+            now,
+            f"{cause.value} for {lasted_s:.2f} s: guidance ended",
+            cause=cause.name.lower(),
+            setpoints_sent=self.setpoints_sent,
+        )
+
     def _command(self, now: float, result: TickCommand) -> None:
         if self.track is not None:
             state = result.state

@@ -56,6 +56,7 @@ from ezcompanion.service.state import TelemetryState
 from ezcompanion.service.tlog import TlogWriter
 from ezcompanion.sim.output import TrackWriter
 from ezcompanion.wire import (
+    Frame,
     Link,
     Message,
     is_ground_vehicle,
@@ -262,8 +263,8 @@ class CompanionService:
             )
             link.wait_readable(clock.wall_s(due - now))
             self._take_pending_scenario(clock.now_s())
-            for msg in link.recv_messages():
-                self._on_message(msg, clock.now_s())
+            for frame in link.recv():
+                self._on_frame(frame, clock.now_s())
             now = clock.now_s()
             if now >= self._next_heartbeat_s:
                 self._send_heartbeat(now)
@@ -273,10 +274,10 @@ class CompanionService:
                 self._tick(now)
         self.engagement.finish(clock.now_s())
 
-    def _on_message(self, msg: Message, now: float) -> None:
+    def _on_frame(self, frame: Frame, now: float) -> None:
         if self._tlog is not None:
-            self._tlog.write(bytes(msg.get_msgbuf()))
-        used = self.session.on_message(msg, now)
+            self._tlog.write(bytes(frame.message.get_msgbuf()))
+        used = self.session.on_frame(frame, now)
         self._follow_session(now)
         # A new position drives a tick at once, at most at the loop rate.
         fresh = used in POSITIONS and self._ticking()
@@ -286,6 +287,9 @@ class CompanionService:
     def _follow_session(self, now: float) -> None:
         """Move the phase along with what the session knows of the vehicle."""
         session = self.session
+        if session.refused:
+            self.phase = Phase.DONE
+            return
         if self.phase in (Phase.WAITING, Phase.GUIDING) and not session.connected:
             self.engagement.pause(now)
             self.phase = Phase.SEARCHING
@@ -299,9 +303,10 @@ class CompanionService:
             if self.engagement.setpoints is None:
                 self.engagement.setpoints = self._make_setpoints()
             self.phase = Phase.WAITING
-        if self.phase is Phase.WAITING and session.in_guided:
+        if self.phase is Phase.WAITING and session.in_guided and session.frame_settled:
             self.phase = Phase.GUIDING
             self._next_deadline_s = now
+            session.telemetry.latch_origin()  # the frame is fixed for the engagement
             self.engagement.start(now, session.mode)
         elif self.phase is Phase.GUIDING and not session.in_guided:
             self.engagement.pause(now)
@@ -341,7 +346,13 @@ class CompanionService:
         self._last_tick_s = now
         self._next_deadline_s = max(self._next_deadline_s + self.loop.period_s, now)
         session = self.session
-        self.engagement.tick(now, session.telemetry.snapshot(self.settings.stale_after_s, now))
+        distrust = session.distrust(now)
+        lasted_s = session.distrusted_for_s(now)
+        if distrust is not None and lasted_s >= self.settings.distrust_give_up_s:
+            self.engagement.abort(now, distrust, lasted_s)
+        else:
+            snapshot = session.telemetry.snapshot(self.settings.stale_after_s, now)
+            self.engagement.tick(now, snapshot, distrust)
         if self.engagement.done:
             self.phase = Phase.DONE
 

@@ -14,6 +14,9 @@ Layout (every key optional)::
       stale_after_s: 0.25            # position older than this is never fed to the law
       link_lost_after_s: 3.0         # no heartbeat for this long: link lost
       engage: false                  # ask for GUIDED/OFFBOARD ourselves
+      gate_position_m: 0.5           # estimate gate: position innovation allowed
+      gate_accel_m_s2: 0.0           # the gate's acceleration bound; 0 = 2 x accel_max
+      distrust_give_up_s: 3.0        # untrusted input this long without a break ends guidance
       signing_key_hex: null          # 64 hex digits: sign, refuse unsigned input
       tlog: null                     # path of the telemetry log (every frame in and out)
       speedup: 1.0                   # the vehicle's clock over wall time (loopback tests)
@@ -56,6 +59,9 @@ class CompanionSettings:
     stale_after_s: float = 0.25
     link_lost_after_s: float = 3.0
     engage: bool = False
+    gate_position_m: float = 0.5
+    gate_accel_m_s2: float = 0.0
+    distrust_give_up_s: float = 3.0
     signing_key_hex: str | None = None
     tlog: str | None = None
     speedup: float = 1.0
@@ -76,6 +82,8 @@ class CompanionSettings:
             "stale_after_s",
             "link_lost_after_s",
             "speedup",
+            "gate_position_m",
+            "distrust_give_up_s",
         ):
             value = getattr(self, name)
             if (
@@ -84,6 +92,13 @@ class CompanionSettings:
                 or not (math.isfinite(value) and value > 0.0)
             ):
                 raise ConfigError(name, value, "must be a finite number > 0")
+        value = self.gate_accel_m_s2
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, int | float)
+            or not (math.isfinite(value) and value >= 0.0)
+        ):
+            raise ConfigError("gate_accel_m_s2", value, "must be a finite number >= 0")
         if not 1.0 <= self.loop_rate_hz <= 1000.0:
             raise ConfigError("loop_rate_hz", self.loop_rate_hz, "must be within [1, 1000]")
         if self.stale_after_s < 2.0 / self.telemetry_rate_hz:

@@ -91,11 +91,16 @@ def fly(
     max_time_s: float = 30.0,
     during: Any = None,
     telemetry: Any = None,
+    port: int | None = None,
+    stub_port: int | None = None,
     **companion: Any,
 ) -> Flight:
-    """The companion in a thread, the vehicle in a process, until the engagement ends."""
+    """The companion in a thread, the vehicle in a process, until the engagement ends.
+
+    The companion listens on ``port`` (default: a free one); the vehicle sends to
+    ``stub_port`` (default: the companion's; a relay's, to sit in between)."""
     scenario = load_scenario(config)
-    port = free_udp_port()
+    port = free_udp_port() if port is None else port
     settings = companion_settings(
         scenario,
         connect=f"udpin:127.0.0.1:{port}",
@@ -115,7 +120,8 @@ def fly(
     try:
         assert listening.wait(30.0), "the companion never opened its link"
         mode = ["--initial-mode", start_mode] if start_mode else []
-        with stub_process(config, port, truth, "--profile", profile, *mode) as stub:
+        to = port if stub_port is None else stub_port
+        with stub_process(config, to, truth, "--profile", profile, *mode) as stub:
             if during is not None:
                 during(service, stub, port, truth)
             thread.join(timeout=max_time_s / SPEEDUP + 30.0)
@@ -269,4 +275,5 @@ def test_the_tlog_reads_back_with_pymavlink(tmp_path: Path) -> None:
         seen[msg.get_type()] = seen.get(msg.get_type(), 0) + 1
     # what we received and what we sent
     assert seen.get("LOCAL_POSITION_NED", 0) > 50 and seen.get("HEARTBEAT", 0) > 5
-    assert seen.get("SET_POSITION_TARGET_LOCAL_NED", 0) == flight.outcome.setpoints_sent
+    sent = flight.outcome.setpoints_sent + flight.outcome.brakes_sent
+    assert seen.get("SET_POSITION_TARGET_LOCAL_NED", 0) == sent

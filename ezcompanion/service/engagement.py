@@ -6,9 +6,11 @@ with the session's picture of the vehicle (or the reason it cannot be trusted), 
 :meth:`Engagement.pause` when guidance must stop (mode change, lost link). No I/O but the
 ``send`` callable it is given; every decision becomes an event.
 
-Fail closed: a tick with no fresh, trusted position sends nothing, so the autopilot's own
-setpoint timeout takes over; the first such tick emits a ``failsafe`` event and the next
-fresh tick a ``resumed`` one.
+Fail closed: a tick with no fresh, trusted position sends no guidance; the first such tick
+emits a ``failsafe`` event, tells a vehicle that can stop (velocity setpoints: copter, rover,
+PX4) to stop where it is with one zero-velocity setpoint built from nothing it reported,
+and the next fresh tick emits a ``resumed`` one. A plane flies on as its autopilot does
+with no new course (ArduPlane holds the last one).
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ class EngagementOutcome:
     ticks: int
     setpoints_sent: int
     failsafes: int
+    brakes_sent: int = 0  # zero-velocity stops sent at failsafes
 
 
 class Engagement:
@@ -65,6 +68,7 @@ class Engagement:
         self.ticks = 0
         self.setpoints_sent = 0
         self.failsafes = 0
+        self.brakes_sent = 0  # zero-velocity stops at failsafes (not counted as setpoints)
         self.last_command: TickCommand | None = None
         self.outcome: EngagementOutcome | None = None
         self.failsafe_active = False
@@ -97,14 +101,20 @@ class Engagement:
         self.failsafe_active = True
         self.failsafes += 1
         self.loop.reset()
+        brake = None
         if self.setpoints is not None:
             self.setpoints.reset()
+            brake = self.setpoints.brake(now)
+        if brake is not None:
+            self._send(brake)
+            self.brakes_sent += 1
         self.events.emit(
             EventKind.FAILSAFE,
             now,
-            f"{reason.value}: setpoints stopped",
+            f"{reason.value}: setpoints stopped" + ("; vehicle told to stop" if brake else ""),
             reason=reason.name.lower(),
             setpoints_sent=self.setpoints_sent,
+            braked=brake is not None,
         )
 
     def abort(self, now: float, cause: Hold, lasted_s: float) -> None:
@@ -151,14 +161,20 @@ class Engagement:
         if self.publisher is not None:  # after the setpoint has left
             self.publisher.publish_tick(result)
 
-    def pause(self, now: float) -> None:
-        """Guidance stops (mode change, lost link): forget the actuator state and timing."""
+    def pause(self, now: float, *, brake: bool = False) -> None:
+        """Guidance stops (mode change, lost link): forget the actuator state and timing.
+        With ``brake``, tell the vehicle to stop too (if it left the guided mode it ignores
+        that; if the mode change was forged, it would otherwise fly on)."""
         if self._guiding_since_s is not None:
             self._guiding_total_s += now - self._guiding_since_s
             self._guiding_since_s = None
         self.loop.reset()
         if self.setpoints is not None:
             self.setpoints.reset()
+            message = self.setpoints.brake(now) if brake else None
+            if message is not None:
+                self._send(message)
+                self.brakes_sent += 1
 
     def finish(self, now: float) -> EngagementOutcome:
         """The end: stop, report the outcome (``ended`` event) and keep it."""
@@ -172,6 +188,7 @@ class Engagement:
             ticks=self.ticks,
             setpoints_sent=self.setpoints_sent,
             failsafes=self.failsafes,
+            brakes_sent=self.brakes_sent,
         )
         verdict = "intercepted" if intercepted else "not intercepted"
         self.events.emit(

@@ -291,7 +291,7 @@ class CompanionService:
             self.phase = Phase.DONE
             return
         if self.phase in (Phase.WAITING, Phase.GUIDING) and not session.connected:
-            self.engagement.pause(now)
+            self.engagement.pause(now, brake=self.phase is Phase.GUIDING)
             self.phase = Phase.SEARCHING
             self.events.emit(
                 EventKind.LINK_LOST,
@@ -307,9 +307,10 @@ class CompanionService:
             self.phase = Phase.GUIDING
             self._next_deadline_s = now
             session.telemetry.latch_origin()  # the frame is fixed for the engagement
+            session.engaged(now)
             self.engagement.start(now, session.mode)
         elif self.phase is Phase.GUIDING and not session.in_guided:
-            self.engagement.pause(now)
+            self.engagement.pause(now, brake=True)
             self.phase = Phase.WAITING
 
     def _ticking(self) -> bool:

@@ -9,9 +9,10 @@ is the engagement's (:mod:`ezcompanion.service.engagement`).
 1. Find the vehicle: the first autopilot heartbeat (of the configured target
    system/component, if set) locks its id and transport address: from then on only its
    frames (same system, component and address) feed the state, and the link sends only to
-   that address. Another autopilot (another id or address) heard within ``_DISCOVERY_S``
-   of the lock: both are named in a ``vehicle_refused`` event, guidance never starts (or
-   stops) and the service ends.
+   that address. Another autopilot (another id or address) heard at any time with no
+   ``target_system`` configured, or one with the configured id before guidance starts or
+   within ``_DISCOVERY_S`` after: both are named in a ``vehicle_refused`` event, guidance
+   never starts (or stops) and the service ends.
 2. Ask for telemetry: REQUEST_DATA_STREAM first (ArduPilot lets it override message
    intervals), then SET_MESSAGE_INTERVAL per message at the configured rate (capped at
    40 Hz for fixed wing, which ArduPlane would deny), and check two seconds later that the
@@ -128,6 +129,11 @@ class VehicleSession:
         """The vehicle reports the mode in which it follows a companion."""
         return self.guided_mode is not None and self.mode == self.guided_mode[0]
 
+    def engaged(self, now: float) -> None:
+        """Guidance starts: other autopilots still refuse the lock for ``_DISCOVERY_S``."""
+        if self._discovery_until_s is not None:
+            self._discovery_until_s = min(self._discovery_until_s, now + _DISCOVERY_S)
+
     @property
     def frame_settled(self) -> bool:
         """The vehicle's origin is known, or it did not answer the requests for it: the
@@ -235,7 +241,7 @@ class VehicleSession:
         first = self.target is None
         self.target, self.address, self.locked = source, address, True
         self._link.lock_peer(address)
-        self._discovery_until_s = now + _DISCOVERY_S
+        self._discovery_until_s = math.inf  # until guidance starts, and a little after
         if first:
             self.heartbeat = msg
             self.fixed_wing = is_fixed_wing(msg)
@@ -252,9 +258,17 @@ class VehicleSession:
 
     def _second_candidate(self, frame: Frame, source: tuple[int, int], now: float) -> bool:
         """Another autopilot heard while discovery still listens: refuse them all."""
+        s = self.settings
+        if (s.target_system and source[0] != s.target_system) or (
+            s.target_component and source[1] != s.target_component
+        ):
+            return False  # not what we look for: ignored
         until = self._discovery_until_s
-        if until is None or now > until or not self._wanted(source):
-            return False
+        in_window = until is not None and now <= until
+        if not (in_window or s.target_system == 0):
+            return False  # the vehicle's id, another address, later on: refused frames
+        if self.refused:
+            return True
         names = ", ".join(
             sorted({self._name(self.target, self.address), self._name(source, frame.source)})
         )

@@ -177,7 +177,13 @@ def _parser() -> argparse.ArgumentParser:
         help="ask the vehicle for GUIDED/OFFBOARD (never arms)",
     )
     run.add_argument("--setpoint", choices=["auto", "velocity", "course"])
-    run.add_argument("--signing-key-hex", help="MAVLink 2 signing key, 64 hex digits")
+    run.add_argument(
+        "--signing-key-file",
+        type=Path,
+        help="MAVLink 2 signing key: a file holding 64 hex digits (or set "
+        "EZCOMPANION_SIGNING_KEY or EZCOMPANION_SIGNING_PASSPHRASE; never the key itself "
+        "on the command line, where ps shows it)",
+    )
     run.add_argument("--tlog", type=Path, help="record every frame in and out to this .tlog")
     run.add_argument("--track", type=Path, help="write the companion's view to this CSV")
     run.add_argument("--speedup", type=float, help="clock speed-up, to match a loopback vehicle")
@@ -248,7 +254,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 connect=args.connect,
                 engage=args.engage,
                 setpoint=args.setpoint,
-                signing_key_hex=args.signing_key_hex,
+                signing_key_file=str(args.signing_key_file) if args.signing_key_file else None,
                 tlog=str(args.tlog) if args.tlog else None,
                 speedup=args.speedup,
                 telemetry={

@@ -15,6 +15,7 @@ pymavlink chooses its wire version from that variable.
 from __future__ import annotations
 
 import hashlib
+import hmac
 import math
 import os
 import select
@@ -121,6 +122,7 @@ ATTITUDE_TARGET_IGNORE_ALL_BUT_ROLL = (
 
 _UINT32 = 1 << 32
 _SIGNING_EPOCH_S = 1420070400  # 2015-01-01T00:00:00Z, MAVLink 2 signing's time origin
+_NEW_STREAM_BEHIND_10US = 60 * 100_000  # a new signed stream may be a minute behind ours
 _TCP_KINDS = ("tcpin", "tcp")
 
 
@@ -271,6 +273,37 @@ def signing_key_from_passphrase(passphrase: str) -> bytes:
     return hashlib.sha256(passphrase.encode("utf-8")).digest()
 
 
+def _check_signature_first(
+    mav: Any, msgbuf: bytearray, src_system: int, src_component: int
+) -> bool:
+    """MAVLink 2 signature check that verifies before it stores anything.
+
+    pymavlink 2.4.x stores the stream's timestamp before it compares the signature, so one
+    frame with a wrong key and timestamp 2^48 makes every later genuine frame of that
+    stream "old" for good. Here the signature is checked first; only a genuine frame can
+    move a stream's timestamp (or the link's own). The timestamp rules are the spec's: a
+    known stream must advance (no replay), a new stream may be at most a minute behind.
+    """
+    signing = mav.signing
+    key = signing.secret_key
+    if key is None or len(msgbuf) < 13:
+        return False
+    digest = hashlib.sha256(bytes(key) + bytes(msgbuf[:-6])).digest()[:6]
+    if not hmac.compare_digest(digest, bytes(msgbuf[-6:])):
+        return False
+    tlow, thigh = mav.mav_sign_unpacker.unpack(msgbuf[-12:-6])
+    timestamp = tlow + (thigh << 32)
+    stream = (msgbuf[-13], src_system, src_component)
+    last = signing.stream_timestamps.get(stream)
+    if last is not None and timestamp <= last:
+        return False  # a replay, or reordered
+    if last is None and timestamp + _NEW_STREAM_BEHIND_10US < signing.timestamp:
+        return False  # a new stream more than a minute behind
+    signing.stream_timestamps[stream] = timestamp
+    signing.timestamp = max(signing.timestamp, timestamp)
+    return True
+
+
 # --- the connection -------------------------------------------------------------------------
 
 
@@ -279,8 +312,9 @@ class LinkStats:
     """Counters of one link's receive side."""
 
     messages: int
-    bad_frames: int
+    bad_frames: int  # bad CRC, length, id or signature
     rejected_unsigned: int
+    bad_signatures: int = 0  # signed, but not with our key, or a replay
 
 
 @dataclass(frozen=True)
@@ -362,7 +396,10 @@ class Link:
     @property
     def stats(self) -> LinkStats:
         """Receive counters so far."""
-        return LinkStats(self._messages, self._bad, int(self._conn.mav.signing.reject_count))
+        signing = self._conn.mav.signing
+        return LinkStats(
+            self._messages, self._bad, int(signing.reject_count), int(signing.badsig_count)
+        )
 
     @property
     def local_address(self) -> tuple[str, int] | None:
@@ -394,6 +431,10 @@ class Link:
             allow_unsigned_callback=callback,
             initial_timestamp=epoch_10us,
             link_id=link_id,
+        )
+        mav = self._conn.mav
+        mav.check_signature = lambda buf, system, component: _check_signature_first(
+            mav, buf, system, component
         )
 
     def disable_signing(self) -> None:

@@ -15,6 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from test_service_loopback import CONFIG, fly, scenario_file
 from test_service_units import known_origin, local
+from test_trust_link import LIGHT
 
 from ezcompanion.config import load_scenario
 from ezcompanion.records import Hold
@@ -112,7 +113,7 @@ def test_a_position_jump_over_udp_ends_guidance_with_the_gate_named(
     config = scenario_file(
         tmp_path, sitl_stub={"faults": {"jump_at_s": 2.0, "jump_east_m": jump_m}}
     )
-    flight = fly(config, tmp_path, max_time_s=25.0)
+    flight = fly(config, tmp_path, max_time_s=25.0, **LIGHT)
     alarms = [e for e in flight.events.of_kind(EventKind.ALARM) if e.data["cause"] == "gate"]
     assert alarms, "the jump was not refused"
     assert [e.data["cause"] for e in flight.events.of_kind(EventKind.ABORTED)] == ["gate"]

@@ -51,7 +51,7 @@ from ezcompanion.service.inbox import ScenarioInbox
 from ezcompanion.service.loop import GuidanceLoop
 from ezcompanion.service.session import POSITIONS, VehicleSession
 from ezcompanion.service.setpoints import Setpoints, make_setpoints
-from ezcompanion.service.settings import CompanionSettings
+from ezcompanion.service.settings import CompanionSettings, signing_key
 from ezcompanion.service.state import TelemetryState
 from ezcompanion.service.tlog import TlogWriter
 from ezcompanion.sim.output import TrackWriter
@@ -62,7 +62,6 @@ from ezcompanion.wire import (
     is_ground_vehicle,
     mavlink,
     open_link,
-    signing_key_from_hex,
 )
 
 if TYPE_CHECKING:
@@ -196,7 +195,7 @@ class CompanionService:
             "config": {
                 k: (v.value if isinstance(v, Enum) else v)
                 for k, v in dataclasses.asdict(self.settings).items()
-                if k != "signing_key_hex"
+                if not k.startswith("signing_")
             },
             "ticks": self.ticks,
             "setpoints_sent": self.setpoints_sent,
@@ -223,8 +222,9 @@ class CompanionService:
                 self.engagement.track = stack.enter_context(
                     TrackWriter(self._track_csv, self.loop.controller.zones.names)
                 )
-            if s.signing_key_hex:
-                link.enable_signing(signing_key_from_hex(s.signing_key_hex))
+            key = signing_key(s)
+            if key is not None:
+                link.enable_signing(key)
             if self._zenoh_settings is not None and self._zenoh_settings.enabled:
                 from ezcompanion.telemetry import TelemetryPublisher
 

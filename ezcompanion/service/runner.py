@@ -8,25 +8,13 @@ One thread owns the link. It waits in ``select`` until a frame arrives or the ne
 is due (heartbeat, a loop deadline, a check), so it never busy-waits, and all its periods are
 on the (optionally sped-up) monotonic clock of :mod:`ezcompanion.service.clock`.
 
-Life cycle:
-
-1. Heartbeat at 1 Hz as MAV_TYPE_ONBOARD_CONTROLLER, from the start and through everything.
-2. Find the vehicle: the configured target system/component, or the first autopilot heard.
-3. Ask for telemetry: REQUEST_DATA_STREAM first (ArduPilot lets it override message
-   intervals), then SET_MESSAGE_INTERVAL per message at the configured rate (capped at
-   40 Hz for fixed wing, which ArduPlane would deny), and check two seconds later that the
-   position arrives at least at half that rate; ask again once if not.
-4. Wait for GUIDED (OFFBOARD on PX4); with ``engage``, ask for it every second. Never arm.
-5. Guide: a tick runs when a new position sample arrives, at most at the loop rate, so the
-   setpoint leaves right after the telemetry that caused it; if none arrives, a tick still
-   runs at each loop deadline and, the position being stale, sends nothing.
-6. End at the intercept radius: stop sending, report the outcome.
-
-Fail closed: a tick with no fresh, valid position sends nothing, so the autopilot's own
-setpoint timeout takes over; the first such tick emits a ``failsafe`` event and the next
-fresh tick a ``resumed`` one (the actuator state restarts from zero). No heartbeat from the
-vehicle for ``link_lost_after_s`` is a lost link: setpoints stop, heartbeats go on, and
-guidance resumes only after the vehicle is heard again and fresh telemetry arrives.
+Life cycle: heartbeat at 1 Hz as MAV_TYPE_ONBOARD_CONTROLLER throughout; the session finds
+and locks the vehicle, asks for its streams and origin and follows its mode; once it is in
+GUIDED (OFFBOARD on PX4) and the frame is settled, the origin is latched and the engagement
+ticks: when a new position arrives (at most at the loop rate), else at each loop deadline.
+A tick on a stale or untrusted picture sends no guidance (a ``failsafe``); untrusted input
+lasting ``distrust_give_up_s`` ends guidance (``aborted``). No heartbeat for
+``link_lost_after_s`` is a lost link. See docs/service.md.
 """
 
 from __future__ import annotations

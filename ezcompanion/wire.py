@@ -488,9 +488,16 @@ class Link:
                 return None
             if not data:
                 return None
+            address = (str(source[0]), int(source[1]))
+            if self._peer is None:  # pymavlink's own bookkeeping of whom to answer
+                if conn.udp_server:
+                    conn.clients.add(address)
+                    conn.clients_last_alive[address] = time.time()
+                elif conn.broadcast:
+                    conn.last_address = address
             # never mix bytes of two datagrams in the parser
             self._reset_parser()
-            return bytes(data), (str(source[0]), int(source[1]))
+            return bytes(data), address
         try:
             data = conn.recv(4096)
         except OSError:

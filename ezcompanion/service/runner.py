@@ -258,6 +258,7 @@ class CompanionService:
                 self._send_heartbeat(now)
             session.periodic(now, waiting=self.phase is Phase.WAITING)
             self._follow_session(now)
+            self._check_distrust(now)
             if self._ticking() and now >= self._next_deadline_s:
                 self._tick(now)
         self.engagement.finish(clock.now_s())
@@ -300,6 +301,21 @@ class CompanionService:
         elif self.phase is Phase.GUIDING and not session.in_guided:
             self.engagement.pause(now, brake=True)
             self.phase = Phase.WAITING
+
+    def _check_distrust(self, now: float) -> None:
+        """Out of GUIDED after guidance started (a forged mode change, say), distrust still
+        counts: a failsafe, and the end once it lasts."""
+        if self.phase is not Phase.WAITING or self.engagement.ticks == 0:
+            return
+        distrust = self.session.distrust(now)
+        if distrust is None:
+            return
+        lasted_s = self.session.distrusted_for_s(now)
+        if lasted_s >= self.settings.distrust_give_up_s:
+            self.engagement.abort(now, distrust, lasted_s)
+            self.phase = Phase.DONE
+        else:
+            self.engagement.failsafe(now, distrust)
 
     def _ticking(self) -> bool:
         """Guiding, or (PX4 only) streaming ahead of OFFBOARD, which PX4 refuses to enter

@@ -134,6 +134,10 @@ def fly(
     ``stub_port`` (default: the companion's; a relay's, to sit in between)."""
     scenario = load_scenario(config)
     port = free_udp_port() if port is None else port
+    # 20 Hz telemetry and ticks unless a test asks otherwise: at 5x that is still 100
+    # positions a wall second, and the machine running the tests is shared
+    companion.setdefault("telemetry_rate_hz", 20.0)
+    companion.setdefault("loop_rate_hz", 20.0)
     settings = companion_settings(
         scenario,
         connect=f"udpin:127.0.0.1:{port}",

@@ -65,7 +65,7 @@ _SPOOF_HOLD_S = 3.0  # a heartbeat conflict holds guidance this long after the l
 _TELEMETRY_HOLD_S = 0.5  # a refused position holds guidance this long after the last one
 _ALARM_REPEAT_S = 1.0  # the same alarm is announced at most this often
 _ORIGIN_RETRY_S = 0.5
-_ORIGIN_TRIES = 6  # then the frame is latched without it (global positions only)
+_ORIGIN_TRIES = 6  # then the scenario's origin is assumed (with a warning)
 _STREAMED = ("LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "ATTITUDE", "VFR_HUD")
 POSITIONS = frozenset({"LOCAL_POSITION_NED", "GLOBAL_POSITION_INT"})
 
@@ -136,9 +136,9 @@ class VehicleSession:
 
     @property
     def frame_settled(self) -> bool:
-        """The vehicle's origin is known, or it did not answer the requests for it: the
-        frame can be latched."""
-        return self.telemetry.origin_known or self._origin_tries >= _ORIGIN_TRIES
+        """The vehicle's origin is known (or, unanswered, assumed): the frame can be
+        latched."""
+        return self.telemetry.origin_known
 
     # --- incoming -------------------------------------------------------------------------
 
@@ -455,6 +455,13 @@ class VehicleSession:
             return
         if self._origin_tries >= _ORIGIN_TRIES:
             self._next_origin_s = math.inf
+            if self.telemetry.assume_scenario_origin():
+                self.events.emit(
+                    EventKind.WARNING,
+                    now,
+                    f"no GPS_GLOBAL_ORIGIN after {_ORIGIN_TRIES} requests: local positions "
+                    "taken in the scenario's frame, cross-checked against global ones",
+                )
             return
         self._origin_tries += 1
         self._next_origin_s = now + _ORIGIN_RETRY_S

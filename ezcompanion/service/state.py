@@ -7,8 +7,9 @@ GPS_GLOBAL_ORIGIN. Wire units are converted only through ``ezcompanion.wire``.
 What the law uses, and why:
 
 - position: LOCAL_POSITION_NED when it is fresh and the vehicle's origin is known (its
-  GPS_GLOBAL_ORIGIN, which the session asks for); otherwise GLOBAL_POSITION_INT converted to
-  the scenario's local NED. Local positions are shifted from the vehicle's origin onto the
+  GPS_GLOBAL_ORIGIN, which the session asks for; if it never answers, the session assumes
+  the scenario's origin, with a warning); otherwise GLOBAL_POSITION_INT converted to the
+  scenario's local NED. Local positions are shifted from the vehicle's origin onto the
   scenario's. The origin is latched at engage (:meth:`TelemetryState.latch_origin`): a
   different one afterwards is refused and raises ``Hold.ORIGIN`` for good. (A first origin
   arriving only after engage is taken: local positions then start, and the cross-check
@@ -151,6 +152,15 @@ class TelemetryState:
     def latch_origin(self) -> None:
         """Fix the frame for the engagement: a different origin from now on is refused."""
         self._latched = True
+
+    def assume_scenario_origin(self) -> bool:
+        """The vehicle never told its origin: take its local frame as the scenario's (what
+        the scenario file says), guarded by the cross-check against global positions. True
+        if this changed anything."""
+        if self._local_offset is not None:
+            return False
+        self._local_offset = (0.0, 0.0, 0.0)
+        return True
 
     @property
     def origin_known(self) -> bool:

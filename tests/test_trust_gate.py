@@ -51,7 +51,7 @@ def test_a_smooth_track_within_the_bound_always_passes(turn_rates: list[float]) 
     assert t.take_refusal() is None
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=60, deadline=None)
 @given(jump_m=st.floats(0.6, 60.0), bearing=st.floats(-math.pi, math.pi),
        after=st.integers(5, 250))
 def test_a_jump_stays_refused_however_long_it_lasts(

@@ -29,8 +29,10 @@ Refused, and counted (a refused sample changes nothing):
 - outside the estimate gate (``Hold.GATE``): each source keeps a prediction, propagated
   from sample to sample by the reported velocities (trapezoid), and pulled towards accepted
   samples with a time constant of ``_GATE_TAU_S``. A position farther from it than
-  ``gate_position_m`` plus what ``accel_bound_m_s2`` allows over the propagation is refused,
-  and so is a velocity that changed faster than the bound. The prediction goes on through
+  ``gate_position_m`` plus what ``accel_bound_m_s2`` allows over the propagation (the
+  trapezoid's error, bound x dt^2 / 4 per step: 5 cm over 5 s of refused samples at 50 Hz,
+  metres over a silent gap of seconds) is refused, and so is a velocity that changed
+  faster than the bound. The prediction goes on through
   refused samples, so a jumped stream stays refused (no re-acceptance once it is "old
   enough"); only samples back on the prediction are taken again.
 - local and global disagreeing (``Hold.DISAGREE``): when both are fresh, each new sample is
@@ -59,8 +61,9 @@ __all__ = ["TelemetryState", "VehicleState"]
 
 # time_boot_ms going back by more than this is a reboot (or a forgery), not reordering
 _REBOOT_BACKSTEP_S = 10.0
-# a position that should have moved more than this by its own velocity and covered less
-# than half of it is frozen (quantisation: GLOBAL_POSITION_INT is 1e-7 deg, about 1 cm)
+# a position within this of the last one that moved has not moved (quantisation:
+# GLOBAL_POSITION_INT is 1e-7 deg, about 1 cm); frozen once its velocity says it should
+# have moved twice this
 _STILL_M = 0.02
 # the gate's prediction follows accepted samples with this time constant
 _GATE_TAU_S = 2.0
@@ -310,9 +313,10 @@ class TelemetryState:
             math.hypot(anchor.vn_m_s, anchor.ve_m_s), math.hypot(sample.vn_m_s, sample.ve_m_s)
         )
         expected = (sample.boot_s - anchor.boot_s) * speed
-        progress = since >= 0.5 * expected
-        if not progress and expected > _STILL_M:
-            return False
+        moved = since > _STILL_M
+        if not moved and expected > 2.0 * _STILL_M:
+            return False  # frozen (a jump elsewhere is not: the gate judges it)
+        progress = moved or expected <= 0.5 * _STILL_M
         # Propagate the prediction to this sample and gate it.
         dt = sample.boot_s - track.pred_boot_s
         bound = self.accel_bound_m_s2
@@ -323,7 +327,7 @@ class TelemetryState:
         track.pred_north_m += 0.5 * (track.pred_vn_m_s + vn) * dt
         track.pred_east_m += 0.5 * (track.pred_ve_m_s + ve) * dt
         track.pred_vn_m_s, track.pred_ve_m_s, track.pred_boot_s = vn, ve, sample.boot_s
-        track.spread_m += 0.5 * bound * dt * dt
+        track.spread_m += 0.25 * bound * dt * dt  # the trapezoid's error for |a| <= bound
         innovation = math.hypot(
             sample.north_m - track.pred_north_m, sample.east_m - track.pred_east_m
         )

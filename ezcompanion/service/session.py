@@ -24,8 +24,8 @@ is the engagement's (:mod:`ezcompanion.service.engagement`).
 Trust (each refusal is an ``alarm`` event naming its ``cause``; see docs/service.md):
 frames claiming the vehicle's id from another address are refused (``foreign_address``);
 heartbeats from the vehicle that disagree (type or autopilot changed, MAVLink 1 from a
-MAVLink 2 vehicle, a mode flipping back within ``_FLIP_S``, more than
-``_MAX_HEARTBEATS_PER_S``) are refused and hold guidance in failsafe
+MAVLink 2 vehicle, a mode flipping back within ``FLIP_S``, a burst; see
+:mod:`ezcompanion.service.trust`) are refused and hold guidance in failsafe
 (``Hold.SPOOF``) for ``_SPOOF_HOLD_S``; the telemetry's own refusals (estimate gate, local
 and global disagreeing, origin changed) hold it likewise. COMMAND_ACK is taken only when
 addressed to this service (or broadcast), STATUSTEXT only from the vehicle.
@@ -34,7 +34,6 @@ addressed to this service (or broadcast), STATUSTEXT only from the vehicle.
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Callable
 
 from ezcompanion.config import Scenario
@@ -42,6 +41,7 @@ from ezcompanion.records import EventKind, Hold
 from ezcompanion.service.events import EventLog
 from ezcompanion.service.settings import CompanionSettings, SetpointKind
 from ezcompanion.service.state import TelemetryState
+from ezcompanion.service.trust import Alarms, HeartbeatJudge
 from ezcompanion.wire import (
     Address,
     Frame,
@@ -59,11 +59,8 @@ _RATE_CHECK_AFTER_S = 2.0
 _ENGAGE_RETRY_S = 1.0
 _PLANE_MAX_RATE_HZ = 40.0
 _DISCOVERY_S = 1.5  # listen this long for other autopilots before locking on one
-_FLIP_S = 1.5  # a mode change back within this is a conflict, not a mode change
-_MAX_HEARTBEATS_PER_S = 3  # ArduPilot and PX4 send 1 Hz; a burst is a conflict
 _SPOOF_HOLD_S = 3.0  # a heartbeat conflict holds guidance this long after the last one
 _TELEMETRY_HOLD_S = 0.5  # a refused position holds guidance this long after the last one
-_ALARM_REPEAT_S = 1.0  # the same alarm is announced at most this often
 _ORIGIN_RETRY_S = 0.5
 _ORIGIN_TRIES = 6  # then the scenario's origin is assumed (with a warning)
 _STREAMED = ("LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "ATTITUDE", "VFR_HUD")
@@ -99,11 +96,8 @@ class VehicleSession:
         self.refused = False  # several autopilots heard: none will be guided
         self.refused_frames = 0
         self._discovery_until_s: float | None = None
-        self._heartbeats: deque[float] = deque()
-        self._last_mode_change_s = -math.inf
-        self._alarm_until: dict[Hold, float] = {}
-        self._alarm_said: dict[str, float] = {}
-        self._distrust_since_s: float | None = None
+        self.alarms = Alarms(events)
+        self._judge = HeartbeatJudge()
         self._origin_tries = 0
         self._next_origin_s = math.inf
         self.mode = ""
@@ -163,7 +157,7 @@ class VehicleSession:
         refusal = self.telemetry.take_refusal()
         if refusal is not None:
             cause, why = refusal
-            self._alarm(cause, now, why, hold_s=_TELEMETRY_HOLD_S)
+            self.alarms.hold(cause, now, why, hold_s=_TELEMETRY_HOLD_S)
         if kind == "COMMAND_ACK":
             self._on_ack(msg, now)
         elif kind == "STATUSTEXT":
@@ -188,7 +182,7 @@ class VehicleSession:
 
     def _refuse_foreign(self, frame: Frame, now: float) -> None:
         self.refused_frames += 1
-        self._say(
+        self.alarms.say(
             "foreign_address",
             now,
             f"{frame.message.get_type()} claiming the vehicle's id "
@@ -211,7 +205,7 @@ class VehicleSession:
         ):
             return
         if source != self.target:
-            self._say(
+            self.alarms.say(
                 "other_autopilot",
                 now,
                 f"heartbeat of another autopilot {self._name(source, frame.source)} ignored",
@@ -220,10 +214,10 @@ class VehicleSession:
         if frame.source != self.address:
             self._refuse_foreign(frame, now)
             return
-        conflict = self._conflict(frame, now)
+        conflict = self._judge.conflict(frame, now, self.mode)
         if conflict is not None:
             self.refused_frames += 1
-            self._alarm(Hold.SPOOF, now, conflict, hold_s=_SPOOF_HOLD_S)
+            self.alarms.hold(Hold.SPOOF, now, conflict, hold_s=_SPOOF_HOLD_S)
             return
         self._take_heartbeat(msg, now)
 
@@ -253,7 +247,7 @@ class VehicleSession:
                 system=source[0],
                 component=source[1],
             )
-        self._heartbeats.clear()
+        self._judge.lock(msg)
         self._take_heartbeat(msg, now)
 
     def _second_candidate(self, frame: Frame, source: tuple[int, int], now: float) -> bool:
@@ -283,28 +277,6 @@ class VehicleSession:
         )
         return True
 
-    def _conflict(self, frame: Frame, now: float) -> str | None:
-        """Why this heartbeat from the vehicle's id and address cannot be the vehicle's."""
-        msg, first = frame.message, self.heartbeat
-        assert first is not None
-        if frame.mavlink1 and not Frame(first, None).mavlink1:
-            return "a MAVLink 1 heartbeat from a MAVLink 2 vehicle"
-        if (msg.type, msg.autopilot) != (first.type, first.autopilot):
-            return (
-                f"heartbeat type {msg.type}/autopilot {msg.autopilot}, the vehicle is "
-                f"{first.type}/{first.autopilot}"
-            )
-        beats = self._heartbeats
-        beats.append(now)
-        while beats and beats[0] < now - 1.0:
-            beats.popleft()
-        if len(beats) > _MAX_HEARTBEATS_PER_S:
-            return f"{len(beats)} heartbeats within 1 s"
-        name = mode_name(msg)
-        if name != self.mode and now - self._last_mode_change_s < _FLIP_S:
-            return f"mode {name} {now - self._last_mode_change_s:.2f} s after mode {self.mode}"
-        return None
-
     def _take_heartbeat(self, msg: Message, now: float) -> None:
         if not self.connected:
             if self.last_heartbeat_s > -math.inf:
@@ -318,36 +290,19 @@ class VehicleSession:
         name = mode_name(msg)
         if name != self.mode:
             if self.mode:
-                self._last_mode_change_s = now
+                self._judge.mode_changed(now)
             self.mode = name
             self.events.emit(EventKind.MODE, now, f"vehicle mode {name}", mode=name)
 
     # --- trust ----------------------------------------------------------------------------
 
-    def _alarm(self, cause: Hold, now: float, why: str, *, hold_s: float) -> None:
-        """Refused input that holds guidance in failsafe for ``hold_s`` after it."""
-        self._alarm_until[cause] = max(self._alarm_until.get(cause, -math.inf), now + hold_s)
-        self._say(cause.name.lower(), now, why)
-
-    def _say(self, cause: str, now: float, why: str) -> None:
-        if now - self._alarm_said.get(cause, -math.inf) >= _ALARM_REPEAT_S:
-            self._alarm_said[cause] = now
-            self.events.emit(EventKind.ALARM, now, why, cause=cause)
-
     def distrust(self, now: float) -> Hold | None:
         """Why the vehicle's picture cannot be trusted now (None: it can)."""
-        for cause in (Hold.ORIGIN, Hold.SPOOF, Hold.DISAGREE, Hold.GATE):
-            if self._alarm_until.get(cause, -math.inf) > now or self.telemetry.alarm is cause:
-                if self._distrust_since_s is None:
-                    self._distrust_since_s = now
-                return cause
-        self._distrust_since_s = None
-        return None
+        return self.alarms.distrust(now, self.telemetry.alarm)
 
     def distrusted_for_s(self, now: float) -> float:
         """How long the distrust has lasted without a break (0: trusted)."""
-        since = self._distrust_since_s
-        return 0.0 if since is None else now - since
+        return self.alarms.distrusted_for_s(now)
 
     @staticmethod
     def _name(source: tuple[int, int] | None, address: Address) -> str:

@@ -28,16 +28,17 @@ class TimedService(CompanionService):
     def _serve(self, max_time_s: float | None) -> None:
         self.latencies_s = []
         link = self._link
-        receive = link.recv_messages
+        assert link is not None
+        receive = link.recv
 
         def timed_receive(max_reads: int = 64) -> list[Any]:
             started = time.perf_counter()
-            messages = receive(max_reads)
-            if any(m.get_type() == "LOCAL_POSITION_NED" for m in messages):
+            frames = receive(max_reads)
+            if any(f.message.get_type() == "LOCAL_POSITION_NED" for f in frames):
                 self._read_at = started
-            return messages
+            return frames
 
-        link.recv_messages = timed_receive  # type: ignore[method-assign]
+        link.recv = timed_receive  # type: ignore[method-assign]
         super()._serve(max_time_s)
 
     def _send(self, msg: Any) -> None:

@@ -280,7 +280,13 @@ def _parser() -> argparse.ArgumentParser:
         help="how the acceleration reaches the autopilot: velocity (copter, PX4), course "
         "(ArduPlane) or auto (chosen from the vehicle's heartbeat; the default)",
     )
-    run.add_argument("--signing-key-hex", help="MAVLink 2 signing key, 64 hex digits")
+    run.add_argument(
+        "--signing-key-file",
+        type=Path,
+        help="MAVLink 2 signing key: a file holding 64 hex digits (or set "
+        "EZCOMPANION_SIGNING_KEY or EZCOMPANION_SIGNING_PASSPHRASE; never the key itself "
+        "on the command line, where ps shows it)",
+    )
     run.add_argument("--tlog", type=Path, help="record every frame in and out to this .tlog")
     run.add_argument("--track", type=Path, help="write the companion's view to this CSV")
     run.add_argument(
@@ -364,7 +370,7 @@ def _dispatch(args: argparse.Namespace) -> int:
             connect=args.connect,
             engage=args.engage,
             setpoint=args.setpoint,
-            signing_key_hex=args.signing_key_hex,
+            signing_key_file=str(args.signing_key_file) if args.signing_key_file else None,
             tlog=str(args.tlog) if args.tlog else None,
             speedup=args.speedup,
             telemetry={

@@ -15,6 +15,7 @@ pymavlink chooses its wire version from that variable.
 from __future__ import annotations
 
 import hashlib
+import hmac
 import math
 import os
 import select
@@ -42,6 +43,8 @@ __all__ = [
     "POSITION_TARGET_VELOCITY",
     "POSITION_TARGET_VELOCITY_YAW_RATE",
     "URL_SCHEMES",
+    "Address",
+    "Frame",
     "Link",
     "LinkStats",
     "Message",
@@ -81,6 +84,10 @@ mavlink: Any = mavutil.mavlink
 #: A decoded MAVLink message (a pymavlink message object; fields are attributes).
 Message = Any
 
+#: A transport address: ``(host, port)`` of a UDP peer; None where the link has one peer
+#: only (TCP, serial).
+Address = tuple[str, int] | None
+
 URL_SCHEMES = ("udpin", "udpout", "udp", "tcpin", "tcp")
 _DEFAULT_BAUD = 57600
 
@@ -115,6 +122,7 @@ ATTITUDE_TARGET_IGNORE_ALL_BUT_ROLL = (
 
 _UINT32 = 1 << 32
 _SIGNING_EPOCH_S = 1420070400  # 2015-01-01T00:00:00Z, MAVLink 2 signing's time origin
+_NEW_STREAM_BEHIND_10US = 60 * 100_000  # a new signed stream may be a minute behind ours
 _TCP_KINDS = ("tcpin", "tcp")
 
 
@@ -265,6 +273,37 @@ def signing_key_from_passphrase(passphrase: str) -> bytes:
     return hashlib.sha256(passphrase.encode("utf-8")).digest()
 
 
+def _check_signature_first(
+    mav: Any, msgbuf: bytearray, src_system: int, src_component: int
+) -> bool:
+    """MAVLink 2 signature check that verifies before it stores anything.
+
+    pymavlink 2.4.x stores the stream's timestamp before it compares the signature, so one
+    frame with a wrong key and timestamp 2^48 makes every later genuine frame of that
+    stream "old" for good. Here the signature is checked first; only a genuine frame can
+    move a stream's timestamp (or the link's own). The timestamp rules are the spec's: a
+    known stream must advance (no replay), a new stream may be at most a minute behind.
+    """
+    signing = mav.signing
+    key = signing.secret_key
+    if key is None or len(msgbuf) < 13:
+        return False
+    digest = hashlib.sha256(bytes(key) + bytes(msgbuf[:-6])).digest()[:6]
+    if not hmac.compare_digest(digest, bytes(msgbuf[-6:])):
+        return False
+    tlow, thigh = mav.mav_sign_unpacker.unpack(msgbuf[-12:-6])
+    timestamp = tlow + (thigh << 32)
+    stream = (msgbuf[-13], src_system, src_component)
+    last = signing.stream_timestamps.get(stream)
+    if last is not None and timestamp <= last:
+        return False  # a replay, or reordered
+    if last is None and timestamp + _NEW_STREAM_BEHIND_10US < signing.timestamp:
+        return False  # a new stream more than a minute behind
+    signing.stream_timestamps[stream] = timestamp
+    signing.timestamp = max(signing.timestamp, timestamp)
+    return True
+
+
 # --- the connection -------------------------------------------------------------------------
 
 
@@ -273,8 +312,23 @@ class LinkStats:
     """Counters of one link's receive side."""
 
     messages: int
-    bad_frames: int
+    bad_frames: int  # bad CRC, length, id or signature
     rejected_unsigned: int
+    bad_signatures: int = 0  # signed, but not with our key, or a replay
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One decoded message and the transport address it came from."""
+
+    message: Message
+    source: Address
+
+    @property
+    def mavlink1(self) -> bool:
+        """The frame was MAVLink 1 (no signature, no extensions)."""
+        buf = self.message.get_msgbuf()
+        return bool(buf) and buf[0] == mavlink.PROTOCOL_MARKER_V1
 
 
 class Link:
@@ -318,6 +372,8 @@ class Link:
         except (OSError, ValueError, ImportError) as exc:
             raise ConfigError("connect", self.url, f"cannot be opened: {exc}") from exc
         self._conn.mav.robust_parsing = True
+        self._udp = isinstance(self._conn, mavutil.mavudp)
+        self._peer: tuple[str, int] | None = None
         self._messages = 0
         self._bad = 0
 
@@ -340,7 +396,10 @@ class Link:
     @property
     def stats(self) -> LinkStats:
         """Receive counters so far."""
-        return LinkStats(self._messages, self._bad, int(self._conn.mav.signing.reject_count))
+        signing = self._conn.mav.signing
+        return LinkStats(
+            self._messages, self._bad, int(signing.reject_count), int(signing.badsig_count)
+        )
 
     @property
     def local_address(self) -> tuple[str, int] | None:
@@ -373,6 +432,10 @@ class Link:
             initial_timestamp=epoch_10us,
             link_id=link_id,
         )
+        mav = self._conn.mav
+        mav.check_signature = lambda buf, system, component: _check_signature_first(
+            mav, buf, system, component
+        )
 
     def disable_signing(self) -> None:
         """Back to unsigned frames, accepting unsigned input."""
@@ -386,21 +449,55 @@ class Link:
         return list(readable)
 
     def recv_messages(self, max_reads: int = 64) -> list[Message]:
-        """Every complete, valid message available now, without blocking.
+        """Every complete, valid message available now, without blocking (see :meth:`recv`)."""
+        return [frame.message for frame in self.recv(max_reads)]
+
+    def recv(self, max_reads: int = 64) -> list[Frame]:
+        """Every complete, valid message available now with its source, without blocking.
 
         Frames with bad CRC, bad length, bad signature or unknown ids are dropped and
-        counted; nothing raises for what a peer sends.
+        counted; nothing raises for what a peer sends. A UDP datagram is parsed on its own
+        (a frame never spans two senders' datagrams).
         """
-        out: list[Message] = []
+        out: list[Frame] = []
         for _ in range(max_reads):
             chunk = self._read_chunk()
             if chunk is None:
                 break
-            out.extend(self._parse(chunk))
+            data, source = chunk
+            out.extend(Frame(msg, source) for msg in self._parse(data))
         return out
 
-    def _read_chunk(self) -> bytes | None:
+    # the peer
+    def lock_peer(self, address: Address) -> None:
+        """Send only to ``address`` from now on (UDP; pymavlink's ``udpin`` would answer
+        every sender it has heard). None unlocks."""
+        self._peer = address
+
+    @property
+    def peer(self) -> Address:
+        """The locked peer, if any."""
+        return self._peer
+
+    def _read_chunk(self) -> tuple[bytes, Address] | None:
         conn = self._conn
+        if self._udp:
+            try:
+                data, source = conn.port.recvfrom(65535)
+            except OSError:
+                return None
+            if not data:
+                return None
+            address = (str(source[0]), int(source[1]))
+            if self._peer is None:  # pymavlink's own bookkeeping of whom to answer
+                if conn.udp_server:
+                    conn.clients.add(address)
+                    conn.clients_last_alive[address] = time.time()
+                elif conn.broadcast:
+                    conn.last_address = address
+            # never mix bytes of two datagrams in the parser
+            self._reset_parser()
+            return bytes(data), address
         try:
             data = conn.recv(4096)
         except OSError:
@@ -414,7 +511,7 @@ class Link:
             return None
         if not data:
             return None
-        return bytes(data)
+        return bytes(data), None
 
     def _parse(self, chunk: bytes) -> list[Message]:
         out: list[Message] = []
@@ -426,10 +523,16 @@ class Link:
                 msg = mav.parse_char(b"")
         except Exception:
             self._bad += 1
-            mav.buf = bytearray()
-            mav.buf_index = 0
-            mav.expected_length = mavlink.HEADER_LEN_V1 + 2
+            self._reset_parser(count_partial=False)
         return out
+
+    def _reset_parser(self, *, count_partial: bool = True) -> None:
+        mav = self._conn.mav
+        if count_partial and len(mav.buf) - mav.buf_index > 0:
+            self._bad += 1  # a partial frame left over
+        mav.buf = bytearray()
+        mav.buf_index = 0
+        mav.expected_length = mavlink.HEADER_LEN_V1 + 2
 
     def _keep(self, msg: Message, out: list[Message]) -> None:
         kind = msg.get_type()
@@ -450,9 +553,13 @@ class Link:
         return buf
 
     def write(self, buf: bytes) -> None:
-        """Send already packed bytes; a peer that is not there yet is not an error."""
+        """Send already packed bytes (to the locked peer only, once there is one); a peer
+        that is not there yet is not an error."""
         with contextlib.suppress(OSError):
-            self._conn.write(buf)
+            if self._udp and self._peer is not None:
+                self._conn.port.sendto(buf, self._peer)
+            else:
+                self._conn.write(buf)
 
     def send(self, msg: Message) -> None:
         """Pack and send ``msg`` now."""

@@ -347,6 +347,12 @@ class Autopilot:
             self.outbox.append(self.heartbeat())
         elif int(msg_id) in STREAMED:
             self.requested.append(STREAMED[int(msg_id)])
+        elif int(msg_id) == _R.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN:
+            # the EKF origin, as ArduPilot answers the request (encoded here, in degE7 and mm)
+            origin = self.config.origin
+            self.outbox.append(self._mav.gps_global_origin_encode(
+                round(origin.lat_deg * 1e7), round(origin.lon_deg * 1e7),
+                round(origin.alt_m * 1000.0), 0))
         else:
             return int(_R.MAV_RESULT_DENIED)
         return int(_R.MAV_RESULT_ACCEPTED)

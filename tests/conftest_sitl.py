@@ -8,7 +8,9 @@ with ``udpout``, so tests never collide on ports and nothing leaves the loopback
 from __future__ import annotations
 
 import math
+import select
 import socket
+import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -167,3 +169,74 @@ def measured_rate_hz(msgs: list[Msg]) -> float:
     t = sorted(stamps_s(msgs))
     assert len(t) >= 3, f"too few messages: {len(t)}"
     return (len(t) - 1) / (t[-1] - t[0])
+
+
+class Relay:
+    """A UDP man in the middle on 127.0.0.1, for the companion's trust tests.
+
+    The vehicle sends to ``vehicle_port``; every datagram goes on to the companion from the
+    relay's own socket, and the companion's replies go back to the vehicle. To the companion
+    the relay *is* the vehicle's address, so :meth:`inject` forges frames from it (an
+    attacker on the path, or spoofing the source address), and ``tamper`` may rewrite or
+    drop the vehicle's datagrams. Frames are encoded here with plain pymavlink, not with
+    the code under test.
+    """
+
+    def __init__(self, companion_port: int) -> None:
+        self._companion = ("127.0.0.1", companion_port)
+        self._vehicle_side = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._vehicle_side.bind(("127.0.0.1", 0))
+        self._companion_side = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._companion_side.bind(("127.0.0.1", 0))
+        self.vehicle_port: int = self._vehicle_side.getsockname()[1]
+        self._vehicle: tuple[str, int] | None = None
+        self.tamper: Callable[[bytes], bytes | None] | None = None
+        self.from_companion: list[bytes] = []
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        sockets = [self._vehicle_side, self._companion_side]
+        while not self._stop.is_set():
+            readable, _, _ = select.select(sockets, [], [], 0.05)
+            for sock in readable:
+                try:
+                    data, source = sock.recvfrom(65535)
+                except OSError:
+                    continue
+                if sock is self._vehicle_side:
+                    self._vehicle = source
+                    tamper = self.tamper
+                    out = tamper(data) if tamper is not None else data
+                    if out:
+                        self._send(out)
+                else:
+                    self.from_companion.append(data)
+                    if self._vehicle is not None:
+                        self._vehicle_side.sendto(data, self._vehicle)
+
+    def _send(self, data: bytes) -> None:
+        with self._lock:
+            self._companion_side.sendto(data, self._companion)
+
+    def inject(self, frame: bytes) -> None:
+        """Send ``frame`` to the companion from the vehicle's address (as it sees it)."""
+        self._send(frame)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5.0)
+        self._vehicle_side.close()
+        self._companion_side.close()
+
+
+def forger(system_id: int = 1, component_id: int = 1) -> Any:
+    """A pymavlink encoder that signs nothing and claims ``system_id/component_id``."""
+    return M.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
+
+
+def frame(mav: Any, msg: Any, *, mavlink1: bool = False) -> bytes:
+    """``msg`` packed by ``mav`` (advancing its sequence number)."""
+    return bytes(msg.pack(mav, force_mavlink1=mavlink1))

@@ -7,6 +7,7 @@ vehicle's own track (``--truth-out``), not by what the companion believed.
 
 from __future__ import annotations
 
+import math
 import subprocess
 import sys
 import threading
@@ -74,6 +75,38 @@ def stub_process(
             process.wait()
 
 
+def frozen_budget(tlog: Path) -> tuple[float, float]:
+    """(wall time of the last position sample that moved before the first freeze, wall time
+    of the last guidance setpoint sent before the freeze was refused) from a tlog."""
+    from pymavlink import mavutil
+
+    log = mavutil.mavlink_connection(str(tlog))
+    last: dict[str, tuple[float, float]] = {}
+    moved_s = -math.inf
+    frozen_since: float | None = None
+    setpoints: list[float] = []
+    while (msg := log.recv_match()) is not None:
+        kind = msg.get_type()
+        if kind == "LOCAL_POSITION_NED":
+            where = (msg.x, msg.y)
+        elif kind == "GLOBAL_POSITION_INT":
+            where = (msg.lat, msg.lon)
+        elif kind == "SET_POSITION_TARGET_LOCAL_NED" and (msg.vx, msg.vy) != (0.0, 0.0):
+            setpoints.append(msg._timestamp)
+            continue
+        else:
+            continue
+        if kind in last and last[kind] == where and math.hypot(msg.vx, msg.vy) > 0:
+            frozen_since = frozen_since or msg._timestamp
+            if msg._timestamp - frozen_since > 1.0 / SPEEDUP:
+                break  # well into the freeze
+        else:
+            frozen_since = None
+            moved_s = msg._timestamp
+        last[kind] = where
+    return moved_s, max(t for t in setpoints if t >= moved_s)
+
+
 @dataclass
 class Flight:
     service: CompanionService
@@ -91,11 +124,20 @@ def fly(
     max_time_s: float = 30.0,
     during: Any = None,
     telemetry: Any = None,
+    port: int | None = None,
+    stub_port: int | None = None,
     **companion: Any,
 ) -> Flight:
-    """The companion in a thread, the vehicle in a process, until the engagement ends."""
+    """The companion in a thread, the vehicle in a process, until the engagement ends.
+
+    The companion listens on ``port`` (default: a free one); the vehicle sends to
+    ``stub_port`` (default: the companion's; a relay's, to sit in between)."""
     scenario = load_scenario(config)
-    port = free_udp_port()
+    port = free_udp_port() if port is None else port
+    # 20 Hz telemetry and ticks unless a test asks otherwise: at 5x that is still 100
+    # positions a wall second, and the machine running the tests is shared
+    companion.setdefault("telemetry_rate_hz", 20.0)
+    companion.setdefault("loop_rate_hz", 20.0)
     settings = companion_settings(
         scenario,
         connect=f"udpin:127.0.0.1:{port}",
@@ -104,7 +146,7 @@ def fly(
         tlog=str(tmp_path / "companion.tlog"),
         **companion,
     )
-    events = EventLog()
+    events = EventLog(lambda e: print(e.line()))  # shown when a test fails
     listening = threading.Event()
     events.add_sink(lambda e: listening.set() if e.kind is EventKind.LISTENING else None)
     service = CompanionService(scenario, settings, events=events, telemetry=telemetry)
@@ -115,7 +157,8 @@ def fly(
     try:
         assert listening.wait(30.0), "the companion never opened its link"
         mode = ["--initial-mode", start_mode] if start_mode else []
-        with stub_process(config, port, truth, "--profile", profile, *mode) as stub:
+        to = port if stub_port is None else stub_port
+        with stub_process(config, to, truth, "--profile", profile, *mode) as stub:
             if during is not None:
                 during(service, stub, port, truth)
             thread.join(timeout=max_time_s / SPEEDUP + 30.0)
@@ -185,19 +228,26 @@ def test_telemetry_freeze_stops_the_setpoints_and_the_autopilot_timeout_takes_ov
     assert len(failsafes) == 1 and len(resumed) == 1
     # No setpoint between failsafe and resumption...
     assert resumed[0].data["setpoints_sent"] == failsafes[0].data["setpoints_sent"]
-    # ... and the vehicle's own timeout took over in the gap (announced, and it stopped).
+    # ... and the vehicle stopped in the gap: told to by the failsafe's zero-velocity
+    # setpoint (before, it flew the last velocity until its own 3 s timeout).
+    assert failsafes[0].data["braked"]
     gap = [
         e
         for e in flight.events.of_kind(EventKind.STATUSTEXT)
         if failsafes[0].time_s < e.time_s < resumed[0].time_s
     ]
-    assert any("setpoint timeout" in e.message for e in gap), [e.message for e in gap]
+    assert any("velocity zero, holding" in e.message for e in gap), [e.message for e in gap]
     # The stream stopped within the budget (plus a loop period and the clocks' offset).
     stale_budget = flight.service.settings.stale_after_s
     engaged = flight.events.of_kind(EventKind.ENGAGED)[0].time_s
     assert failsafes[0].data["reason"] == "stale"
     assert resumed[0].time_s - failsafes[0].time_s > freeze_for - 1.5
     assert failsafes[0].time_s < engaged + freeze_start + stale_budget + 1.5
+    # The budget holds from the last valid sample: the last guidance setpoint before the
+    # failsafe left within stale_after_s of the last position that moved (issue 10: 0.397 s
+    # after the first frozen sample, for a 0.25 s budget). Read off the companion's tlog.
+    last_valid_s, last_setpoint_s = frozen_budget(tmp_path / "companion.tlog")
+    assert (last_setpoint_s - last_valid_s) * SPEEDUP <= stale_budget + 0.01
     # Guidance resumed from wherever the timeout left the vehicle, and kept it safe.
     assert flight.outcome.setpoints_sent > resumed[0].data["setpoints_sent"] + 20
     assert min(judge_truth(load_scenario(config), flight.truth)[3]) > 0.0
@@ -269,4 +319,5 @@ def test_the_tlog_reads_back_with_pymavlink(tmp_path: Path) -> None:
         seen[msg.get_type()] = seen.get(msg.get_type(), 0) + 1
     # what we received and what we sent
     assert seen.get("LOCAL_POSITION_NED", 0) > 50 and seen.get("HEARTBEAT", 0) > 5
-    assert seen.get("SET_POSITION_TARGET_LOCAL_NED", 0) == flight.outcome.setpoints_sent
+    sent = flight.outcome.setpoints_sent + flight.outcome.brakes_sent
+    assert seen.get("SET_POSITION_TARGET_LOCAL_NED", 0) == sent

@@ -19,12 +19,22 @@ CONFIG = Path(__file__).resolve().parents[1] / "config" / "paper_scenario1.yaml"
 ORIGIN = GeoOrigin()
 
 
+def known_origin(**kwargs: object) -> TelemetryState:
+    """Telemetry whose vehicle has told its origin (the scenario's): local positions count."""
+    t = TelemetryState(origin=ORIGIN, **kwargs)  # type: ignore[arg-type]
+    origin = mavlink.MAVLink_gps_global_origin_message(
+        deg_to_e7(ORIGIN.lat_deg), deg_to_e7(ORIGIN.lon_deg), m_to_mm(ORIGIN.alt_m), 0
+    )
+    assert t.update(origin, now_s=0.0) == "GPS_GLOBAL_ORIGIN"
+    return t
+
+
 def local(boot_ms: int, north: float, east: float, vn: float = 1.0, ve: float = 0.0) -> object:
     return mavlink.MAVLink_local_position_ned_message(boot_ms, north, east, -20.0, vn, ve, 0.0)
 
 
 def test_local_position_is_taken_with_its_arrival_time() -> None:
-    t = TelemetryState(origin=ORIGIN)
+    t = known_origin()
     assert t.update(local(1000, 3.0, 4.0, 0.0, 2.0), now_s=5.0) == "LOCAL_POSITION_NED"
     state = t.snapshot(0.25, now_s=5.1)
     assert state is not None and (state.north_m, state.east_m) == (3.0, 4.0)
@@ -44,7 +54,7 @@ def test_global_position_goes_through_the_scenario_origin() -> None:
     msg = mavlink.MAVLink_global_position_int_message(
         2000, deg_to_e7(lat), deg_to_e7(lon), m_to_mm(alt), m_to_mm(30.0), -100, 50, 0, 0
     )
-    t = TelemetryState(origin=ORIGIN)
+    t = known_origin()
     assert t.update(msg, now_s=1.0) == "GLOBAL_POSITION_INT"
     state = t.snapshot(0.25, now_s=1.0)
     assert state is not None and state.position_source == "global"
@@ -64,7 +74,7 @@ def test_global_position_goes_through_the_scenario_origin() -> None:
     ],
 )
 def test_bad_samples_are_refused_and_change_nothing(bad: object) -> None:
-    t = TelemetryState(origin=ORIGIN)
+    t = known_origin()
     t.update(local(1000, 0.0, 0.0), now_s=1.0)
     assert t.update(bad, now_s=2.0) is None
     assert sum(t.refused.values()) == 1
@@ -73,21 +83,23 @@ def test_bad_samples_are_refused_and_change_nothing(bad: object) -> None:
 
 
 def test_a_frozen_position_with_a_velocity_is_refused() -> None:
-    t = TelemetryState(origin=ORIGIN)
+    t = known_origin()
     for k in range(10):  # moving north at 1 m/s, 50 Hz
         assert t.update(local(1000 + 20 * k, 0.02 * k, 0.0), now_s=1.0 + 0.02 * k)
     frozen = [t.update(local(1200 + 20 * k, 0.18, 0.0), now_s=1.2 + 0.02 * k) for k in range(20)]
-    assert frozen[0] is not None  # within what one step can hide
-    assert frozen[-1] is None  # but not for long: 0.4 s at 1 m/s should have moved 0.4 m
+    assert frozen[-1] is None  # 0.4 s at 1 m/s should have moved 0.4 m
+    # and the position is as old as the last sample that moved: the stale budget runs
+    state = t.snapshot(1.0, now_s=1.6)
+    assert state is not None and state.position_time_s == pytest.approx(1.18)
     # and a vehicle that really is still (velocity 0) is not frozen
-    still = TelemetryState(origin=ORIGIN)
+    still = known_origin()
     assert all(
         still.update(local(1000 + 20 * k, 5.0, 5.0, 0.0, 0.0), 1.0 + 0.02 * k) for k in range(50)
     )
 
 
 def test_course_falls_back_to_yaw_when_nearly_still() -> None:
-    t = TelemetryState(origin=ORIGIN)
+    t = known_origin()
     t.update(mavlink.MAVLink_attitude_message(1000, 0.0, 0.0, -2.0, 0.0, 0.0, 0.0), now_s=1.0)
     t.update(local(1000, 0.0, 0.0, 0.01, 0.0), now_s=1.0)
     state = t.snapshot(1.0, now_s=1.0)
@@ -98,12 +110,13 @@ def test_tick_refuses_stale_or_missing_telemetry_and_ends_at_capture() -> None:
     scenario = load_scenario(CONFIG)
     loop = GuidanceLoop(scenario, loop_rate_hz=50.0, stale_after_s=0.25)
     assert loop.tick(None, 0.0) is Hold.NO_TELEMETRY
-    t = TelemetryState(origin=ORIGIN)
+    t = known_origin()
     t.update(local(1000, 8.0, -4.0, -0.83, 0.55), now_s=1.0)
     assert loop.tick(t.snapshot(0.25, 1.5), 1.5) is Hold.STALE
     command = loop.tick(t.snapshot(0.25, 1.1), 1.1)
     assert isinstance(command, TickCommand) and not command.captured
     assert abs(command.accel_lat_m_s2) < scenario.guidance.accel_max_m_s2
+    t = known_origin()  # a vehicle near the target (7 m away would be a jump)
     t.update(local(2000, 2.05, 0.0, 0.0, 1.0), now_s=2.0)
     done = loop.tick(t.snapshot(0.25, 2.0), 2.0)
     assert isinstance(done, TickCommand) and done.captured
@@ -113,7 +126,7 @@ def test_tick_refuses_stale_or_missing_telemetry_and_ends_at_capture() -> None:
 def _command(
     loop: GuidanceLoop, north: float, east: float, vn: float, ve: float, now: float
 ) -> TickCommand:
-    t = TelemetryState(origin=ORIGIN)
+    t = known_origin()
     t.update(local(int(now * 1000), north, east, vn, ve), now_s=now)
     command = loop.tick(t.snapshot(0.25, now), now)
     assert isinstance(command, TickCommand)

@@ -8,48 +8,13 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from enum import StrEnum
 from typing import Any
+
+from ezcompanion.records import Event, EventKind
 
 __all__ = ["Event", "EventKind", "EventLog"]
 
 _log = logging.getLogger("ezcompanion.events")
-
-
-class EventKind(StrEnum):
-    """The kinds of event."""
-
-    LISTENING = "listening"
-    VEHICLE_FOUND = "vehicle_found"
-    STREAMS_REQUESTED = "streams_requested"
-    RATE_LOW = "rate_low"
-    MODE = "mode"
-    ENGAGED = "engaged"
-    FAILSAFE = "failsafe"
-    RESUMED = "resumed"
-    LINK_LOST = "link_lost"
-    LINK_RESTORED = "link_restored"
-    COMMAND_ACK = "command_ack"
-    STATUSTEXT = "statustext"
-    WARNING = "warning"
-    SCENARIO = "scenario"
-    INTERCEPTED = "intercepted"
-    ENDED = "ended"
-
-
-@dataclass(frozen=True)
-class Event:
-    """One event at companion clock time ``time_s``."""
-
-    kind: EventKind
-    time_s: float
-    message: str
-    data: dict[str, Any] = field(default_factory=dict)
-
-    def line(self) -> str:
-        """One readable line."""
-        return f"[{self.time_s:8.3f} s] {self.kind.value}: {self.message}"
 
 
 Sink = Callable[[Event], None]

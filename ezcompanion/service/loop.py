@@ -9,50 +9,19 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
-from enum import StrEnum
 
 from ezcompanion.config import Scenario
-from ezcompanion.guidance import GuidanceController, GuidanceStep, KinematicState, LawName
-from ezcompanion.service.state import VehicleState
+from ezcompanion.guidance import GuidanceController, KinematicState, LawName
+from ezcompanion.records import Hold, TickCommand, VehicleState
 
 __all__ = ["GuidanceLoop", "Hold", "TickCommand"]
 
 # Below this fraction of the nominal speed the velocity has no usable direction (yaw stands
 # in for course) and the law is fed this fraction of the nominal speed instead.
 _MIN_SPEED_FRACTION = 0.5
-
-
-class Hold(StrEnum):
-    """Why a tick sends nothing."""
-
-    NO_TELEMETRY = "no position yet"
-    STALE = "position older than the budget"
-    CAPTURED = "the engagement is over"
-
-
-@dataclass(frozen=True)
-class TickCommand:
-    """What one tick asks of the vehicle, with what the law saw."""
-
-    time_s: float
-    dt_s: float
-    state: VehicleState
-    course_rad: float  # measured course the law used
-    speed_m_s: float  # speed the law used (measured, at least half the nominal)
-    nominal_speed_m_s: float  # the speed to fly (the scenario's constant speed)
-    accel_lat_m_s2: float  # lateral acceleration to fly (the actuator state at the step's end)
-    step: GuidanceStep
-
-    @property
-    def captured(self) -> bool:
-        """This step reached the intercept radius: the engagement is over, send nothing."""
-        return bool(self.step.captured)
-
-    @property
-    def turn_rate_rad_s(self) -> float:
-        """Course rate that the lateral acceleration gives at the law's speed."""
-        return self.accel_lat_m_s2 / self.speed_m_s
+# A measured turn restarts the actuator state at most at this fraction of the bound (the
+# actuator model holds |a| < a_max strictly).
+_RESUME_BOUND_FRACTION = 0.98
 
 
 class GuidanceLoop:
@@ -112,9 +81,21 @@ class GuidanceLoop:
         self.captured = False
 
     def reset(self) -> None:
-        """Forget the actuator state and the timing (after a gap: link loss, failsafe)."""
+        """Forget the actuator state and the timing (after a gap: link loss, failsafe); the
+        next tick starts from the measured turn."""
         self.controller.reset()
         self._last_tick_s = None
+
+    def _resume_from(self, state: VehicleState, min_speed_m_s: float) -> None:
+        """Start (or resume after a gap) from what the vehicle is doing: the actuator state
+        is the measured turn, a = speed * course rate, kept inside the bound."""
+        rate = state.course_rate_rad_s
+        speed = state.ground_speed_m_s
+        if rate is None or not math.isfinite(rate) or speed < min_speed_m_s:
+            self.controller.reset()  # unknown, or too slow for the course to mean a turn
+            return
+        bound = _RESUME_BOUND_FRACTION * self.scenario.guidance.accel_max_m_s2
+        self.controller.reset(max(-bound, min(bound, speed * rate)))
 
     def tick(self, state: VehicleState | None, now_s: float) -> TickCommand | Hold:
         """One law step on ``state`` at clock time ``now_s``."""
@@ -128,9 +109,20 @@ class GuidanceLoop:
         course = state.course_rad(minimum)
         speed = max(state.ground_speed_m_s, minimum)
         last = self._last_tick_s
+        if last is None:
+            self._resume_from(state, minimum)
         dt = self.period_s if last is None else min(max(now_s - last, 1e-4), 5.0 * self.period_s)
         self._last_tick_s = now_s
-        step = self.controller.step(KinematicState(state.north_m, state.east_m, course, speed), dt)
+        step = self.controller.step(
+            KinematicState(
+                state.north_m,
+                state.east_m,
+                course,
+                speed,
+                course_rate_rad_s=state.course_rate_rad_s,
+            ),
+            dt,
+        )
         self.miss_distance_m = min(self.miss_distance_m, float(step.law.range_to_target_m))
         self.captured = bool(step.captured)
         return TickCommand(

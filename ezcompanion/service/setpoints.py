@@ -69,6 +69,11 @@ class Setpoints(ABC):
     def message(self, command: TickCommand) -> Message | None:
         """The message for ``command``, or None if nothing is due this tick."""
 
+    def brake(self, time_s: float) -> Message | None:
+        """What stops the vehicle where it is when guidance must stop (a failsafe), built
+        from nothing the vehicle reported; None if the airframe cannot stop."""
+        return None
+
 
 class VelocitySetpoints(Setpoints):
     """Velocity + yaw rate in LOCAL_NED (copter, rover, PX4)."""
@@ -97,6 +102,22 @@ class VelocitySetpoints(Setpoints):
             east_m_s=speed * math.sin(reference),
             down_m_s=0.0,
             yaw_rate_rad_s=omega,
+            horizontal_only=self.ground_vehicle,
+        )
+
+
+    def brake(self, time_s: float) -> Message:
+        """Zero velocity: a copter, rover or PX4 multicopter stops and holds at once, instead
+        of flying the last velocity until its own timeout (3 s on ArduCopter)."""
+        return velocity_setpoint(
+            self.link,
+            target_system=self.target_system,
+            target_component=self.target_component,
+            time_boot_ms=s_to_ms(time_s) % 2**32,
+            north_m_s=0.0,
+            east_m_s=0.0,
+            down_m_s=0.0,
+            yaw_rate_rad_s=0.0,
             horizontal_only=self.ground_vehicle,
         )
 

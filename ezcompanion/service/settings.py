@@ -14,7 +14,15 @@ Layout (every key optional)::
       stale_after_s: 0.25            # position older than this is never fed to the law
       link_lost_after_s: 3.0         # no heartbeat for this long: link lost
       engage: false                  # ask for GUIDED/OFFBOARD ourselves
+      gate_position_m: 0.5           # estimate gate: position innovation allowed
+      gate_accel_m_s2: 0.0           # the gate's acceleration bound; 0 = 2 x accel_max
+      distrust_give_up_s: 3.0        # untrusted input this long without a break ends guidance
       signing_key_hex: null          # 64 hex digits: sign, refuse unsigned input
+      signing_key_file: null         # or a file holding the 64 hex digits (mode 600)
+      signing_passphrase: null       # or a passphrase (key = SHA-256 of it, as MAVProxy)
+
+The key may also come from the environment: EZCOMPANION_SIGNING_KEY (64 hex digits) or
+EZCOMPANION_SIGNING_PASSPHRASE; never from a command-line value, which ``ps`` shows.
       tlog: null                     # path of the telemetry log (every frame in and out)
       speedup: 1.0                   # the vehicle's clock over wall time (loopback tests)
 """
@@ -22,15 +30,26 @@ Layout (every key optional)::
 from __future__ import annotations
 
 import math
+import os
+from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import StrEnum
+from pathlib import Path
 from typing import Any
 
 from ezcompanion.config import Scenario, build_dataclass
 from ezcompanion.errors import ConfigError
-from ezcompanion.wire import URL_SCHEMES, is_serial_device
+from ezcompanion.wire import (
+    URL_SCHEMES,
+    is_serial_device,
+    signing_key_from_hex,
+    signing_key_from_passphrase,
+)
 
-__all__ = ["CompanionSettings", "SetpointKind", "companion_settings"]
+__all__ = ["SIGNING_ENV", "CompanionSettings", "SetpointKind", "companion_settings", "signing_key"]
+
+#: Environment variables a signing key may come from (hex key, passphrase).
+SIGNING_ENV = ("EZCOMPANION_SIGNING_KEY", "EZCOMPANION_SIGNING_PASSPHRASE")
 
 
 class SetpointKind(StrEnum):
@@ -56,7 +75,12 @@ class CompanionSettings:
     stale_after_s: float = 0.25
     link_lost_after_s: float = 3.0
     engage: bool = False
+    gate_position_m: float = 0.5
+    gate_accel_m_s2: float = 0.0
+    distrust_give_up_s: float = 3.0
     signing_key_hex: str | None = None
+    signing_key_file: str | None = None
+    signing_passphrase: str | None = None
     tlog: str | None = None
     speedup: float = 1.0
 
@@ -76,6 +100,8 @@ class CompanionSettings:
             "stale_after_s",
             "link_lost_after_s",
             "speedup",
+            "gate_position_m",
+            "distrust_give_up_s",
         ):
             value = getattr(self, name)
             if (
@@ -84,6 +110,13 @@ class CompanionSettings:
                 or not (math.isfinite(value) and value > 0.0)
             ):
                 raise ConfigError(name, value, "must be a finite number > 0")
+        value = self.gate_accel_m_s2
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, int | float)
+            or not (math.isfinite(value) and value >= 0.0)
+        ):
+            raise ConfigError("gate_accel_m_s2", value, "must be a finite number >= 0")
         if not 1.0 <= self.loop_rate_hz <= 1000.0:
             raise ConfigError("loop_rate_hz", self.loop_rate_hz, "must be within [1, 1000]")
         if self.stale_after_s < 2.0 / self.telemetry_rate_hz:
@@ -94,6 +127,18 @@ class CompanionSettings:
             raise ConfigError("setpoint", self.setpoint, "must be auto, velocity or course")
         if not isinstance(self.engage, bool):
             raise ConfigError("engage", self.engage, "must be true or false")
+        given = [
+            name
+            for name in ("signing_key_hex", "signing_key_file", "signing_passphrase")
+            if getattr(self, name) is not None
+        ]
+        if len(given) > 1:
+            raise ConfigError(given[1], "(hidden)", f"give only one of {', '.join(given)}")
+        for name in given:
+            if not isinstance(getattr(self, name), str) or not getattr(self, name):
+                raise ConfigError(name, "(hidden)", "must be a non-empty string")
+        if self.signing_key_hex is not None:
+            signing_key_from_hex(self.signing_key_hex)
         if self.connect.split(":", 1)[0] not in URL_SCHEMES and not is_serial_device(self.connect):
             raise ConfigError(
                 "connect",
@@ -101,6 +146,40 @@ class CompanionSettings:
                 "must be a pymavlink URL such as udpin:0.0.0.0:14550 or a serial device "
                 "such as /dev/ttyACM0,57600",
             )
+
+
+def signing_key(
+    settings: CompanionSettings, environ: Mapping[str, str] | None = None
+) -> bytes | None:
+    """The signing key: from the settings (hex, file or passphrase), else the environment
+    (``EZCOMPANION_SIGNING_KEY``, ``EZCOMPANION_SIGNING_PASSPHRASE``), else None. A bad one
+    raises ConfigError naming where it came from (never showing the key)."""
+    env = os.environ if environ is None else environ
+    if settings.signing_key_hex is not None:
+        return signing_key_from_hex(settings.signing_key_hex)
+    if settings.signing_key_file is not None:
+        path = Path(settings.signing_key_file)
+        try:
+            text = path.read_text(encoding="ascii").strip()
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ConfigError("signing_key_file", str(path), f"cannot be read: {exc}") from None
+        try:
+            return signing_key_from_hex(text)
+        except ConfigError:
+            raise ConfigError(
+                "signing_key_file", str(path), "must hold 64 hexadecimal digits"
+            ) from None
+    if settings.signing_passphrase is not None:
+        return signing_key_from_passphrase(settings.signing_passphrase)
+    key_env, passphrase_env = SIGNING_ENV
+    if env.get(key_env):
+        try:
+            return signing_key_from_hex(env[key_env].strip())
+        except ConfigError:
+            raise ConfigError(key_env, "(hidden)", "must be 64 hexadecimal digits") from None
+    if env.get(passphrase_env):
+        return signing_key_from_passphrase(env[passphrase_env])
+    return None
 
 
 def companion_settings(scenario: Scenario, **overrides: Any) -> CompanionSettings:

@@ -1,25 +1,42 @@
-"""Telemetry to one typed vehicle state in SI units, with the age of each part.
+"""Telemetry to one typed vehicle state in SI units, each position earning its trust.
 
 Decodes LOCAL_POSITION_NED (preferred), GLOBAL_POSITION_INT (through the scenario's
-geodetic origin, converted by pymap3d in :mod:`ezcompanion.wire`), ATTITUDE and VFR_HUD.
-Wire units are converted only through ``ezcompanion.wire``.
+geodetic origin, converted by pymap3d in :mod:`ezcompanion.wire`), ATTITUDE, VFR_HUD and
+GPS_GLOBAL_ORIGIN. Wire units are converted only through ``ezcompanion.wire``.
 
 What the law uses, and why:
 
-- position: LOCAL_POSITION_NED when it is fresh; otherwise GLOBAL_POSITION_INT converted
-  to the scenario's local NED. If the vehicle reports its EKF origin (GPS_GLOBAL_ORIGIN) and
-  it differs from the scenario's origin, local positions are shifted onto the scenario's.
-- course: the direction of the ground velocity (vx, vy), not ATTITUDE.yaw. The law's
-  kinematics are those of the velocity vector, and with wind or a copter's sideslip the
-  nose points elsewhere. When the vehicle is nearly stationary (ground speed below
-  ``min_course_speed_m_s``) the velocity has no direction, and yaw stands in.
+- position: LOCAL_POSITION_NED when it is fresh and the vehicle's origin is known (its
+  GPS_GLOBAL_ORIGIN, which the session asks for; if it never answers, the session assumes
+  the scenario's origin, with a warning); otherwise GLOBAL_POSITION_INT converted to the
+  scenario's local NED. Local positions are shifted from the vehicle's origin onto the
+  scenario's. The origin is latched at engage (:meth:`TelemetryState.latch_origin`): a
+  different one afterwards is refused and raises ``Hold.ORIGIN`` for good. (A first origin
+  arriving only after engage is taken: local positions then start, and the cross-check
+  against the global ones guards them.)
+- course: the direction of the ground velocity (vx, vy), not ATTITUDE.yaw (with wind or a
+  copter's sideslip the nose points elsewhere); below ``min_course_speed_m_s`` yaw stands in.
+  Its rate, from successive accepted velocities, is the measured course rate.
 
-A sample is refused, and counted, when any field is non-finite or out of range, when it is
-older than the last one of its kind (duplicated or reordered telemetry: time_boot_ms did not
-advance), when the position moved faster than ``max_plausible_speed_m_s`` since the last
-sample (a jump), or when it did not move although the velocity says it should have (a
-frozen estimate re-sent with fresh time stamps). A refused sample changes nothing, so a
-frozen or jumping stream ages out and the loop fails closed.
+Refused, and counted (a refused sample changes nothing):
+
+- a field non-finite or out of range;
+- a sample not newer than the last of its kind (duplicated or reordered), silently; a
+  time stamp going back by more than ``_REBOOT_BACKSTEP_S`` raises ``Hold.GATE``;
+- a frozen estimate (the position stands still while its velocity says it moves): not an
+  alarm, but it does not refresh the position, so the stale budget runs from the last
+  sample that moved and the loop fails closed;
+- outside the estimate gate (``Hold.GATE``): each source keeps a prediction, propagated
+  from sample to sample by the reported velocities (trapezoid), and pulled towards accepted
+  samples with a time constant of ``_GATE_TAU_S``. A position farther from it than
+  ``gate_position_m`` plus what ``accel_bound_m_s2`` allows over the propagation (the
+  trapezoid's error, bound x dt^2 / 4 per step: 5 cm over 5 s of refused samples at 50 Hz,
+  metres over a silent gap of seconds) is refused, and so is a velocity that changed
+  faster than the bound. The prediction goes on through
+  refused samples, so a jumped stream stays refused (no re-acceptance once it is "old
+  enough"); only samples back on the prediction are taken again.
+- local and global disagreeing (``Hold.DISAGREE``): when both are fresh, each new sample is
+  compared with the other source propagated to its time stamp.
 """
 
 from __future__ import annotations
@@ -28,6 +45,8 @@ import math
 from dataclasses import dataclass, field
 
 from ezcompanion.config import GeoOrigin
+from ezcompanion.frames import wrap_pi
+from ezcompanion.records import Hold, VehicleState
 from ezcompanion.wire import (
     Message,
     cm_s_to_m_s,
@@ -40,45 +59,22 @@ from ezcompanion.wire import (
 
 __all__ = ["TelemetryState", "VehicleState"]
 
-# time_boot_ms going back by more than this is a reboot, not reordering
+# time_boot_ms going back by more than this is a reboot (or a forgery), not reordering
 _REBOOT_BACKSTEP_S = 10.0
-# a position that should have moved this far by its own velocity, and did not, is frozen
-_FROZEN_AFTER_M = 0.1
-# moves smaller than this do not count as moving (quantisation: GLOBAL_POSITION_INT is 1e-7 deg)
+# a position within this of the last one that moved has not moved (quantisation:
+# GLOBAL_POSITION_INT is 1e-7 deg, about 1 cm); frozen once its velocity says it should
+# have moved twice this
 _STILL_M = 0.02
-
-
-@dataclass(frozen=True)
-class VehicleState:
-    """The vehicle as the companion last saw it (local NED of the scenario, SI).
-
-    ``*_time_s`` are companion clock times of arrival; ``age_s`` gives how old each is.
-    """
-
-    north_m: float
-    east_m: float
-    down_m: float
-    velocity_north_m_s: float
-    velocity_east_m_s: float
-    yaw_rad: float  # where the nose points, clockwise from north
-    position_time_s: float
-    attitude_time_s: float
-    position_source: str  # "local" or "global"
-
-    @property
-    def ground_speed_m_s(self) -> float:
-        """Horizontal speed over the ground."""
-        return math.hypot(self.velocity_north_m_s, self.velocity_east_m_s)
-
-    def course_rad(self, min_speed_m_s: float) -> float:
-        """Course over ground, or yaw when slower than ``min_speed_m_s`` (no direction)."""
-        if self.ground_speed_m_s >= min_speed_m_s:
-            return math.atan2(self.velocity_east_m_s, self.velocity_north_m_s)
-        return self.yaw_rad
-
-    def age_s(self, now_s: float) -> float:
-        """Age of the position (the part the law cannot do without)."""
-        return now_s - self.position_time_s
+# the gate's prediction follows accepted samples with this time constant
+_GATE_TAU_S = 2.0
+# a velocity may differ from the bound's prediction by this much (quantisation, noise)
+_GATE_VELOCITY_M_S = 0.2
+# the cross-check compares with the other source only when it is this recent (vehicle time)
+_CROSS_MAX_AGE_S = 0.5
+# two origins this close are the same
+_SAME_ORIGIN_M = 0.05
+# the course rate is smoothed over about this long
+_COURSE_RATE_TAU_S = 0.1
 
 
 @dataclass
@@ -93,22 +89,52 @@ class _Position:
 
 
 @dataclass
+class _Track:
+    """One source's accepted samples and the gate's prediction."""
+
+    last: _Position  # the last accepted sample
+    moved: _Position  # the last accepted sample that moved (or was not expected to)
+    pred_north_m: float
+    pred_east_m: float
+    pred_vn_m_s: float
+    pred_ve_m_s: float
+    pred_boot_s: float
+    spread_m: float = 0.0  # what the acceleration bound allows since the last acceptance
+    course_rate_rad_s: float | None = None
+
+    @classmethod
+    def start(cls, sample: _Position) -> _Track:
+        return cls(
+            sample,
+            sample,
+            sample.north_m,
+            sample.east_m,
+            sample.vn_m_s,
+            sample.ve_m_s,
+            sample.boot_s,
+        )
+
+
+@dataclass
 class TelemetryState:
     """Accumulates telemetry; :meth:`update` takes each message, :meth:`snapshot` reads.
 
-    ``origin`` is the geodetic position of the scenario's local NED origin.
+    ``origin`` is the geodetic position of the scenario's local NED origin;
+    ``accel_bound_m_s2`` the most the vehicle can accelerate (the gate's bound).
     """
 
     origin: GeoOrigin
-    max_plausible_speed_m_s: float = 100.0
+    accel_bound_m_s2: float = 2.0
+    gate_position_m: float = 0.5
     refused: dict[str, int] = field(default_factory=dict)
-    _local: _Position | None = None
-    _global: _Position | None = None
+    alarm: Hold | None = None  # a refusal that lasts: the origin changed after the latch
+    _tracks: dict[str, _Track] = field(default_factory=dict)
     _yaw_rad: float = 0.0
     _attitude_s: float = -math.inf
     _attitude_boot_s: float = -math.inf
-    _local_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    _moved: dict[str, _Position] = field(default_factory=dict)  # last sample that moved
+    _local_offset: tuple[float, float, float] | None = None  # vehicle origin in ours
+    _latched: bool = False
+    _refusal: tuple[Hold, str] | None = None
 
     def update(self, msg: Message, now_s: float) -> str | None:
         """Take one message; returns its type if it was used, None if not ours or refused."""
@@ -121,14 +147,41 @@ class TelemetryState:
             return None
         return str(kind)
 
+    def take_refusal(self) -> tuple[Hold, str] | None:
+        """The trust refusal of the last :meth:`update` (cause, why), once."""
+        refusal, self._refusal = self._refusal, None
+        return refusal
+
+    def latch_origin(self) -> None:
+        """Fix the frame for the engagement: a different origin from now on is refused."""
+        self._latched = True
+
+    def assume_scenario_origin(self) -> bool:
+        """The vehicle never told its origin: take its local frame as the scenario's (what
+        the scenario file says), guarded by the cross-check against global positions. True
+        if this changed anything."""
+        if self._local_offset is not None:
+            return False
+        self._local_offset = (0.0, 0.0, 0.0)
+        return True
+
+    @property
+    def origin_known(self) -> bool:
+        """The vehicle has told its local origin."""
+        return self._local_offset is not None
+
     def snapshot(self, stale_after_s: float, now_s: float) -> VehicleState | None:
         """The local position if it is fresh, else the global one if that is, else the newest
-        of the two however old (its ``age_s`` tells); None before any position."""
-        samples = [(p, src) for p, src in ((self._local, "local"), (self._global, "global")) if p]
+        of the two however old (its ``age_s`` tells); None before any position.
+
+        A position's time is that of the last sample that moved: a frozen estimate re-sent
+        with fresh stamps does not make it younger."""
+        samples = [(t, src) for src in ("local", "global") if (t := self._tracks.get(src))]
         if not samples:
             return None
-        fresh = [(p, src) for p, src in samples if now_s - p.arrived_s <= stale_after_s]
-        p, source = fresh[0] if fresh else max(samples, key=lambda item: item[0].arrived_s)
+        fresh = [(t, src) for t, src in samples if now_s - t.moved.arrived_s <= stale_after_s]
+        track, source = fresh[0] if fresh else max(samples, key=lambda i: i[0].moved.arrived_s)
+        p = track.last
         return VehicleState(
             north_m=p.north_m,
             east_m=p.east_m,
@@ -136,9 +189,10 @@ class TelemetryState:
             velocity_north_m_s=p.vn_m_s,
             velocity_east_m_s=p.ve_m_s,
             yaw_rad=self._yaw_rad,
-            position_time_s=p.arrived_s,
+            position_time_s=track.moved.arrived_s,
             attitude_time_s=self._attitude_s,
             position_source=source,
+            course_rate_rad_s=track.course_rate_rad_s,
         )
 
     # --- decoders: each returns False to refuse the sample --------------------------------
@@ -147,14 +201,13 @@ class TelemetryState:
         values = (msg.x, msg.y, msg.z, msg.vx, msg.vy)
         if not is_finite(*values) or max(abs(v) for v in values) > 1e7:
             return False
+        if self._local_offset is None:
+            return False  # the vehicle's origin is not known: its local frame is not ours
         dn, de, dd = self._local_offset
         sample = _Position(
             msg.x + dn, msg.y + de, msg.z + dd, msg.vx, msg.vy, ms_to_s(msg.time_boot_ms), now_s
         )
-        if not self._accept("local", self._local, sample):
-            return False
-        self._local = sample
-        return True
+        return self._accept("local", sample)
 
     def _on_global(self, msg: Message, now_s: float) -> bool:
         lat, lon = e7_to_deg(msg.lat), e7_to_deg(msg.lon)
@@ -168,6 +221,8 @@ class TelemetryState:
             origin_lon_deg=self.origin.lon_deg,
             origin_alt_m=self.origin.alt_m,
         )
+        if not is_finite(north, east, down):
+            return False
         sample = _Position(
             north,
             east,
@@ -177,10 +232,7 @@ class TelemetryState:
             ms_to_s(msg.time_boot_ms),
             now_s,
         )
-        if not is_finite(north, east, down) or not self._accept("global", self._global, sample):
-            return False
-        self._global = sample
-        return True
+        return self._accept("global", sample)
 
     def _on_attitude(self, msg: Message, now_s: float) -> bool:
         if not is_finite(msg.yaw) or abs(msg.yaw) > 2.0 * math.pi:
@@ -201,7 +253,7 @@ class TelemetryState:
         if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
             return False
         # Where the vehicle's local origin lies in the scenario's local frame.
-        self._local_offset = geodetic_to_ned(
+        offset = geodetic_to_ned(
             lat,
             lon,
             mm_to_m(msg.altitude),
@@ -209,32 +261,138 @@ class TelemetryState:
             origin_lon_deg=self.origin.lon_deg,
             origin_alt_m=self.origin.alt_m,
         )
+        if not is_finite(*offset):
+            return False
+        offset = (round(offset[0], 6), round(offset[1], 6), round(offset[2], 6))  # to 1 um
+        old = self._local_offset
+        if old is not None and math.dist(old[:2], offset[:2]) <= _SAME_ORIGIN_M:
+            return True  # the same origin again
+        if self._latched and old is not None:
+            self.alarm = Hold.ORIGIN
+            self._refusal = (
+                Hold.ORIGIN,
+                f"GPS_GLOBAL_ORIGIN moved by {math.dist(old[:2], offset[:2]):.3f} m during "
+                "the engagement: refused, guidance held",
+            )
+            return False
+        self._local_offset = offset
+        self._tracks.pop("local", None)  # the local frame changed: start its track afresh
         return True
 
-    def _accept(self, kind: str, last: _Position | None, sample: _Position) -> bool:
-        if last is None:
-            self._moved[kind] = sample
+    # --- the gate ---------------------------------------------------------------------------
+
+    def _refuse(self, cause: Hold, why: str) -> bool:
+        self._refusal = (cause, why)
+        return False
+
+    def _accept(self, kind: str, sample: _Position) -> bool:
+        track = self._tracks.get(kind)
+        if track is None:
+            if not self._cross_check(kind, sample):
+                return False
+            self._tracks[kind] = _Track.start(sample)
             return True
-        if not _advances(last.boot_s, sample.boot_s):
-            return False
-        dt = sample.boot_s - last.boot_s
-        if dt <= 0.0:  # a reboot: start afresh
-            self._moved[kind] = sample
-            return True
-        moved = math.hypot(sample.north_m - last.north_m, sample.east_m - last.east_m)
-        if moved > self.max_plausible_speed_m_s * dt + 1.0:
-            return False  # a jump
+        last = track.last
+        if sample.boot_s <= last.boot_s:
+            if sample.boot_s < last.boot_s - _REBOOT_BACKSTEP_S:
+                return self._refuse(
+                    Hold.GATE,
+                    f"{kind} position time went back {last.boot_s - sample.boot_s:.1f} s "
+                    "(a reboot or a forgery): refused",
+                )
+            return False  # duplicated or reordered
+        if sample.boot_s <= track.pred_boot_s:
+            return False  # not newer than a refused sample already judged
         # A position that stands still while the velocity says it moves is frozen (a stale
-        # estimate re-sent with fresh time stamps): as good as no telemetry. Judged from the
-        # last sample that moved, so that slow motion between close samples is not mistaken.
-        anchor = self._moved[kind]
+        # estimate re-sent with fresh time stamps): no information, and it leaves the
+        # prediction alone. Judged from the last sample that moved.
+        anchor = track.moved
         since = math.hypot(sample.north_m - anchor.north_m, sample.east_m - anchor.east_m)
-        expected = (sample.boot_s - anchor.boot_s) * math.hypot(anchor.vn_m_s, anchor.ve_m_s)
-        if expected > _FROZEN_AFTER_M and since < 0.1 * expected:
+        # (the slower of the two velocities: a vehicle that stopped says so itself)
+        speed = min(
+            math.hypot(anchor.vn_m_s, anchor.ve_m_s), math.hypot(sample.vn_m_s, sample.ve_m_s)
+        )
+        expected = (sample.boot_s - anchor.boot_s) * speed
+        moved = since > _STILL_M
+        if not moved and expected > 2.0 * _STILL_M:
+            return False  # frozen (a jump elsewhere is not: the gate judges it)
+        progress = moved or expected <= 0.5 * _STILL_M
+        # Propagate the prediction to this sample and gate it.
+        dt = sample.boot_s - track.pred_boot_s
+        bound = self.accel_bound_m_s2
+        dv = math.hypot(sample.vn_m_s - track.pred_vn_m_s, sample.ve_m_s - track.pred_ve_m_s)
+        velocity_ok = dv <= bound * dt + _GATE_VELOCITY_M_S
+        vn = sample.vn_m_s if velocity_ok else track.pred_vn_m_s
+        ve = sample.ve_m_s if velocity_ok else track.pred_ve_m_s
+        track.pred_north_m += 0.5 * (track.pred_vn_m_s + vn) * dt
+        track.pred_east_m += 0.5 * (track.pred_ve_m_s + ve) * dt
+        track.pred_vn_m_s, track.pred_ve_m_s, track.pred_boot_s = vn, ve, sample.boot_s
+        track.spread_m += 0.25 * bound * dt * dt  # the trapezoid's error for |a| <= bound
+        innovation = math.hypot(
+            sample.north_m - track.pred_north_m, sample.east_m - track.pred_east_m
+        )
+        limit = self.gate_position_m + track.spread_m
+        if not velocity_ok:
+            return self._refuse(
+                Hold.GATE,
+                f"{kind} velocity changed by {dv:.2f} m/s in {dt:.3f} s (bound "
+                f"{bound:g} m/s2): refused",
+            )
+        if innovation > limit:
+            return self._refuse(
+                Hold.GATE,
+                f"{kind} position {innovation:.2f} m from the prediction (gate "
+                f"{limit:.2f} m): refused",
+            )
+        if not self._cross_check(kind, sample):
             return False
-        if since > _STILL_M:
-            self._moved[kind] = sample
+        # Accepted: pull the prediction towards it, keep the course rate.
+        gain = min(1.0, dt / _GATE_TAU_S)
+        track.pred_north_m += gain * (sample.north_m - track.pred_north_m)
+        track.pred_east_m += gain * (sample.east_m - track.pred_east_m)
+        track.spread_m = 0.0
+        self._course_rate(track, last, sample)
+        if progress:
+            track.moved = sample
+        track.last = sample
         return True
+
+    def _cross_check(self, kind: str, sample: _Position) -> bool:
+        other = self._tracks.get("global" if kind == "local" else "local")
+        if other is None:
+            return True
+        o = other.last
+        lag = sample.boot_s - o.boot_s
+        if abs(lag) > _CROSS_MAX_AGE_S:
+            return True
+        north = o.north_m + o.vn_m_s * lag
+        east = o.east_m + o.ve_m_s * lag
+        apart = math.hypot(sample.north_m - north, sample.east_m - east)
+        limit = self.gate_position_m + 0.5 * self.accel_bound_m_s2 * lag * lag
+        if apart > limit:
+            return self._refuse(
+                Hold.DISAGREE,
+                f"local and global positions {apart:.2f} m apart (gate {limit:.2f} m): "
+                f"{kind} refused",
+            )
+        return True
+
+    @staticmethod
+    def _course_rate(track: _Track, last: _Position, sample: _Position) -> None:
+        dt = sample.boot_s - last.boot_s
+        if math.hypot(last.vn_m_s, last.ve_m_s) < 0.1 or math.hypot(
+            sample.vn_m_s, sample.ve_m_s
+        ) < 0.1:
+            return
+        turn = float(
+            wrap_pi(
+                math.atan2(sample.ve_m_s, sample.vn_m_s) - math.atan2(last.ve_m_s, last.vn_m_s)
+            )
+        )
+        rate = turn / dt
+        old = track.course_rate_rad_s
+        gain = min(1.0, dt / (dt + _COURSE_RATE_TAU_S))
+        track.course_rate_rad_s = rate if old is None else old + gain * (rate - old)
 
 
 def _advances(last_boot_s: float, boot_s: float) -> bool:

@@ -32,8 +32,7 @@ import zenoh
 
 import ezcompanion
 from ezcompanion.errors import ConfigError
-from ezcompanion.service.events import Event
-from ezcompanion.service.loop import TickCommand
+from ezcompanion.records import Event, TickCommand
 from ezcompanion.telemetry.exposure import exposure_warnings
 from ezcompanion.telemetry.schema import (
     SCHEMAS,

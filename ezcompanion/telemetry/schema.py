@@ -16,8 +16,7 @@ from collections.abc import Sequence
 from typing import Any, SupportsFloat
 
 from ezcompanion.guidance.controller import GuidanceMode
-from ezcompanion.service.events import Event
-from ezcompanion.service.loop import TickCommand
+from ezcompanion.records import Event, TickCommand
 from ezcompanion.telemetry.updates import bounded
 
 __all__ = [

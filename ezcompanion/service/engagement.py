@@ -1,0 +1,202 @@
+"""The engagement: guidance ticks, failsafes and the end, on a vehicle the session found.
+
+:class:`Engagement` owns the guidance loop and the setpoint encoder. The service calls
+:meth:`Engagement.start` when the vehicle enters its guided mode, :meth:`Engagement.tick`
+with the session's picture of the vehicle (or the reason it cannot be trusted), and
+:meth:`Engagement.pause` when guidance must stop (mode change, lost link). No I/O but the
+``send`` callable it is given; every decision becomes an event.
+
+Fail closed: a tick with no fresh, trusted position sends no guidance; the first such tick
+emits a ``failsafe`` event, tells a vehicle that can stop (velocity setpoints: copter, rover,
+PX4) to stop where it is with one zero-velocity setpoint built from nothing it reported,
+and the next fresh tick emits a ``resumed`` one. A plane flies on as its autopilot does
+with no new course (ArduPlane holds the last one).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from ezcompanion.records import EventKind, Hold, TickCommand, VehicleState
+from ezcompanion.service.events import EventLog
+from ezcompanion.service.loop import GuidanceLoop
+from ezcompanion.service.setpoints import Setpoints
+from ezcompanion.sim.output import TrackWriter
+from ezcompanion.wire import Message
+
+if TYPE_CHECKING:
+    from ezcompanion.telemetry import TelemetryPublisher
+
+__all__ = ["Engagement", "EngagementOutcome"]
+
+
+@dataclass(frozen=True)
+class EngagementOutcome:
+    """How the engagement ended, as the companion saw it."""
+
+    intercepted: bool
+    time_s: float  # clock time of the end (of interception, or of the stop)
+    guiding_time_s: float  # time spent guiding
+    miss_distance_m: float
+    ticks: int
+    setpoints_sent: int
+    failsafes: int
+    brakes_sent: int = 0  # zero-velocity stops sent at failsafes
+
+
+class Engagement:
+    """Ticks of the law, the setpoints they send, the failsafes and the outcome."""
+
+    def __init__(
+        self,
+        loop: GuidanceLoop,
+        events: EventLog,
+        send: Callable[[Message], None],
+        *,
+        intercept_radius_m: float,
+    ) -> None:
+        self.loop = loop
+        self.events = events
+        self._send = send
+        self.intercept_radius_m = intercept_radius_m
+        self.setpoints: Setpoints | None = None
+        self.track: TrackWriter | None = None
+        self.publisher: TelemetryPublisher | None = None
+        self.done = False
+        self.ticks = 0
+        self.setpoints_sent = 0
+        self.failsafes = 0
+        self.brakes_sent = 0  # zero-velocity stops at failsafes (not counted as setpoints)
+        self.last_command: TickCommand | None = None
+        self.outcome: EngagementOutcome | None = None
+        self.failsafe_active = False
+        self._guiding_since_s: float | None = None
+        self._guiding_total_s = 0.0
+
+    def start(self, now: float, mode_name: str) -> None:
+        """The vehicle follows setpoints from now on."""
+        self._guiding_since_s = now
+        self.events.emit(
+            EventKind.ENGAGED, now, f"guiding in {mode_name}", setpoints_sent=self.setpoints_sent
+        )
+
+    def tick(self, now: float, state: VehicleState | None, distrust: Hold | None = None) -> None:
+        """One tick on ``state`` (None: no position yet); ``distrust`` holds it, whatever the
+        state says."""
+        self.ticks += 1
+        result = distrust if distrust is not None else self.loop.tick(state, now)
+        if isinstance(result, TickCommand):
+            self._command(now, result)
+            return
+        if result is Hold.NO_TELEMETRY:
+            return  # nothing to stop yet: no position has arrived since (re)connecting
+        self.failsafe(now, result)
+
+    def failsafe(self, now: float, reason: Hold) -> None:
+        """Stop sending (once per failsafe) and say why."""
+        if self.failsafe_active:
+            return
+        self.failsafe_active = True
+        self.failsafes += 1
+        self.loop.reset()
+        brake = None
+        if self.setpoints is not None:
+            self.setpoints.reset()
+            brake = self.setpoints.brake(now)
+        if brake is not None:
+            self._send(brake)
+            self.brakes_sent += 1
+        self.events.emit(
+            EventKind.FAILSAFE,
+            now,
+            f"{reason.value}: setpoints stopped" + ("; vehicle told to stop" if brake else ""),
+            reason=reason.name.lower(),
+            setpoints_sent=self.setpoints_sent,
+            braked=brake is not None,
+        )
+
+    def abort(self, now: float, cause: Hold, lasted_s: float) -> None:
+        """End guidance for good: the input stayed untrusted for ``lasted_s``."""
+        self.failsafe(now, cause)
+        self.done = True
+        self.events.emit(
+            EventKind.ABORTED,
+            now,
+            f"{cause.value} for {lasted_s:.2f} s: guidance ended",
+            cause=cause.name.lower(),
+            setpoints_sent=self.setpoints_sent,
+        )
+
+    def _command(self, now: float, result: TickCommand) -> None:
+        if self.track is not None:
+            state = result.state
+            self.track.write(now, state.north_m, state.east_m, result.course_rad, result.step)
+        self.last_command = result
+        if result.captured:
+            if self.publisher is not None:
+                self.publisher.publish_tick(result)
+            self.events.emit(
+                EventKind.INTERCEPTED,
+                now,
+                f"within {self.intercept_radius_m:g} m of the target; setpoints stopped",
+                miss_distance_m=self.loop.miss_distance_m,
+            )
+            self.done = True
+            return
+        if self.failsafe_active:
+            self.failsafe_active = False
+            self.events.emit(
+                EventKind.RESUMED,
+                now,
+                "fresh telemetry: guiding again",
+                setpoints_sent=self.setpoints_sent,
+            )
+        assert self.setpoints is not None
+        message = self.setpoints.message(result)
+        if message is not None:
+            self._send(message)
+            self.setpoints_sent += 1
+        if self.publisher is not None:  # after the setpoint has left
+            self.publisher.publish_tick(result)
+
+    def pause(self, now: float, *, brake: bool = False) -> None:
+        """Guidance stops (mode change, lost link): forget the actuator state and timing.
+        With ``brake``, tell the vehicle to stop too (if it left the guided mode it ignores
+        that; if the mode change was forged, it would otherwise fly on)."""
+        if self._guiding_since_s is not None:
+            self._guiding_total_s += now - self._guiding_since_s
+            self._guiding_since_s = None
+        self.loop.reset()
+        if self.setpoints is not None:
+            self.setpoints.reset()
+            message = self.setpoints.brake(now) if brake else None
+            if message is not None:
+                self._send(message)
+                self.brakes_sent += 1
+
+    def finish(self, now: float) -> EngagementOutcome:
+        """The end: stop, report the outcome (``ended`` event) and keep it."""
+        self.pause(now)
+        intercepted = self.loop.captured
+        self.outcome = EngagementOutcome(
+            intercepted=intercepted,
+            time_s=now,
+            guiding_time_s=self._guiding_total_s,
+            miss_distance_m=self.loop.miss_distance_m,
+            ticks=self.ticks,
+            setpoints_sent=self.setpoints_sent,
+            failsafes=self.failsafes,
+            brakes_sent=self.brakes_sent,
+        )
+        verdict = "intercepted" if intercepted else "not intercepted"
+        self.events.emit(
+            EventKind.ENDED,
+            now,
+            f"{verdict}; miss distance "
+            f"{self.loop.miss_distance_m:.3f} m after {self._guiding_total_s:.2f} s "
+            f"of guidance",
+            intercepted=intercepted,
+        )
+        return self.outcome

@@ -1,0 +1,450 @@
+"""The vehicle session: finding the vehicle, its streams, its mode and the link's health.
+
+:class:`VehicleSession` reads every frame the link delivers and keeps what the service knows
+of the vehicle: which system/component it is, what it flies (setpoint kind), the mode it is
+in, when it was last heard, and its telemetry (:class:`TelemetryState`). It sends only what
+a session needs (stream requests, mode requests) through the ``send`` callable; guidance
+is the engagement's (:mod:`ezcompanion.service.engagement`).
+
+1. Find the vehicle: the first autopilot heartbeat (of the configured target
+   system/component, if set) locks its id and transport address: from then on only its
+   frames (same system, component and address) feed the state, and the link sends only to
+   that address. Another autopilot (another id or address) heard at any time with no
+   ``target_system`` configured, or one with the configured id before guidance starts or
+   within ``_DISCOVERY_S`` after: both are named in a ``vehicle_refused`` event, guidance
+   never starts (or stops) and the service ends.
+2. Ask for telemetry: REQUEST_DATA_STREAM first (ArduPilot lets it override message
+   intervals), then SET_MESSAGE_INTERVAL per message at the configured rate (capped at
+   40 Hz for fixed wing, which ArduPlane would deny), and check two seconds later that the
+   position arrives at least at half that rate; ask again once if not.
+3. With ``engage``, ask for GUIDED (OFFBOARD on PX4) every second while not in it. Never arm.
+4. No heartbeat from the vehicle for ``link_lost_after_s`` is a lost link: the address lock
+   is released and discovery runs again, for the same system and component only.
+
+Trust (each refusal is an ``alarm`` event naming its ``cause``; see docs/service.md):
+frames claiming the vehicle's id from another address are refused (``foreign_address``);
+heartbeats from the vehicle that disagree (type or autopilot changed, MAVLink 1 from a
+MAVLink 2 vehicle, a mode flipping back within ``FLIP_S``, a burst; see
+:mod:`ezcompanion.service.trust`) are refused and hold guidance in failsafe
+(``Hold.SPOOF``) for ``_SPOOF_HOLD_S``; the telemetry's own refusals (estimate gate, local
+and global disagreeing, origin changed) hold it likewise. COMMAND_ACK is taken only when
+addressed to this service (or broadcast), STATUSTEXT only from the vehicle.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+from ezcompanion.config import Scenario
+from ezcompanion.records import EventKind, Hold
+from ezcompanion.service.events import EventLog
+from ezcompanion.service.settings import CompanionSettings, SetpointKind
+from ezcompanion.service.state import TelemetryState
+from ezcompanion.service.trust import Alarms, HeartbeatJudge
+from ezcompanion.wire import (
+    Address,
+    Frame,
+    Link,
+    Message,
+    guided_mode,
+    is_fixed_wing,
+    mavlink,
+    mode_name,
+)
+
+__all__ = ["POSITIONS", "VehicleSession"]
+
+_RATE_CHECK_AFTER_S = 2.0
+_ENGAGE_RETRY_S = 1.0
+_PLANE_MAX_RATE_HZ = 40.0
+_DISCOVERY_S = 1.5  # listen this long for other autopilots before locking on one
+_SPOOF_HOLD_S = 3.0  # a heartbeat conflict holds guidance this long after the last one
+_TELEMETRY_HOLD_S = 0.5  # a refused position holds guidance this long after the last one
+_ORIGIN_RETRY_S = 0.5
+_ORIGIN_TRIES = 6  # then the scenario's origin is assumed (with a warning)
+_STREAMED = ("LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "ATTITUDE", "VFR_HUD")
+POSITIONS = frozenset({"LOCAL_POSITION_NED", "GLOBAL_POSITION_INT"})
+
+
+class VehicleSession:
+    """What the service knows of the vehicle, from the frames it hears."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        settings: CompanionSettings,
+        events: EventLog,
+        link: Link,
+        send: Callable[[Message], None],
+    ) -> None:
+        self.settings = settings
+        self.events = events
+        self._link = link
+        self._send = send
+        self.telemetry = TelemetryState(
+            origin=scenario.origin,
+            accel_bound_m_s2=settings.gate_accel_m_s2 or 2.0 * scenario.guidance.accel_max_m_s2,
+            gate_position_m=settings.gate_position_m,
+        )
+        self.target: tuple[int, int] | None = None
+        self.address: Address = None  # the vehicle's transport address, once locked
+        self.locked = False
+        self.heartbeat: Message | None = None  # the vehicle's first heartbeat
+        self.fixed_wing = False
+        self.connected = False
+        self.refused = False  # several autopilots heard: none will be guided
+        self.refused_frames = 0
+        self._discovery_until_s: float | None = None
+        self.alarms = Alarms(events)
+        self._judge = HeartbeatJudge()
+        self._origin_tries = 0
+        self._next_origin_s = math.inf
+        self.mode = ""
+        self.guided_mode: tuple[str, float, float, float] | None = None
+        self.last_heartbeat_s = -math.inf
+        self._streams_requested_s: float | None = None
+        self._rate_checks = 0
+        self._counts_at_request: dict[str, int] = {}
+        self.received: dict[str, int] = {}
+        self._next_engage_s = 0.0
+        self.requested_rate_hz = settings.telemetry_rate_hz
+
+    @property
+    def setpoint_kind(self) -> SetpointKind:
+        """How to steer this vehicle: the setting, or by airframe (fixed wing: course)."""
+        kind = self.settings.setpoint
+        if kind is SetpointKind.AUTO:
+            kind = SetpointKind.COURSE if self.fixed_wing else SetpointKind.VELOCITY
+        return kind
+
+    @property
+    def in_guided(self) -> bool:
+        """The vehicle reports the mode in which it follows a companion."""
+        return self.guided_mode is not None and self.mode == self.guided_mode[0]
+
+    def engaged(self, now: float) -> None:
+        """Guidance starts: other autopilots still refuse the lock for ``_DISCOVERY_S``."""
+        if self._discovery_until_s is not None:
+            self._discovery_until_s = min(self._discovery_until_s, now + _DISCOVERY_S)
+
+    @property
+    def frame_settled(self) -> bool:
+        """The vehicle's origin is known (or, unanswered, assumed): the frame can be
+        latched."""
+        return self.telemetry.origin_known
+
+    # --- incoming -------------------------------------------------------------------------
+
+    def on_frame(self, frame: Frame, now: float) -> str | None:
+        """Take one frame; the telemetry kind it fed (a position drives a tick), or None."""
+        msg = frame.message
+        kind = msg.get_type()
+        source = (msg.get_srcSystem(), msg.get_srcComponent())
+        if kind == "HEARTBEAT":
+            self._on_heartbeat(frame, now)
+            return None
+        if not self.locked or source != self.target:
+            return None
+        if frame.source != self.address:
+            self._refuse_foreign(frame, now)
+            return None
+        used = self.telemetry.update(msg, now)
+        if used is not None:
+            self.received[used] = self.received.get(used, 0) + 1
+            if used == "GPS_GLOBAL_ORIGIN":
+                self._next_origin_s = math.inf
+        refusal = self.telemetry.take_refusal()
+        if refusal is not None:
+            cause, why = refusal
+            self.alarms.hold(cause, now, why, hold_s=_TELEMETRY_HOLD_S)
+        if kind == "COMMAND_ACK":
+            self._on_ack(msg, now)
+        elif kind == "STATUSTEXT":
+            self.events.emit(EventKind.STATUSTEXT, now, str(msg.text), severity=int(msg.severity))
+        return used
+
+    def _on_ack(self, msg: Message, now: float) -> None:
+        s = self.settings
+        if int(msg.target_system) not in (0, s.system_id) or int(msg.target_component) not in (
+            0,
+            s.component_id,
+        ):
+            return  # another component's command (behind a router: the GCS's)
+        if msg.result != mavlink.MAV_RESULT_ACCEPTED:
+            self.events.emit(
+                EventKind.COMMAND_ACK,
+                now,
+                f"command {msg.command} refused with result {msg.result}",
+                command=int(msg.command),
+                result=int(msg.result),
+            )
+
+    def _refuse_foreign(self, frame: Frame, now: float) -> None:
+        self.refused_frames += 1
+        self.alarms.say(
+            "foreign_address",
+            now,
+            f"{frame.message.get_type()} claiming the vehicle's id "
+            f"{self._name(self.target, frame.source)} refused: the vehicle is at "
+            f"{_address(self.address)}",
+        )
+
+    def _on_heartbeat(self, frame: Frame, now: float) -> None:
+        msg = frame.message
+        if msg.type in (mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER) or (
+            msg.autopilot == mavlink.MAV_AUTOPILOT_INVALID
+        ):
+            return
+        source = (msg.get_srcSystem(), msg.get_srcComponent())
+        if not self.locked:  # discovering (at start, or after a lost link)
+            self._discover(frame, source, now)
+            return
+        if (source, frame.source) != (self.target, self.address) and self._second_candidate(
+            frame, source, now
+        ):
+            return
+        if source != self.target:
+            self.alarms.say(
+                "other_autopilot",
+                now,
+                f"heartbeat of another autopilot {self._name(source, frame.source)} ignored",
+            )
+            return
+        if frame.source != self.address:
+            self._refuse_foreign(frame, now)
+            return
+        conflict = self._judge.conflict(frame, now, self.mode)
+        if conflict is not None:
+            self.refused_frames += 1
+            self.alarms.hold(Hold.SPOOF, now, conflict, hold_s=_SPOOF_HOLD_S)
+            return
+        self._take_heartbeat(msg, now)
+
+    def _wanted(self, source: tuple[int, int]) -> bool:
+        s = self.settings
+        wanted = self.target or (s.target_system, s.target_component)
+        system_ok = not wanted[0] or source[0] == wanted[0]
+        return system_ok and (not wanted[1] or source[1] == wanted[1])
+
+    def _discover(self, frame: Frame, source: tuple[int, int], now: float) -> None:
+        """Lock on the first autopilot heard (of the configured id, if any)."""
+        if not self._wanted(source):
+            return
+        msg, address = frame.message, frame.source
+        first = self.target is None
+        self.target, self.address, self.locked = source, address, True
+        self._link.lock_peer(address)
+        self._discovery_until_s = math.inf  # until guidance starts, and a little after
+        if first:
+            self.heartbeat = msg
+            self.fixed_wing = is_fixed_wing(msg)
+            self.events.emit(
+                EventKind.VEHICLE_FOUND,
+                now,
+                f"vehicle {source[0]}/{source[1]} at {_address(address)}, "
+                f"setpoints {self.setpoint_kind.value}",
+                system=source[0],
+                component=source[1],
+            )
+        self._judge.lock(msg)
+        self._take_heartbeat(msg, now)
+
+    def _second_candidate(self, frame: Frame, source: tuple[int, int], now: float) -> bool:
+        """Another autopilot heard while discovery still listens: refuse them all."""
+        s = self.settings
+        if (s.target_system and source[0] != s.target_system) or (
+            s.target_component and source[1] != s.target_component
+        ):
+            return False  # not what we look for: ignored
+        until = self._discovery_until_s
+        in_window = until is not None and now <= until
+        if not (in_window or s.target_system == 0):
+            return False  # the vehicle's id, another address, later on: refused frames
+        if self.refused:
+            return True
+        names = ", ".join(
+            sorted({self._name(self.target, self.address), self._name(source, frame.source)})
+        )
+        self.refused = True
+        self.connected = False
+        self.events.emit(
+            EventKind.VEHICLE_REFUSED,
+            now,
+            f"several autopilots heard: {names}; set companion.target_system (and "
+            "target_component) to the vehicle, and make it the only one there",
+            candidates=names,
+        )
+        return True
+
+    def _take_heartbeat(self, msg: Message, now: float) -> None:
+        if not self.connected:
+            if self.last_heartbeat_s > -math.inf:
+                self.events.emit(EventKind.LINK_RESTORED, now, "vehicle heard again")
+            self.connected = True
+            self.request_streams(now)
+            if self._origin_tries == 0:
+                self._next_origin_s = now
+        self.last_heartbeat_s = now
+        self.guided_mode = guided_mode(msg)
+        name = mode_name(msg)
+        if name != self.mode:
+            if self.mode:
+                self._judge.mode_changed(now)
+            self.mode = name
+            self.events.emit(EventKind.MODE, now, f"vehicle mode {name}", mode=name)
+
+    # --- trust ----------------------------------------------------------------------------
+
+    def distrust(self, now: float) -> Hold | None:
+        """Why the vehicle's picture cannot be trusted now (None: it can)."""
+        return self.alarms.distrust(now, self.telemetry.alarm)
+
+    def distrusted_for_s(self, now: float) -> float:
+        """How long the distrust has lasted without a break (0: trusted)."""
+        return self.alarms.distrusted_for_s(now)
+
+    @staticmethod
+    def _name(source: tuple[int, int] | None, address: Address) -> str:
+        system, component = source if source is not None else (0, 0)
+        return f"{system}/{component} at {_address(address)}"
+
+    # --- periodic work --------------------------------------------------------------------
+
+    def periodic(self, now: float, *, waiting: bool) -> None:
+        """Discovery, link health, the stream-rate check, the origin request and
+        (``waiting`` for GUIDED) mode requests."""
+        self._check_link(now)
+        self._check_rates(now)
+        self._request_origin(now)
+        if waiting:
+            self._engage(now)
+
+    def request_streams(self, now: float) -> None:
+        """Ask for the telemetry streams at the configured rate."""
+        assert self.target is not None
+        system, component = self.target
+        rate = self.settings.telemetry_rate_hz
+        if self.fixed_wing:
+            rate = min(rate, _PLANE_MAX_RATE_HZ)
+        mav = self._link.mav
+        for stream in (
+            mavlink.MAV_DATA_STREAM_POSITION,
+            mavlink.MAV_DATA_STREAM_EXTRA1,
+            mavlink.MAV_DATA_STREAM_EXTRA2,
+        ):
+            self._send(mav.request_data_stream_encode(system, component, stream, round(rate), 1))
+        for name in _STREAMED:
+            self._send(
+                mav.command_long_encode(
+                    system,
+                    component,
+                    mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+                    0,
+                    float(getattr(mavlink, f"MAVLINK_MSG_ID_{name}")),
+                    1e6 / rate,
+                    0,
+                    0,
+                    0,
+                    0,
+                    0,
+                )
+            )
+        self._streams_requested_s = now
+        self._counts_at_request = dict(self.received)
+        self.requested_rate_hz = rate
+        self.events.emit(
+            EventKind.STREAMS_REQUESTED, now, f"telemetry at {rate:g} Hz", rate_hz=rate
+        )
+
+    def _check_rates(self, now: float) -> None:
+        start = self._streams_requested_s
+        if start is None or now - start < _RATE_CHECK_AFTER_S:
+            return
+        self._streams_requested_s = None
+        elapsed = now - start
+        rate = max(
+            (self.received.get(n, 0) - self._counts_at_request.get(n, 0)) / elapsed
+            for n in POSITIONS
+        )
+        if rate < 0.5 * self.requested_rate_hz:
+            self.events.emit(
+                EventKind.RATE_LOW,
+                now,
+                f"position arrives at {rate:.1f} Hz, asked {self.requested_rate_hz:g} Hz",
+                rate_hz=rate,
+            )
+            if self._rate_checks == 0 and self.connected:
+                self.request_streams(now)
+            self._rate_checks += 1
+
+    def _engage(self, now: float) -> None:
+        if not self.settings.engage or now < self._next_engage_s:
+            return
+        mode = self.guided_mode
+        if mode is None or self.target is None:
+            return
+        name, param1, param2, param3 = mode
+        self._send(
+            self._link.mav.command_long_encode(
+                self.target[0],
+                self.target[1],
+                mavlink.MAV_CMD_DO_SET_MODE,
+                0,
+                param1,
+                param2,
+                param3,
+                0,
+                0,
+                0,
+                0,
+            )
+        )
+        self._next_engage_s = now + _ENGAGE_RETRY_S
+        self.events.emit(EventKind.MODE, now, f"asking for {name}", requested=name)
+
+    def _request_origin(self, now: float) -> None:
+        """Ask for GPS_GLOBAL_ORIGIN: ArduPilot and PX4 send it only when it is set or
+        changes, so a companion started later never hears it unasked."""
+        if now < self._next_origin_s or self.target is None:
+            return
+        if self._origin_tries >= _ORIGIN_TRIES:
+            self._next_origin_s = math.inf
+            if self.telemetry.assume_scenario_origin():
+                self.events.emit(
+                    EventKind.WARNING,
+                    now,
+                    f"no GPS_GLOBAL_ORIGIN after {_ORIGIN_TRIES} requests: local positions "
+                    "taken in the scenario's frame, cross-checked against global ones",
+                )
+            return
+        self._origin_tries += 1
+        self._next_origin_s = now + _ORIGIN_RETRY_S
+        self._send(
+            self._link.mav.command_long_encode(
+                self.target[0],
+                self.target[1],
+                mavlink.MAV_CMD_REQUEST_MESSAGE,
+                0,
+                float(mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN),
+                0,
+                0,
+                0,
+                0,
+                0,
+                0,
+            )
+        )
+
+    def _check_link(self, now: float) -> None:
+        if self.connected and now - self.last_heartbeat_s > self.settings.link_lost_after_s:
+            self.connected = False
+            # Discover again, the same id only: a restarted vehicle may speak from a new
+            # port. The runner stops guidance and emits link_lost (it knows what was sent).
+            self.address, self.locked = None, False
+            self._link.lock_peer(None)
+            self._discovery_until_s = None
+
+
+def _address(address: Address) -> str:
+    return "the link's one peer" if address is None else f"{address[0]}:{address[1]}"

@@ -1,0 +1,101 @@
+"""The session's trust decisions: alarms that hold guidance, and heartbeats that conflict.
+
+:class:`Alarms` keeps, per cause, until when refused input holds guidance in failsafe, and
+announces each refusal as an ``alarm`` event (at most once a second per cause).
+:class:`HeartbeatJudge` says why a heartbeat from the vehicle's own id and address cannot
+be the vehicle's: a type or autopilot that changed, MAVLink 1 from a MAVLink 2 vehicle, a
+burst, or a mode flipping back within ``FLIP_S``. Pure bookkeeping on the clock times it
+is given; no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+from ezcompanion.records import EventKind, Hold
+from ezcompanion.service.events import EventLog
+from ezcompanion.wire import Frame, Message, mode_name
+
+__all__ = ["FLIP_S", "Alarms", "HeartbeatJudge"]
+
+FLIP_S = 1.5  # a mode change back within this is a conflict, not a mode change
+_MAX_HEARTBEATS_PER_S = 3  # ArduPilot and PX4 send 1 Hz; a burst is a conflict
+_ALARM_REPEAT_S = 1.0  # the same alarm is announced at most this often
+_PRIORITY = (Hold.ORIGIN, Hold.SPOOF, Hold.DISAGREE, Hold.GATE)
+
+
+class Alarms:
+    """Refusals that hold guidance for a while, and how long the distrust has lasted."""
+
+    def __init__(self, events: EventLog) -> None:
+        self.events = events
+        self._until: dict[Hold, float] = {}
+        self._said: dict[str, float] = {}
+        self._since_s: float | None = None
+
+    def hold(self, cause: Hold, now: float, why: str, *, hold_s: float) -> None:
+        """Refused input that holds guidance in failsafe for ``hold_s`` after it."""
+        self._until[cause] = max(self._until.get(cause, -math.inf), now + hold_s)
+        self.say(cause.name.lower(), now, why)
+
+    def say(self, cause: str, now: float, why: str) -> None:
+        """Announce a refusal (at most once a second per cause)."""
+        if now - self._said.get(cause, -math.inf) >= _ALARM_REPEAT_S:
+            self._said[cause] = now
+            self.events.emit(EventKind.ALARM, now, why, cause=cause)
+
+    def distrust(self, now: float, lasting: Hold | None = None) -> Hold | None:
+        """The cause holding guidance now (``lasting``: one that never ends), or None."""
+        for cause in _PRIORITY:
+            if self._until.get(cause, -math.inf) > now or lasting is cause:
+                if self._since_s is None:
+                    self._since_s = now
+                return cause
+        self._since_s = None
+        return None
+
+    def distrusted_for_s(self, now: float) -> float:
+        """How long the distrust has lasted without a break (0: trusted)."""
+        return 0.0 if self._since_s is None else now - self._since_s
+
+
+class HeartbeatJudge:
+    """Heartbeats from the vehicle's id and address, against its first one."""
+
+    def __init__(self) -> None:
+        self.first: Message | None = None
+        self._beats: deque[float] = deque()
+        self._last_change_s = -math.inf
+
+    def lock(self, heartbeat: Message) -> None:
+        """The vehicle was (re)locked on ``heartbeat``."""
+        if self.first is None:
+            self.first = heartbeat
+        self._beats.clear()
+
+    def mode_changed(self, now: float) -> None:
+        """A heartbeat's mode change was taken."""
+        self._last_change_s = now
+
+    def conflict(self, frame: Frame, now: float, mode: str) -> str | None:
+        """Why this heartbeat cannot be the vehicle's (``mode``: the one taken so far)."""
+        msg, first = frame.message, self.first
+        assert first is not None
+        if frame.mavlink1 and not Frame(first, None).mavlink1:
+            return "a MAVLink 1 heartbeat from a MAVLink 2 vehicle"
+        if (msg.type, msg.autopilot) != (first.type, first.autopilot):
+            return (
+                f"heartbeat type {msg.type}/autopilot {msg.autopilot}, the vehicle is "
+                f"{first.type}/{first.autopilot}"
+            )
+        beats = self._beats
+        beats.append(now)
+        while beats and beats[0] < now - 1.0:
+            beats.popleft()
+        if len(beats) > _MAX_HEARTBEATS_PER_S:
+            return f"{len(beats)} heartbeats within 1 s"
+        name = mode_name(msg)
+        if name != mode and now - self._last_change_s < FLIP_S:
+            return f"mode {name} {now - self._last_change_s:.2f} s after mode {mode}"
+        return None

@@ -1,0 +1,125 @@
+"""The estimate gate, the stale budget and the restart from the measured turn.
+
+Units on :class:`TelemetryState` and :class:`GuidanceLoop` (hypothesis for the gate's
+properties), then issue 10's jumps over real UDP, judged by the vehicle's truth.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from test_service_loopback import CONFIG, fly, scenario_file
+from test_service_units import known_origin, local
+from test_trust_link import LIGHT
+
+from ezcompanion.config import load_scenario
+from ezcompanion.records import Hold
+from ezcompanion.service.demo import judge_truth
+from ezcompanion.service.events import EventKind
+from ezcompanion.service.loop import GuidanceLoop
+from ezcompanion.wire import deg_to_e7, m_to_mm, mavlink, ned_to_geodetic
+
+DT_S = 0.02  # 50 Hz
+
+
+def fly_track(
+    t: Any, turn_rates: list[float], *, speed: float = 1.0, start_ms: int = 1000
+) -> tuple[list[str | None], tuple[float, float, float]]:
+    """Feed a unicycle track (constant speed, piecewise constant turn rate, |a| <= 1)."""
+    north = east = course = 0.0
+    used = []
+    for k, rate in enumerate(turn_rates):
+        vn, ve = speed * math.cos(course), speed * math.sin(course)
+        used.append(t.update(local(start_ms + 20 * k, north, east, vn, ve), 1.0 + DT_S * k))
+        north += vn * DT_S
+        east += ve * DT_S
+        course += rate * DT_S
+    return used, (north, east, course)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.floats(-1.0, 1.0), min_size=5, max_size=200))
+def test_a_smooth_track_within_the_bound_always_passes(turn_rates: list[float]) -> None:
+    t = known_origin()
+    used, _ = fly_track(t, turn_rates)
+    assert all(u == "LOCAL_POSITION_NED" for u in used)
+    assert t.take_refusal() is None
+
+
+@settings(max_examples=60, deadline=None)
+@given(jump_m=st.floats(0.6, 60.0), bearing=st.floats(-math.pi, math.pi),
+       after=st.integers(5, 250))
+def test_a_jump_stays_refused_however_long_it_lasts(
+    jump_m: float, bearing: float, after: int
+) -> None:
+    # Issue 10: 1 m and 3 m jumps passed, and a 50 m one was taken after a 0.23 s failsafe.
+    t = known_origin()
+    _, (north, east, _course) = fly_track(t, [0.0] * 50)
+    dn, de = jump_m * math.cos(bearing), jump_m * math.sin(bearing)
+    refusals = []
+    for k in range(after):
+        boot = 2000 + 20 * k
+        north += DT_S
+        u = t.update(local(boot, north + dn, east + de, 1.0, 0.0), 2.0 + DT_S * k)
+        refusals.append((u, t.take_refusal()))
+    assert all(u is None for u, _ in refusals)
+    # named by the gate (a jump back onto where the vehicle was a moment ago is also a
+    # frozen position: refused as well, without an alarm of its own)
+    causes = {r[0] for _, r in refusals if r is not None}
+    assert causes == {Hold.GATE}
+    # back on the real track: taken again at once
+    assert t.update(local(2000 + 20 * after, north + DT_S, east, 1.0, 0.0), 9.0)
+
+
+def test_local_and_global_are_cross_checked() -> None:
+    o = known_origin().origin
+    for east, taken in ((5.2, True), (7.0, False)):  # 0.2 m apart is noise; 2 m is not
+        t = known_origin()
+        assert t.update(local(1000, 5.0, 5.0, 0.0, 0.0), 1.0)
+        lat, lon, alt = ned_to_geodetic(5.0, east, -20.0, origin_lat_deg=o.lat_deg,
+                                        origin_lon_deg=o.lon_deg, origin_alt_m=o.alt_m)
+        msg = mavlink.MAVLink_global_position_int_message(
+            1010, deg_to_e7(lat), deg_to_e7(lon), m_to_mm(alt), 20000, 0, 0, 0, 0)
+        assert (t.update(msg, 1.01) is not None) is taken
+        refusal = t.take_refusal()
+        assert (refusal is None) if taken else (refusal is not None and refusal[0] is Hold.DISAGREE)
+
+
+def test_guidance_restarts_from_the_measured_turn_inside_the_bound() -> None:
+    scenario = load_scenario(CONFIG / "paper_scenario1.yaml")
+    bound = scenario.guidance.accel_max_m_s2
+    for rate, expected in ((0.4, 0.4), (-0.3, -0.3), (5.0, 0.98 * bound)):
+        loop = GuidanceLoop(scenario, loop_rate_hz=50.0, stale_after_s=0.25)
+        t = known_origin()
+        fly_track(t, [rate] * 30)
+        state = t.snapshot(0.25, 1.0 + DT_S * 29)
+        assert state is not None and state.course_rate_rad_s is not None
+        command = loop.tick(state, 1.0 + DT_S * 29)
+        assert not isinstance(command, Hold)
+        # a = speed * course rate (1 m/s here), clipped inside the bound, not 0
+        assert float(command.step.accel_lat_m_s2) == pytest.approx(
+            min(expected, 0.98 * bound), abs=0.03)
+
+
+@pytest.mark.parametrize("jump_m", [1.0, 3.0, 50.0])
+def test_a_position_jump_over_udp_ends_guidance_with_the_gate_named(
+    jump_m: float, tmp_path: Path
+) -> None:
+    config = scenario_file(
+        tmp_path, sitl_stub={"faults": {"jump_at_s": 2.0, "jump_east_m": jump_m}}
+    )
+    flight = fly(config, tmp_path, max_time_s=25.0, **LIGHT)
+    alarms = [e for e in flight.events.of_kind(EventKind.ALARM) if e.data["cause"] == "gate"]
+    assert alarms, "the jump was not refused"
+    assert [e.data["cause"] for e in flight.events.of_kind(EventKind.ABORTED)] == ["gate"]
+    assert not flight.outcome.intercepted
+    intercepted, *_ = judge_truth(load_scenario(config), flight.truth)
+    assert not flight.events.of_kind(EventKind.INTERCEPTED) or intercepted
+    # stopped: nothing after the abort, and the vehicle stopped short of every zone
+    clearance = judge_truth(load_scenario(config), flight.truth)[3]
+    assert min(clearance) > 0.0

@@ -1,0 +1,243 @@
+"""The trust boundary on the MAVLink side, attacked as issue 10 measured it, over real UDP.
+
+Each test flies the loopback vehicle (its own process) with the companion in this process,
+and an attacker on 127.0.0.1: a stranger socket (another address), or a relay between the
+two that forges frames from the vehicle's own address. Frames are forged with plain
+pymavlink. Every flight is judged by the vehicle's truth: it ends outside every zone, or
+guidance stopped with an event naming the cause, and never with an intercept the truth
+does not show.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import socket
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+from conftest_sitl import M, Relay, forger, frame
+from test_service_loopback import CONFIG, SPEEDUP, Flight, fly
+
+from ezcompanion.config import load_scenario
+from ezcompanion.service.demo import free_udp_port, judge_truth
+from ezcompanion.service.events import EventKind
+
+SCENARIO = CONFIG / "paper_scenario1.yaml"
+# 20 Hz telemetry and ticks: a third of the CPU of 50 Hz, for a machine shared by others
+LIGHT = {"telemetry_rate_hz": 20.0, "loop_rate_hz": 20.0}
+
+
+def wait_for(flight_service: Any, kind: EventKind, timeout_s: float = 30.0) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if flight_service.events.of_kind(kind) or flight_service.phase.value == "done":
+            return bool(flight_service.events.of_kind(kind))
+        time.sleep(0.01)
+    return False
+
+
+def repeat(every_wall_s: float, until: Callable[[], bool], action: Callable[[], None]) -> None:
+    while not until():
+        action()
+        time.sleep(every_wall_s)
+
+
+def assert_honest(flight: Flight) -> tuple[bool, float]:
+    """No intercept the truth does not show, and outside every zone or stopped with a cause.
+    Returns (truth intercepted, min true clearance)."""
+    intercepted, _, _, clearance, _ = judge_truth(load_scenario(SCENARIO), flight.truth)
+    if flight.outcome.intercepted:
+        assert intercepted, "the companion reported an intercept the truth does not show"
+    aborted = flight.events.of_kind(EventKind.ABORTED)
+    assert min(clearance) > 0.0 or aborted, f"entered a zone by {-min(clearance):.3f} m"
+    return intercepted, min(clearance)
+
+
+class Clock:
+    """The vehicle's newest time_boot_ms, read off the relayed frames."""
+
+    def __init__(self) -> None:
+        self._parser = M.MAVLink(None)
+        self._parser.robust_parsing = True
+        self.boot_ms = 0
+
+    def __call__(self, data: bytes) -> bytes:
+        for msg in self._parser.parse_buffer(data) or []:
+            stamp = getattr(msg, "time_boot_ms", None)
+            if isinstance(stamp, int):
+                self.boot_ms = max(self.boot_ms, stamp)
+        return data
+
+
+def relayed_flight(attack: Callable[[Any, Relay, Clock], None], tmp_path: Path,
+                   **kwargs: Any) -> Flight:
+    port = free_udp_port()
+    relay = Relay(port)
+    clock = Clock()
+    relay.tamper = clock
+    try:
+        return fly(SCENARIO, tmp_path, port=port, stub_port=relay.vehicle_port,
+                   during=lambda service, *_: attack(service, relay, clock), **LIGHT, **kwargs)
+    finally:
+        relay.close()
+
+
+def test_position_spoof_at_the_target_is_refused_and_ends_guidance(tmp_path: Path) -> None:
+    # Issue 10: LOCAL_POSITION_NED at the target with advancing stamps said "intercepted,
+    # miss 0.000 m" while the truth was 4.91 m away.
+    mav = forger()
+
+    def attack(service: Any, relay: Relay, clock: Clock) -> None:
+        assert wait_for(service, EventKind.ENGAGED)
+        time.sleep(1.0 / SPEEDUP)
+        target = load_scenario(SCENARIO).target
+
+        def spoof() -> None:
+            msg = M.MAVLink_local_position_ned_message(
+                clock.boot_ms + 5, target.north_m, target.east_m, -20.0, 0.0, 1.0, 0.0)
+            relay.inject(frame(mav, msg))
+
+        repeat(0.05 / SPEEDUP, lambda: service.phase.value == "done", spoof)
+
+    flight = relayed_flight(attack, tmp_path, max_time_s=20.0)
+    assert not flight.outcome.intercepted
+    causes = {e.data["cause"] for e in flight.events.of_kind(EventKind.ABORTED)}
+    assert causes == {"gate"}
+    assert not flight.events.of_kind(EventKind.INTERCEPTED)
+    assert_honest(flight)
+
+
+def test_an_origin_change_during_the_engagement_is_a_failsafe_never_applied(
+    tmp_path: Path,
+) -> None:
+    # Issue 10: one GPS_GLOBAL_ORIGIN 1 m east shifted 316 of 396 setpoints, and the truth
+    # entered a zone by 0.594 m while the companion reported an intercept.
+    mav = forger()
+
+    def attack(service: Any, relay: Relay, clock: Clock) -> None:
+        assert wait_for(service, EventKind.ENGAGED)
+        time.sleep(1.0 / SPEEDUP)
+        o = load_scenario(SCENARIO).origin
+        east_deg = 1.0 / 111_320.0 / 0.815  # 1 m east at about -35 deg latitude
+        msg = M.MAVLink_gps_global_origin_message(
+            round(o.lat_deg * 1e7), round((o.lon_deg + east_deg) * 1e7), round(o.alt_m * 1000), 0)
+        relay.inject(frame(mav, msg))
+
+    flight = relayed_flight(attack, tmp_path, max_time_s=20.0)
+    # it asked for the origin (ArduPilot sends it only when set) and learnt it
+    assert flight.service.vehicle_telemetry is not None
+    assert flight.service.vehicle_telemetry.origin_known
+    alarms = [e for e in flight.events.of_kind(EventKind.ALARM) if e.data["cause"] == "origin"]
+    assert alarms and "moved by 1.0" in alarms[0].message
+    failsafes = flight.events.of_kind(EventKind.FAILSAFE)
+    assert failsafes and failsafes[0].data["reason"] == "origin"
+    assert [e.data["cause"] for e in flight.events.of_kind(EventKind.ABORTED)] == ["origin"]
+    assert not flight.outcome.intercepted
+    assert_honest(flight)
+
+
+def test_heartbeats_acks_and_a_stranger_on_the_port_steer_nothing(tmp_path: Path) -> None:
+    # Issue 10: five STABILIZE heartbeats from 1/1 paused guidance; on udpin a stranger on
+    # the port got 351 setpoints; COMMAND_ACKs for the GCS were reported as ours.
+    port = free_udp_port()
+    stranger = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    stranger.bind(("127.0.0.1", 0))
+    stranger.settimeout(0.01)
+    got: list[bytes] = []
+    mav = forger()
+
+    def attack(service: Any, *_: Any) -> None:
+        assert wait_for(service, EventKind.ENGAGED)
+        # (earlier, within 1.5 s of engaging, it would be a second autopilot: refused)
+        time.sleep(2.0 / SPEEDUP)
+        for _ in range(5):  # STABILIZE (custom_mode 0) from 1/1, from another address
+            hb = M.MAVLink_heartbeat_message(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                                             M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 0,
+                                             M.MAV_STATE_ACTIVE, 3)
+            stranger.sendto(frame(mav, hb), ("127.0.0.1", port))
+        ack = M.MAVLink_command_ack_message(M.MAV_CMD_DO_SET_MODE, M.MAV_RESULT_DENIED, 0, 0,
+                                            255, 190)  # for the GCS, not for us
+        stranger.sendto(frame(mav, ack), ("127.0.0.1", port))
+        while service.phase.value != "done":
+            with contextlib.suppress(OSError):
+                got.append(stranger.recv(65535))
+
+    try:
+        # the vehicle's id configured: the stranger's 1/1 are refused frames, not a second
+        # autopilot that would end the engagement
+        flight = fly(SCENARIO, tmp_path, port=port, during=attack, target_system=1, **LIGHT)
+    finally:
+        stranger.close()
+    parser = M.MAVLink(None)
+    received = [m.get_type() for data in got for m in parser.parse_buffer(data) or []]
+    assert "SET_POSITION_TARGET_LOCAL_NED" not in received  # nothing reached the stranger
+    alarms = {e.data["cause"] for e in flight.events.of_kind(EventKind.ALARM)}
+    assert "foreign_address" in alarms
+    assert not flight.events.of_kind(EventKind.COMMAND_ACK)
+    assert not flight.events.of_kind(EventKind.FAILSAFE)  # refused, so nothing to hold
+    assert not flight.events.of_kind(EventKind.MODE, ) or all(
+        "STABILIZE" not in e.message for e in flight.events.of_kind(EventKind.MODE))
+    assert flight.outcome.setpoints_sent > 80  # guidance went on (4 s at 20 Hz)
+    _, clearance = assert_honest(flight)
+    assert clearance > 0.0
+
+
+@pytest.mark.parametrize("mavlink1", [False, True])
+def test_conflicting_heartbeats_from_the_vehicles_address_hold_guidance(
+    mavlink1: bool, tmp_path: Path
+) -> None:
+    # Issue 10: MAVLink 1 heartbeats from 1/1 with custom_mode 0 flipped the mode 14 times
+    # and the truth entered a zone by 0.285 m.
+    mav = forger()
+
+    def attack(service: Any, relay: Relay, clock: Clock) -> None:
+        assert wait_for(service, EventKind.ENGAGED)
+        time.sleep(1.0 / SPEEDUP)
+        hb = M.MAVLink_heartbeat_message(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                                         M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 0,
+                                         M.MAV_STATE_ACTIVE, 3)
+        for _ in range(14):
+            relay.inject(frame(mav, hb, mavlink1=mavlink1))
+            time.sleep(0.3 / SPEEDUP)
+
+    flight = relayed_flight(attack, tmp_path, max_time_s=30.0)
+    spoofs = [e for e in flight.events.of_kind(EventKind.ALARM) if e.data["cause"] == "spoof"]
+    assert spoofs
+    if mavlink1:
+        assert "MAVLink 1" in spoofs[0].message
+    assert any(e.data["reason"] == "spoof" for e in flight.events.of_kind(EventKind.FAILSAFE))
+    assert_honest(flight)
+
+
+def test_an_autopilot_heard_first_is_refused_with_the_vehicle_both_named(
+    tmp_path: Path,
+) -> None:
+    # Issue 10: an autopilot heartbeat from system 2, heard first, took the lock.
+    port = free_udp_port()
+    stranger = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    stop = threading.Event()
+    mav = forger(system_id=2)
+    hb = M.MAVLink_heartbeat_message(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                                     M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4,
+                                     M.MAV_STATE_ACTIVE, 3)
+
+    def beat() -> None:
+        while not stop.is_set():
+            stranger.sendto(frame(mav, hb), ("127.0.0.1", port))
+            stop.wait(1.0 / SPEEDUP)
+
+    thread = threading.Thread(target=beat)
+    thread.start()
+    try:
+        flight = fly(SCENARIO, tmp_path, port=port, max_time_s=20.0, **LIGHT)
+    finally:
+        stop.set()
+        thread.join()
+        stranger.close()
+    refused = flight.events.of_kind(EventKind.VEHICLE_REFUSED)
+    assert refused and "2/1" in refused[0].message and "1/1" in refused[0].message
+    assert flight.outcome.setpoints_sent == 0 and not flight.outcome.intercepted

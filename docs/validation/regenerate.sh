@@ -13,6 +13,13 @@ if [ -n "${SCHEDULER:-}" ]; then WHERE="--scheduler $SCHEDULER"; fi
 "$BIN/ezcompanion" validate --runs 10000 --seed 2026 --map-runs 2000 --chatter-runs 100 \
     --no-progress --out "$OUT" $WHERE
 cp "$OUT/summary.txt" "$OUT/tables.md" "$OUT"/*.png docs/validation/
+# the default (backup) law against the robust law and the QP filter, 2,000 runs
+# shellcheck disable=SC2086
+"$BIN/ezcompanion" validate --runs 2000 --seed 2026 --law backup --law robust --law qp-filter \
+    --map-runs 500 --chatter-runs 50 --abandon px4 --no-figures --no-progress \
+    --out "$OUT-backup" $WHERE
+mkdir -p docs/validation/backup_2k
+cp "$OUT-backup/tables.md" "$OUT-backup/summary.txt" docs/validation/backup_2k/
 if [ -n "${FULL:-}" ]; then
     # shellcheck disable=SC2086
     "$BIN/ezcompanion" validate --runs 100000 --seed 2026 --law robust --map-runs 10000 \

@@ -29,6 +29,7 @@ from ezcompanion.guidance import (
     ez_boundary_point,
 )
 from ezcompanion.guidance import backup as bk
+from ezcompanion.guidance import lookahead as lk
 from ezcompanion.guidance.abandon import ABANDON_PROFILES, abandon_gap_m
 from ezcompanion.guidance.controller import GuidanceStep
 from ezcompanion.sim.engine import SimResult, simulate
@@ -41,7 +42,7 @@ PARAMS = GuidanceParams()
 
 
 def settings_for(params: GuidanceParams) -> FloatArray:
-    return bk.ShieldSettings.of(params).packed
+    return bk.pack_shield(params)
 
 
 def true_gap(zones: ZoneSet, north: float, east: float, course: float) -> float:
@@ -100,7 +101,7 @@ def test_the_zone_is_the_reach_disc_seen_from_the_lookahead_point(
     rho, _, _ = ez_boundary_point(
         float(zones.mu_range_m[0, 0]), float(zones.reach_term[0, 0]), cos_s, sin_s
     )
-    gap = bk.lookahead_gap(
+    gap = lk.lookahead_gap(
         zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, north, east, course
     )
     clearance = r - rho
@@ -119,7 +120,7 @@ def test_on_the_boundary_the_gap_is_zero() -> None:
         # the vehicle at distance rho from the defender, its course sigma off the line of sight
         los = 0.7
         north, east = -rho * math.cos(los), -rho * math.sin(los)
-        gap = bk.lookahead_gap(
+        gap = lk.lookahead_gap(
             zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, north, east, los + sigma
         )
         assert gap == pytest.approx(0.0, abs=1e-12)
@@ -140,7 +141,7 @@ def test_on_the_boundary_the_gap_is_zero() -> None:
 def test_segment_and_ray_gaps_match_dense_sampling(
     zones: ZoneSet, north: float, east: float, course: float, start: float, stop: float
 ) -> None:
-    got = bk._segment_gap(
+    got = lk.segment_gap(
         zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0, north, east,
         math.cos(course), math.sin(course), start, stop, True, 0.0, 0.0,
     )  # fmt: skip
@@ -161,7 +162,7 @@ def test_segment_and_ray_gaps_match_dense_sampling(
 def test_the_lookahead_circle_gap_matches_dense_sampling(
     zones: ZoneSet, cn: float, ce: float, radius: float
 ) -> None:
-    got = bk._annulus_gap(
+    got = lk.annulus_gap(
         zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0, cn, ce, radius, -1.0,
         0.0, 0.0, 0.0,
     )  # fmt: skip

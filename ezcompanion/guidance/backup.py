@@ -4,13 +4,10 @@ safe for ever, kept true at every step.
 The argument, in the order the code follows it (docs/guidance.md has it in full, with its
 assumptions named; tests/test_backup.py checks each step):
 
-1. **The zones as discs.** A vehicle at p flying the fixed heading u is inside defender i's
-   engagement zone (r < rho_i(sigma), :mod:`ezcompanion.guidance.zones`) exactly when its
-   look-ahead point q = p + mu_i R_i u lies inside the defender's reach disc,
-   |q - d_i| < R_i + c_i. (Square r - mu R cos(sigma) < sqrt(mu^2 R^2 cos^2 sigma +
-   (R + c)^2 - mu^2 R^2) and collect terms.) So the gap g_i = |q - d_i| - (R_i + c_i) has the
-   sign of the true clearance r - rho, and it is 1-Lipschitz in q, which moves at most at
-   v + mu R |a| / v.
+1. **The zones as discs** (:mod:`ezcompanion.guidance.lookahead`): flying the fixed
+   heading u, the vehicle is inside zone i exactly when its look-ahead point
+   p + mu_i R_i u is inside the reach disc of radius R_i + c_i; the gap to the discs has the
+   sign of the true clearance and is in closed form along a ray or a circle.
 2. **The model.** Speed v constant, course rate a_v / v, the flown lateral acceleration a_v
    follows the actuator state a with a first-order lag tau (``response_lag_s``; tau = 0:
    a_v = a), and a follows the saturation model with a bounded command.
@@ -57,7 +54,9 @@ import numpy as np
 import numpy.typing as npt
 
 from ezcompanion.guidance._jit import jit, jit_inline
+from ezcompanion.guidance.abandon import abandon_gap
 from ezcompanion.guidance.actuator import actuator_rate, advance_one
+from ezcompanion.guidance.lookahead import annulus_gap, dip, point_gap, segment_gap
 from ezcompanion.guidance.params import GuidanceParams
 
 __all__ = [
@@ -65,8 +64,7 @@ __all__ = [
     "BACKUP_NONE",
     "BACKUP_RIGHT",
     "BACKUP_STRAIGHT",
-    "ShieldSettings",
-    "lookahead_gap",
+    "pack_shield",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -101,87 +99,26 @@ _EXIT_EVERY = 1
 # further would only find exits that its flight, by its rule, takes anyway: those are
 # certified where they are taken).
 _EXIT_SEARCH_RAD = math.pi
-# The abandon path's turn is checked at this many points.
-_ABANDON_ARC_SAMPLES = 8
 # The nominal's weight looks this many samples ahead (a fixed time, whatever the step).
 _PREVIEW_SAMPLES = 4
 
 
-class ShieldSettings:
-    """The shield's packed settings: built once per controller from ``GuidanceParams``."""
-
-    __slots__ = ("packed",)
-
-    def __init__(
-        self,
-        *,
-        accel_max_m_s2: float,
-        p1_1_s: float,
-        n: int,
-        command_limit_m_s3: float,
-        response_lag_s: float,
-        margin_m: float,
-        band_m: float,
-        prediction_step_ratio: float,
-        abandon_turn_s: float,
-        abandon_hold_s: float,
-        abandon_brake_m_s2: float,
-    ) -> None:
-        p = np.empty(S_SIZE)
-        p[S_AMAX] = accel_max_m_s2
-        p[S_P1] = p1_1_s
-        p[S_N] = n
-        p[S_CMD] = command_limit_m_s3
-        p[S_TAU] = response_lag_s
-        p[S_EPS] = margin_m
-        p[S_BAND] = band_m
-        p[S_PRED_RATIO] = prediction_step_ratio
-        p[S_AB_TURN] = abandon_turn_s
-        p[S_AB_HOLD] = abandon_hold_s
-        p[S_AB_BRAKE] = abandon_brake_m_s2
-        self.packed = p
-
-    @classmethod
-    def of(cls, params: GuidanceParams, **abandon: float) -> ShieldSettings:
-        """The settings ``params`` give, with ``abandon_turn_s``, ``abandon_hold_s`` and
-        ``abandon_brake_m_s2`` overridden by ``abandon`` where given."""
-        return cls(
-            accel_max_m_s2=params.accel_max_m_s2,
-            p1_1_s=params.actuator_p1_1_s,
-            n=params.actuator_n,
-            command_limit_m_s3=params.command_limit_m_s3,
-            response_lag_s=params.response_lag_s,
-            margin_m=params.shield_margin_m,
-            band_m=params.shield_band_m,
-            prediction_step_ratio=params.prediction_step_ratio,
-            abandon_turn_s=abandon.get("abandon_turn_s", params.abandon_turn_s),
-            abandon_hold_s=abandon.get("abandon_hold_s", params.abandon_hold_s),
-            abandon_brake_m_s2=abandon.get("abandon_brake_m_s2", params.abandon_brake_m_s2),
-        )
-
-
-# ---------------------------------------------------------------------------------------
-# 1. gaps: least distance from look-ahead points to the reach discs, closed form
-
-
-@jit_inline
-def _dip(mur: float, dist: float, speed: float, amax: float, av_rate: float, step: float
-         ) -> float:
-    """How far below the least of its two sample values the gap of one zone can dip between
-    samples ``step`` apart, for a look-ahead point ``dist`` from the defender at a sample.
-
-    The look-ahead point q moves at |q_dot| <= V = v + mu R a_max / v and accelerates at
-    |q_ddot| <= a_max + mu R (av_rate / v + a_max^2 / v^2) (av_rate bounds |d a_v / dt|),
-    so |q - d|'' <= V^2 / |q - d| + |q_ddot| =: K while |q - d| >= dist - V step > 0: a
-    function with |f''| <= K lies above the line between its samples less K step^2 / 8.
-    Otherwise the first-order bound V step / 2. (step = 0: no dip.)"""  # fmt: skip
-    fast = speed + mur * amax / speed
-    near = dist - fast * step
-    first = 0.5 * fast * step
-    if near <= 0.0:
-        return first
-    curve = fast * fast / near + amax + mur * (av_rate / speed + amax * amax / (speed * speed))
-    return min(first, 0.125 * curve * step * step)
+def pack_shield(params: GuidanceParams, **abandon: float) -> FloatArray:
+    """The shield's packed settings from ``params``, with ``abandon_turn_s``,
+    ``abandon_hold_s`` and ``abandon_brake_m_s2`` overridden by ``abandon`` where given."""
+    p = np.empty(S_SIZE)
+    p[S_AMAX] = params.accel_max_m_s2
+    p[S_P1] = params.actuator_p1_1_s
+    p[S_N] = params.actuator_n
+    p[S_CMD] = params.command_limit_m_s3
+    p[S_TAU] = params.response_lag_s
+    p[S_EPS] = params.shield_margin_m
+    p[S_BAND] = params.shield_band_m
+    p[S_PRED_RATIO] = params.prediction_step_ratio
+    p[S_AB_TURN] = abandon.get("abandon_turn_s", params.abandon_turn_s)
+    p[S_AB_HOLD] = abandon.get("abandon_hold_s", params.abandon_hold_s)
+    p[S_AB_BRAKE] = abandon.get("abandon_brake_m_s2", params.abandon_brake_m_s2)
+    return p
 
 
 @jit_inline
@@ -194,147 +131,14 @@ def _av_rate_bound(s: FloatArray) -> float:
 
 
 @jit_inline
-def _point_gap(
-    zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
-    n: float, e: float, cos_h: float, sin_h: float, eps: float, speed: float, amax: float,
-    av_rate: float, step: float,
-) -> float:
-    """min_i |p + mu_i R_i u - d_i| - reach_i - eps, each less its inter-sample dip for
-    samples ``step`` apart (``_dip``; step 0: the gap at this point alone)."""  # fmt: skip
-    best = math.inf
-    for i in range(zn.shape[1]):
-        mur = zmur[kz, i]
-        qn = n + mur * cos_h - zn[kz, i]
-        qe = e + mur * sin_h - ze[kz, i]
-        dist = math.sqrt(qn * qn + qe * qe)
-        g = dist - zreach[kz, i] - eps
-        if step > 0.0:
-            g -= _dip(mur, dist, speed, amax, av_rate, step)
-        best = min(best, g)
-    return best
-
-
-@jit_inline
-def _segment_gap(
-    zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
-    n: float, e: float, cos_h: float, sin_h: float, start_m: float, stop_m: float,
-    lookahead_start: bool, eps: float, widen: float,
-) -> float:
-    """Least gap of the points p + s u, s in [s0_i, s1_i], to the reach discs, where
-    s0_i = min(mu_i R_i, start_m) if ``lookahead_start`` else start_m, and
-    s1_i = stop_m + mu_i R_i (stop_m = inf: a ray). ``widen`` (rad) subtracts the lateral
-    uncertainty of a heading known to within +-widen: (|d - p| + reach + mu R) sin(widen)."""
-    best = math.inf
-    for i in range(zn.shape[1]):
-        mur = zmur[kz, i]
-        s0 = min(mur, start_m) if lookahead_start else start_m
-        s1 = stop_m + mur
-        wn = zn[kz, i] - n
-        we = ze[kz, i] - e
-        along = wn * cos_h + we * sin_h
-        s = min(max(along, s0), s1)
-        dn = wn - s * cos_h
-        de = we - s * sin_h
-        g = math.sqrt(dn * dn + de * de) - zreach[kz, i] - eps
-        if widen > 0.0:
-            g -= (math.sqrt(wn * wn + we * we) + zreach[kz, i] + mur) * math.sin(min(widen, 1.5))
-        best = min(best, g)
-    return best
-
-
-@jit
-def _annulus_gap(
-    zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
-    cn: float, ce: float, radius_m: float, inner_ahead_m: float, outer_ahead_m: float,
-    eps: float, shift_m: float,
-) -> float:
-    """Least gap of the annulus about (cn, ce) swept by the points s ahead of a circle of
-    radius ``radius_m`` along its tangents, s in [inner_ahead_i, outer_ahead_i] (with
-    ``inner_ahead_m`` < 0 meaning mu_i R_i for both: the look-ahead circle alone), against the
-    reach discs; ``shift_m`` is an uncertainty in the centre."""
-    best = math.inf
-    r2 = radius_m * radius_m
-    for i in range(zn.shape[1]):
-        mur = zmur[kz, i]
-        s0 = mur if inner_ahead_m < 0.0 else min(mur, inner_ahead_m)
-        s1 = mur if inner_ahead_m < 0.0 else outer_ahead_m + mur
-        r_in = math.sqrt(r2 + s0 * s0)
-        r_out = math.sqrt(r2 + s1 * s1)
-        dn = zn[kz, i] - cn
-        de = ze[kz, i] - ce
-        dist = math.sqrt(dn * dn + de * de)
-        reach = zreach[kz, i] + eps + shift_m
-        g = max(dist - reach - r_out, r_in - dist - reach)
-        best = min(best, g)
-    return best
-
-
-@jit_inline
-def _arc_end(
-    n: float, e: float, heading: float, accel: float, speed: float, duration_s: float
-) -> tuple[float, float, float]:
-    """Position and heading after flying lateral acceleration ``accel`` for ``duration_s``."""
-    turn = accel * duration_s / speed
-    if abs(turn) < 1e-9:
-        chord = speed * duration_s
-    else:
-        chord = 2.0 * speed * speed / accel * math.sin(0.5 * turn)
-    mid = heading + 0.5 * turn
-    return n + chord * math.cos(mid), e + chord * math.sin(mid), heading + turn
-
-
-@jit_inline
-def _abandon_gap(
+def _abandon(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
-    kz: int, n: float, e: float, heading: float, accel: float, speed: float,
+    kz: int, n: float, e: float, h: float, a: float, speed: float,
 ) -> float:
-    """Least gap of the path the autopilot flies if no setpoint follows this state: the turn
-    goes on for ``abandon_turn_s`` (sampled at ``_ABANDON_ARC_SAMPLES`` points, each less
-    its first-order dip), then straight for ``abandon_hold_s``, then braking at
-    ``abandon_brake_m_s2`` to a stop (or, without braking, the hold's end is the horizon):
-    the straight part's look-ahead points from min(mu R, v hold) to v hold + v^2 / (2 b) +
-    mu R ahead, in closed form (a braking vehicle's look-ahead shrinks to its reach disc).
-    inf where no profile is set."""
-    hold = s[S_AB_HOLD]
-    if hold <= 0.0:
-        return math.inf
-    turn = s[S_AB_TURN]
-    best = math.inf
-    if turn > 0.0:
-        step = turn / _ABANDON_ARC_SAMPLES
-        amax = s[S_AMAX]
-        for j in range(_ABANDON_ARC_SAMPLES):
-            nj, ej, hj = _arc_end(n, e, heading, accel, speed, (j + 0.5) * step)
-            # a midpoint sample: only the first-order dip holds (an infinite rate bound)
-            gap = _point_gap(zn, ze, zmur, zreach, kz, nj, ej, math.cos(hj), math.sin(hj),
-                             s[S_EPS], speed, amax, math.inf, step)  # fmt: skip
-            best = min(best, gap)
-    n1, e1, h1 = _arc_end(n, e, heading, accel, speed, turn)
-    brake = s[S_AB_BRAKE]
-    stop = speed * hold + (0.5 * speed * speed / brake if brake > 0.0 else 0.0)
-    return min(best, _segment_gap(
-        zn, ze, zmur, zreach, kz, n1, e1, math.cos(h1), math.sin(h1), speed * hold, stop,
-        True, s[S_EPS], 0.0,
-    ))  # fmt: skip
-
-
-def lookahead_gap(
-    zones_north_m: FloatArray,
-    zones_east_m: FloatArray,
-    mu_range_m: FloatArray,
-    reach_m: FloatArray,
-    north_m: float,
-    east_m: float,
-    course_rad: float,
-    margin_m: float = 0.0,
-) -> float:
-    """min_i |p + mu_i R_i u - d_i| - (R_i + c_i) - margin (zone arrays of shape (1, zones)):
-    > 0 exactly where r_i > rho_i(sigma_i) for every zone (item 1 of the module docstring)."""
-    return float(
-        _point_gap(
-            zones_north_m, zones_east_m, mu_range_m, reach_m, 0, north_m, east_m,
-            math.cos(course_rad), math.sin(course_rad), margin_m, 1.0, 1.0, 0.0, 0.0,
-        )
+    """The abandon gap of this state with the shield's profile (inf where none is set)."""
+    return abandon_gap(
+        zn, ze, zmur, zreach, kz, n, e, h, a, speed, s[S_AB_TURN], s[S_AB_HOLD], s[S_AB_BRAKE],
+        s[S_EPS], s[S_AMAX],
     )  # fmt: skip
 
 
@@ -424,7 +228,7 @@ def acceptance_level_m(s: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: 
     theta = 0.0
     for i in range(zmur.shape[1]):
         dist = zreach[kz, i] + s[S_EPS]
-        theta = max(theta, _dip(zmur[kz, i], dist, speed, s[S_AMAX], rate, step))
+        theta = max(theta, dip(zmur[kz, i], dist, speed, s[S_AMAX], rate, step))
     return theta
 
 
@@ -463,9 +267,9 @@ def straight_certificate(
     step = ticks * dt
     best = math.inf
     for _ in range(_MAX_SAMPLES):
-        best = min(best, _point_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h),
+        best = min(best, point_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h),
                                     eps, speed, amax, rate, step))  # fmt: skip
-        best = min(best, _abandon_gap(s, zn, ze, zmur, zreach, kz, n, e, h, a, speed))
+        best = min(best, _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, speed))
         if best < stop_below or _residual_turn_rad(s, a, av, 0.0, speed) < _RESIDUAL_RAD:
             break
         for _ in range(ticks):
@@ -479,7 +283,7 @@ def straight_certificate(
     # the look-ahead points of the line; with an abandon profile, from min(mu R, v hold)
     # ahead: the abandon paths from points of the line are parts of the line
     start = speed * hold if hold > 0.0 else math.inf
-    tail = _segment_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h), start,
+    tail = segment_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h), start,
                         math.inf, True, eps, widen)  # fmt: skip
     return min(best, tail)
 
@@ -492,7 +296,7 @@ def turn_certificate(
 ) -> float:
     """Certificate of LEFT or RIGHT: turn hard (a_c = -+C held) until a sample where the
     STRAIGHT certificate is at least ``exit_level``, then STRAIGHT; with no such sample
-    within a revolution after the turn has converged, the circle for ever (closed form).
+    before it has turned half a revolution after converging, the circle for ever (closed form).
     Samples every ``sample_ticks`` control steps ``dt``, so every sample is a control step
     (``exit_now``: the STRAIGHT certificate at this state, already known)."""  # fmt: skip
     amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
@@ -505,9 +309,9 @@ def turn_certificate(
     turned = 0.0
     converged = False
     for j in range(_MAX_SAMPLES):
-        best = min(best, _point_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h),
+        best = min(best, point_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h),
                                     eps, speed, amax, rate, step))  # fmt: skip
-        best = min(best, _abandon_gap(s, zn, ze, zmur, zreach, kz, n, e, h, a, speed))
+        best = min(best, _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, speed))
         if best < stop_below:
             return best
         if j == 0:
@@ -540,13 +344,13 @@ def turn_certificate(
     shift = widen * (2.0 * radius + speed * (tau + 1.0 / p1)) + speed * speed * abs(
         a - limit
     ) / (limit * limit)
-    tail = _annulus_gap(zn, ze, zmur, zreach, kz, cn, ce, radius, -1.0, 0.0, eps,
+    tail = annulus_gap(zn, ze, zmur, zreach, kz, cn, ce, radius, -1.0, 0.0, eps,
                         shift + widen * np.max(zmur[kz]))  # fmt: skip
     hold = s[S_AB_HOLD]
     if hold > 0.0:
         brake = s[S_AB_BRAKE]
         stop = speed * hold + (0.5 * speed * speed / brake if brake > 0.0 else 0.0)
-        tail = min(tail, _annulus_gap(zn, ze, zmur, zreach, kz, cn, ce, radius, speed * hold,
+        tail = min(tail, annulus_gap(zn, ze, zmur, zreach, kz, cn, ce, radius, speed * hold,
                                       stop, eps, shift + widen * stop))  # fmt: skip
     return min(best, tail)
 
@@ -609,7 +413,7 @@ def _fly_step(
         a0 = a + (a_end - a) * i / steps
         a1 = a + (a_end - a) * (i + 1) / steps
         n, e, h, av = _fly(n, e, h, a0, a1, av, speed, s[S_TAU], sub)
-        best = min(best, _point_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h),
+        best = min(best, point_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h),
                                     s[S_EPS], speed, amax, rate, sub))  # fmt: skip
     return best, n, e, h, a_end, av
 
@@ -726,25 +530,3 @@ def shield_batch(
                 s, zn, ze, zmur, zreach, 0 if shared else k, n[k], e[k], h[k], a[k], av[k],
                 speed[k], nominal[k], dt, int(current[k]), out, k,
             )  # fmt: skip
-
-
-@jit
-def abandon_gap_batch(
-    s: FloatArray,
-    zn: FloatArray,
-    ze: FloatArray,
-    zmur: FloatArray,
-    zreach: FloatArray,
-    n: FloatArray,
-    e: FloatArray,
-    h: FloatArray,
-    a: FloatArray,
-    speed: FloatArray,
-    out: FloatArray,
-) -> None:
-    """``_abandon_gap`` for every vehicle (zone row k, or 0 if shared) into ``out``."""
-    shared = zn.shape[0] == 1
-    for k in range(n.shape[0]):
-        out[k] = _abandon_gap(
-            s, zn, ze, zmur, zreach, 0 if shared else k, n[k], e[k], h[k], a[k], speed[k]
-        )

@@ -23,7 +23,7 @@ import numpy.typing as npt
 from ezcompanion.errors import StateError
 from ezcompanion.guidance._jit import jit
 from ezcompanion.guidance.actuator import advance_one
-from ezcompanion.guidance.backup import BACKUP_NONE, ShieldSettings, shield_batch
+from ezcompanion.guidance.backup import BACKUP_NONE, pack_shield, shield_batch
 from ezcompanion.guidance.law import (
     O_AC,
     O_ALPHA,
@@ -133,7 +133,7 @@ class GuidanceController:
         self._accel = np.zeros(1)
         self._flown = np.zeros(1)  # the model's flown lateral acceleration (backup law)
         self._backup = np.full(1, BACKUP_NONE, dtype=np.int8)
-        self._shield = ShieldSettings.of(self.params).packed
+        self._shield = pack_shield(self.params)
 
     @property
     def accel_m_s2(self) -> FloatArray:

@@ -1,0 +1,155 @@
+"""The zones seen from a heading: least distances from look-ahead points to the reach discs.
+
+A vehicle at p flying the fixed heading u is inside defender i's engagement zone
+(r < rho_i(sigma), :mod:`ezcompanion.guidance.zones`) exactly when its look-ahead point
+q = p + mu_i R_i u lies inside the defender's reach disc, |q - d_i| < R_i + c_i. (Square
+r - mu R cos(sigma) < sqrt(mu^2 R^2 cos^2 sigma + (R + c)^2 - mu^2 R^2) and collect
+terms.) So the gap g_i = |q - d_i| - (R_i + c_i) has the sign of the true clearance, and
+along a straight line or a circle the look-ahead points move on a ray or a circle, where
+the least gap is in closed form. Pure and compiled; used by the backup law's certificates
+(:mod:`ezcompanion.guidance.backup`) and the abandon check
+(:mod:`ezcompanion.guidance.abandon`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+
+from ezcompanion.guidance._jit import jit, jit_inline
+
+__all__ = ["annulus_gap", "arc_end", "dip", "lookahead_gap", "point_gap", "segment_gap"]
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@jit_inline
+def dip(mur: float, dist: float, speed: float, amax: float, av_rate: float, step: float
+         ) -> float:
+    """How far below the least of its two sample values the gap of one zone can dip between
+    samples ``step`` apart, for a look-ahead point ``dist`` from the defender at a sample.
+
+    The look-ahead point q moves at |q_dot| <= V = v + mu R a_max / v and accelerates at
+    |q_ddot| <= a_max + mu R (av_rate / v + a_max^2 / v^2) (av_rate bounds |d a_v / dt|),
+    so |q - d|'' <= V^2 / |q - d| + |q_ddot| =: K while |q - d| >= dist - V step > 0: a
+    function with |f''| <= K lies above the line between its samples less K step^2 / 8.
+    Otherwise the first-order bound V step / 2. (step = 0: no dip.)"""  # fmt: skip
+    fast = speed + mur * amax / speed
+    near = dist - fast * step
+    first = 0.5 * fast * step
+    if near <= 0.0:
+        return first
+    curve = fast * fast / near + amax + mur * (av_rate / speed + amax * amax / (speed * speed))
+    return min(first, 0.125 * curve * step * step)
+
+
+@jit_inline
+def point_gap(
+    zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
+    n: float, e: float, cos_h: float, sin_h: float, eps: float, speed: float, amax: float,
+    av_rate: float, step: float,
+) -> float:
+    """min_i |p + mu_i R_i u - d_i| - reach_i - eps, each less its inter-sample dip for
+    samples ``step`` apart (``_dip``; step 0: the gap at this point alone)."""  # fmt: skip
+    best = math.inf
+    for i in range(zn.shape[1]):
+        mur = zmur[kz, i]
+        qn = n + mur * cos_h - zn[kz, i]
+        qe = e + mur * sin_h - ze[kz, i]
+        dist = math.sqrt(qn * qn + qe * qe)
+        g = dist - zreach[kz, i] - eps
+        if step > 0.0:
+            g -= dip(mur, dist, speed, amax, av_rate, step)
+        best = min(best, g)
+    return best
+
+
+@jit_inline
+def segment_gap(
+    zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
+    n: float, e: float, cos_h: float, sin_h: float, start_m: float, stop_m: float,
+    lookahead_start: bool, eps: float, widen: float,
+) -> float:
+    """Least gap of the points p + s u, s in [s0_i, s1_i], to the reach discs, where
+    s0_i = min(mu_i R_i, start_m) if ``lookahead_start`` else start_m, and
+    s1_i = stop_m + mu_i R_i (stop_m = inf: a ray). ``widen`` (rad) subtracts the lateral
+    uncertainty of a heading known to within +-widen: (|d - p| + reach + mu R) sin(widen)."""
+    best = math.inf
+    for i in range(zn.shape[1]):
+        mur = zmur[kz, i]
+        s0 = min(mur, start_m) if lookahead_start else start_m
+        s1 = stop_m + mur
+        wn = zn[kz, i] - n
+        we = ze[kz, i] - e
+        along = wn * cos_h + we * sin_h
+        s = min(max(along, s0), s1)
+        dn = wn - s * cos_h
+        de = we - s * sin_h
+        g = math.sqrt(dn * dn + de * de) - zreach[kz, i] - eps
+        if widen > 0.0:
+            g -= (math.sqrt(wn * wn + we * we) + zreach[kz, i] + mur) * math.sin(min(widen, 1.5))
+        best = min(best, g)
+    return best
+
+
+@jit
+def annulus_gap(
+    zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
+    cn: float, ce: float, radius_m: float, inner_ahead_m: float, outer_ahead_m: float,
+    eps: float, shift_m: float,
+) -> float:
+    """Least gap of the annulus about (cn, ce) swept by the points s ahead of a circle of
+    radius ``radius_m`` along its tangents, s in [inner_ahead_i, outer_ahead_i] (with
+    ``inner_ahead_m`` < 0 meaning mu_i R_i for both: the look-ahead circle alone), against the
+    reach discs; ``shift_m`` is an uncertainty in the centre."""
+    best = math.inf
+    r2 = radius_m * radius_m
+    for i in range(zn.shape[1]):
+        mur = zmur[kz, i]
+        s0 = mur if inner_ahead_m < 0.0 else min(mur, inner_ahead_m)
+        s1 = mur if inner_ahead_m < 0.0 else outer_ahead_m + mur
+        r_in = math.sqrt(r2 + s0 * s0)
+        r_out = math.sqrt(r2 + s1 * s1)
+        dn = zn[kz, i] - cn
+        de = ze[kz, i] - ce
+        dist = math.sqrt(dn * dn + de * de)
+        reach = zreach[kz, i] + eps + shift_m
+        g = max(dist - reach - r_out, r_in - dist - reach)
+        best = min(best, g)
+    return best
+
+
+@jit_inline
+def arc_end(
+    n: float, e: float, heading: float, accel: float, speed: float, duration_s: float
+) -> tuple[float, float, float]:
+    """Position and heading after flying lateral acceleration ``accel`` for ``duration_s``."""
+    turn = accel * duration_s / speed
+    if abs(turn) < 1e-9:
+        chord = speed * duration_s
+    else:
+        chord = 2.0 * speed * speed / accel * math.sin(0.5 * turn)
+    mid = heading + 0.5 * turn
+    return n + chord * math.cos(mid), e + chord * math.sin(mid), heading + turn
+
+
+def lookahead_gap(
+    zones_north_m: FloatArray,
+    zones_east_m: FloatArray,
+    mu_range_m: FloatArray,
+    reach_m: FloatArray,
+    north_m: float,
+    east_m: float,
+    course_rad: float,
+    margin_m: float = 0.0,
+) -> float:
+    """min_i |p + mu_i R_i u - d_i| - (R_i + c_i) - margin (zone arrays of shape (1, zones)):
+    > 0 exactly where r_i > rho_i(sigma_i) for every zone (the module docstring)."""
+    return float(
+        point_gap(
+            zones_north_m, zones_east_m, mu_range_m, reach_m, 0, north_m, east_m,
+            math.cos(course_rad), math.sin(course_rad), margin_m, 1.0, 1.0, 0.0, 0.0,
+        )
+    )  # fmt: skip

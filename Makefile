@@ -35,6 +35,8 @@ bench: $(STAMP)
 	$(BIN)/python bench/bench_batch.py
 	$(BIN)/python bench/bench_service.py
 	$(BIN)/python bench/bench_qp.py
+	$(BIN)/python bench/bench_recovery.py --runs 10 --freeze-s 2 --mode stale
+	$(BIN)/python bench/bench_recovery.py --runs 10 --freeze-s 5 --mode silent
 
 clean:
 	rm -rf $(VENV) demo-out .pytest_cache .mypy_cache .ruff_cache

@@ -19,6 +19,7 @@ import hmac
 import math
 import os
 import select
+import socket
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -124,6 +125,8 @@ _UINT32 = 1 << 32
 _SIGNING_EPOCH_S = 1420070400  # 2015-01-01T00:00:00Z, MAVLink 2 signing's time origin
 _NEW_STREAM_BEHIND_10US = 60 * 100_000  # a new signed stream may be a minute behind ours
 _TCP_KINDS = ("tcpin", "tcp")
+_TCP_RECONNECT_S = 1.0  # a tcp: client tries its server again this often (MAVProxy: 1 s)
+_TCP_CONNECT_TIMEOUT_S = 0.2
 
 
 # --- unit conversions (SI <-> wire) -------------------------------------------------------
@@ -373,6 +376,14 @@ class Link:
             raise ConfigError("connect", self.url, f"cannot be opened: {exc}") from exc
         self._conn.mav.robust_parsing = True
         self._udp = isinstance(self._conn, mavutil.mavudp)
+        # a tcp: client reads its socket itself and reconnects like MAVProxy (pymavlink's
+        # recv returns b"" both for "nothing yet" and for a closed socket)
+        self._tcp_client = isinstance(self._conn, mavutil.mavtcp)
+        self._tcp_address: tuple[str, int] | None = (
+            getattr(self._conn, "destination_addr", None) if self._tcp_client else None
+        )
+        self._reconnect_at_s = math.inf
+        self._idle_r, self._idle_w = os.pipe() if self._tcp_client else (-1, -1)
         self._peer: tuple[str, int] | None = None
         self._messages = 0
         self._bad = 0
@@ -380,7 +391,18 @@ class Link:
     # lifecycle
     def close(self) -> None:
         """Close the socket(s)."""
+        if self._tcp_client and self._conn.port is None:
+            self._conn.port = socket.socket()  # pymavlink's close() expects one
         self._conn.close()
+        for fd in (self._idle_r, self._idle_w):
+            if fd >= 0:
+                os.close(fd)
+        self._idle_r = self._idle_w = -1
+
+    @property
+    def connected(self) -> bool:
+        """False while a tcp: client waits to reconnect; True otherwise."""
+        return not (self._tcp_client and self._conn.port is None)
 
     def __enter__(self) -> Link:
         return self
@@ -414,7 +436,11 @@ class Link:
         return str(host), int(port)
 
     def fileno(self) -> int:
-        """The descriptor to wait on (for ``tcpin`` it changes once a client connects)."""
+        """The descriptor to wait on (for ``tcpin`` it changes once a client connects; a
+        disconnected tcp: client waits on a pipe that never becomes readable)."""
+        if self._tcp_client:
+            port = self._conn.port
+            return int(port.fileno()) if port is not None else self._idle_r
         return int(self._conn.fd)
 
     # signing
@@ -479,8 +505,45 @@ class Link:
         """The locked peer, if any."""
         return self._peer
 
+    def _read_tcp_client(self) -> tuple[bytes, Address] | None:
+        conn = self._conn
+        if conn.port is None:
+            if time.monotonic() >= self._reconnect_at_s:
+                self._reconnect()
+            return None
+        try:
+            data = conn.port.recv(4096)
+        except (BlockingIOError, InterruptedError):
+            return None  # nothing waiting: an idle socket is not a closed one
+        except OSError:
+            data = b""
+        if not data:  # closed or reset by the peer: reconnect in a second
+            with contextlib.suppress(OSError):
+                conn.port.close()
+            conn.port = None
+            self._reconnect_at_s = time.monotonic() + _TCP_RECONNECT_S
+            return None
+        return bytes(data), None
+
+    def _reconnect(self) -> None:
+        """One short, non-blocking-enough attempt to reach the tcp: server again."""
+        assert self._tcp_address is not None
+        try:
+            sock = socket.create_connection(self._tcp_address, timeout=_TCP_CONNECT_TIMEOUT_S)
+        except OSError:
+            self._reconnect_at_s = time.monotonic() + _TCP_RECONNECT_S
+            return
+        sock.setblocking(False)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self._conn.port = sock
+        self._conn.fd = sock.fileno()
+        self._reset_parser(count_partial=False)
+        self._reconnect_at_s = math.inf
+
     def _read_chunk(self) -> tuple[bytes, Address] | None:
         conn = self._conn
+        if self._tcp_client:
+            return self._read_tcp_client()
         if self._udp:
             try:
                 data, source = conn.port.recvfrom(65535)
@@ -558,6 +621,9 @@ class Link:
         with contextlib.suppress(OSError):
             if self._udp and self._peer is not None:
                 self._conn.port.sendto(buf, self._peer)
+            elif self._tcp_client:
+                if self._conn.port is not None:
+                    self._conn.port.send(buf)
             else:
                 self._conn.write(buf)
 

@@ -615,21 +615,26 @@ class Link:
         mav.total_bytes_sent += len(buf)
         return buf
 
-    def write(self, buf: bytes) -> None:
-        """Send already packed bytes (to the locked peer only, once there is one); a peer
-        that is not there yet is not an error."""
-        with contextlib.suppress(OSError):
+    def write(self, buf: bytes) -> bool:
+        """Send already packed bytes (to the locked peer only, once there is one). False
+        when they did not leave: the socket refused them, or a tcp: client is down. (Never
+        raises: a peer that is not there yet is not an error, but it is not a send.)"""
+        try:
             if self._udp and self._peer is not None:
                 self._conn.port.sendto(buf, self._peer)
             elif self._tcp_client:
-                if self._conn.port is not None:
-                    self._conn.port.send(buf)
+                if self._conn.port is None:
+                    return False
+                self._conn.port.send(buf)
             else:
                 self._conn.write(buf)
+        except OSError:
+            return False
+        return True
 
-    def send(self, msg: Message) -> None:
-        """Pack and send ``msg`` now."""
-        self.write(self.pack(msg))
+    def send(self, msg: Message) -> bool:
+        """Pack and send ``msg`` now; False if it did not leave (see :meth:`write`)."""
+        return self.write(self.pack(msg))
 
 
 def open_link(url: str, *, system_id: int, component_id: int) -> Link:

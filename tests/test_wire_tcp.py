@@ -50,7 +50,8 @@ def test_a_tcp_client_survives_an_idle_socket_and_reconnects() -> None:
         peer.close()
         receive(link, 0.3)
         assert not link.connected
-        link.send(link.mav.heartbeat_encode(18, 8, 0, 0, 0))  # no error while down
+        # a send while down does not raise, and does not count as sent
+        assert link.send(link.mav.heartbeat_encode(18, 8, 0, 0, 0)) is False
         # ... and is back within its retry period, driven by its own receive calls
         server.setblocking(False)
         again = None
@@ -68,7 +69,7 @@ def test_a_tcp_client_survives_an_idle_socket_and_reconnects() -> None:
         again.sendall(heartbeat_bytes(1))
         assert "HEARTBEAT" in receive(link, 1.0)
         # and it sends again on the new connection
-        link.send(link.mav.heartbeat_encode(18, 8, 0, 0, 0))
+        assert link.send(link.mav.heartbeat_encode(18, 8, 0, 0, 0)) is True
         again.settimeout(2.0)
         assert again.recv(4096)[:1] in (b"\xfd", b"\xfe")
         again.close()

@@ -53,7 +53,7 @@ class Engagement:
         self,
         loop: GuidanceLoop,
         events: EventLog,
-        send: Callable[[Message], None],
+        send: Callable[[Message], bool],
         *,
         intercept_radius_m: float,
     ) -> None:
@@ -67,6 +67,7 @@ class Engagement:
         self.done = False
         self.ticks = 0
         self.setpoints_sent = 0
+        self.setpoint_write_failures = 0
         self.failsafes = 0
         self.brakes_sent = 0  # zero-velocity stops at failsafes (not counted as setpoints)
         self.last_command: TickCommand | None = None
@@ -156,8 +157,10 @@ class Engagement:
         assert self.setpoints is not None
         message = self.setpoints.message(result)
         if message is not None:
-            self._send(message)
-            self.setpoints_sent += 1
+            if self._send(message):
+                self.setpoints_sent += 1
+            else:  # counted as what it is (issue 13: a failed write was counted as sent)
+                self.setpoint_write_failures += 1
         if self.publisher is not None:  # after the setpoint has left
             self.publisher.publish_tick(result)
 

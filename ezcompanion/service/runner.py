@@ -188,6 +188,7 @@ class CompanionService:
             },
             "ticks": self.ticks,
             "setpoints_sent": self.setpoints_sent,
+            "setpoint_write_failures": self.engagement.setpoint_write_failures,
             "failsafes": self.failsafes,
             "last_state": None
             if last is None
@@ -393,9 +394,10 @@ class CompanionService:
             ground_vehicle=is_ground_vehicle(session.heartbeat),
         )
 
-    def _send(self, msg: Message) -> None:
+    def _send(self, msg: Message) -> bool:
         assert self._link is not None
         frame = self._link.pack(msg)
-        self._link.write(frame)
-        if self._tlog is not None:
+        sent = self._link.write(frame)
+        if sent and self._tlog is not None:
             self._tlog.write(frame)
+        return sent

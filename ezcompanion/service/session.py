@@ -76,7 +76,7 @@ class VehicleSession:
         settings: CompanionSettings,
         events: EventLog,
         link: Link,
-        send: Callable[[Message], None],
+        send: Callable[[Message], object],
     ) -> None:
         self.settings = settings
         self.events = events

@@ -130,7 +130,11 @@ def test_run_with_no_vehicle_is_a_link_failure_not_a_miss(
     argv = ["run", "--config", str(SCENARIO), "--connect", f"udpin://127.0.0.1:{port}",
             "--max-time", "0.5", "--no-telemetry"]  # fmt: skip
     assert main(argv) == ExitCode.LINK_FAILURE
-    (error,) = capsys.readouterr().err.splitlines()
+    captured = capsys.readouterr()
+    (error,) = captured.err.splitlines()
+    # and the event log says so, not "miss distance inf m after 0.00 s of guidance"
+    (ended,) = [line for line in captured.out.splitlines() if "ended:" in line]
+    assert "never guided" in ended and "inf" not in ended
     assert re.fullmatch(  # the endpoint as pymavlink opened it
         r"ezcompanion: error: connect: no vehicle heard in [0-9.]+ s "
         rf"\(got 'udpin:127.0.0.1:{port}'\)",

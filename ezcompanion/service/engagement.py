@@ -15,6 +15,7 @@ with no new course (ArduPlane holds the last one).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -194,12 +195,12 @@ class Engagement:
             brakes_sent=self.brakes_sent,
         )
         verdict = "intercepted" if intercepted else "not intercepted"
-        self.events.emit(
-            EventKind.ENDED,
-            now,
-            f"{verdict}; miss distance "
-            f"{self.loop.miss_distance_m:.3f} m after {self._guiding_total_s:.2f} s "
-            f"of guidance",
-            intercepted=intercepted,
-        )
+        if math.isinf(self.loop.miss_distance_m):  # the law never ran: no miss to speak of
+            detail = "never guided (no vehicle in GUIDED with a fresh position)"
+        else:
+            detail = (
+                f"miss distance {self.loop.miss_distance_m:.3f} m after "
+                f"{self._guiding_total_s:.2f} s of guidance"
+            )
+        self.events.emit(EventKind.ENDED, now, f"{verdict}; {detail}", intercepted=intercepted)
         return self.outcome

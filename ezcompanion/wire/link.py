@@ -1,0 +1,360 @@
+"""One MAVLink connection: non-blocking receive with the sender's address, a locked peer,
+signing, and a tcp: client that reconnects like MAVProxy."""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import select
+import socket
+import time
+from dataclasses import dataclass
+from typing import Any
+
+from ezcompanion.errors import ConfigError
+from ezcompanion.wire.dialect import Address, Message, mavlink, mavutil
+from ezcompanion.wire.signing import SIGNING_EPOCH_S, check_signature_first
+
+URL_SCHEMES = ("udpin", "udpout", "udp", "tcpin", "tcp")
+_DEFAULT_BAUD = 57600
+_TCP_KINDS = ("tcpin", "tcp")
+_TCP_RECONNECT_S = 1.0  # a tcp: client tries its server again this often (MAVProxy: 1 s)
+_TCP_CONNECT_TIMEOUT_S = 0.2
+
+
+def is_serial_device(url: str) -> bool:
+    """A serial device path (/dev/..., or COMn on Windows), not a network URL."""
+    return url.startswith("/") or url.upper().startswith("COM")
+
+
+@dataclass(frozen=True)
+class LinkStats:
+    """Counters of one link's receive side."""
+
+    messages: int
+    bad_frames: int  # bad CRC, length, id or signature
+    rejected_unsigned: int
+    bad_signatures: int = 0  # signed, but not with our key, or a replay
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One decoded message and the transport address it came from."""
+
+    message: Message
+    source: Address
+
+    @property
+    def mavlink1(self) -> bool:
+        """The frame was MAVLink 1 (no signature, no extensions)."""
+        buf = self.message.get_msgbuf()
+        return bool(buf) and buf[0] == mavlink.PROTOCOL_MARKER_V1
+
+
+class Link:
+    """One MAVLink connection (a context manager): non-blocking receive, raw and encoded send.
+
+    Not thread-safe: one thread owns a link. ``mav`` is pymavlink's encoder (its
+    ``*_encode`` methods build messages); :meth:`pack` turns a message into bytes with this
+    link's sequence number and signature, :meth:`write` sends bytes, :meth:`send` does both.
+    """
+
+    def __init__(self, url: str, *, system_id: int, component_id: int) -> None:
+        for name, value in (("system_id", system_id), ("component_id", component_id)):
+            if not 1 <= value <= 255:
+                raise ConfigError(name, value, "must be within [1, 255]")
+        self.url = url
+        scheme = url.split(":", 1)[0]
+        self._tcp = scheme in _TCP_KINDS
+        options: dict[str, Any] = {}
+        if is_serial_device(url):
+            # a serial device, as MAVProxy writes it: /dev/ttyACM0,57600 (or COM3,115200)
+            url, _, baud = url.partition(",")
+            if baud and not (baud.isdigit() and int(baud) > 0):
+                raise ConfigError("connect", self.url, "the baud rate after ',' must be a number")
+            options["baud"] = int(baud) if baud else _DEFAULT_BAUD
+        elif scheme not in URL_SCHEMES or url.count(":") != 2:
+            raise ConfigError(
+                "connect",
+                url,
+                f"must be SCHEME:HOST:PORT with SCHEME one of {', '.join(URL_SCHEMES)}, "
+                "or a serial device such as /dev/ttyACM0,57600",
+            )
+        try:
+            self._conn: Any = mavutil.mavlink_connection(
+                url,
+                source_system=system_id,
+                source_component=component_id,
+                dialect="ardupilotmega",
+                autoreconnect=False,
+                **options,
+            )
+        except (OSError, ValueError, ImportError) as exc:
+            raise ConfigError("connect", self.url, f"cannot be opened: {exc}") from exc
+        self._conn.mav.robust_parsing = True
+        self._udp = isinstance(self._conn, mavutil.mavudp)
+        # a tcp: client reads its socket itself and reconnects like MAVProxy (pymavlink's
+        # recv returns b"" both for "nothing yet" and for a closed socket)
+        self._tcp_client = isinstance(self._conn, mavutil.mavtcp)
+        self._tcp_address: tuple[str, int] | None = (
+            getattr(self._conn, "destination_addr", None) if self._tcp_client else None
+        )
+        self._reconnect_at_s = math.inf
+        self._idle_r, self._idle_w = os.pipe() if self._tcp_client else (-1, -1)
+        self._peer: tuple[str, int] | None = None
+        self._messages = 0
+        self._bad = 0
+
+    # lifecycle
+    def close(self) -> None:
+        """Close the socket(s)."""
+        if self._tcp_client and self._conn.port is None:
+            self._conn.port = socket.socket()  # pymavlink's close() expects one
+        self._conn.close()
+        for fd in (self._idle_r, self._idle_w):
+            if fd >= 0:
+                os.close(fd)
+        self._idle_r = self._idle_w = -1
+
+    @property
+    def connected(self) -> bool:
+        """False while a tcp: client waits to reconnect; True otherwise."""
+        return not (self._tcp_client and self._conn.port is None)
+
+    def __enter__(self) -> Link:
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self.close()
+
+    @property
+    def mav(self) -> Any:
+        """pymavlink's encoder/parser for this link (``link.mav.heartbeat_encode(...)``)."""
+        return self._conn.mav
+
+    @property
+    def stats(self) -> LinkStats:
+        """Receive counters so far."""
+        signing = self._conn.mav.signing
+        return LinkStats(
+            self._messages, self._bad, int(signing.reject_count), int(signing.badsig_count)
+        )
+
+    @property
+    def local_address(self) -> tuple[str, int] | None:
+        """Host and port this link's socket is bound to (useful after ``udpin:HOST:0``)."""
+        sock = getattr(self._conn, "listen", None) or getattr(self._conn, "port", None)
+        if sock is None:
+            return None
+        try:
+            host, port = sock.getsockname()[:2]
+        except OSError:
+            return None
+        return str(host), int(port)
+
+    def fileno(self) -> int:
+        """The descriptor to wait on (for ``tcpin`` it changes once a client connects; a
+        disconnected tcp: client waits on a pipe that never becomes readable)."""
+        if self._tcp_client:
+            port = self._conn.port
+            return int(port.fileno()) if port is not None else self._idle_r
+        return int(self._conn.fd)
+
+    # signing
+    def enable_signing(self, key: bytes, *, link_id: int = 0, allow_unsigned: bool = False) -> None:
+        """Sign every outgoing frame with ``key``; refuse unsigned or badly signed input
+        unless ``allow_unsigned``."""
+        if len(key) != 32:
+            raise ConfigError("signing_key", key.hex(), "must be 32 bytes")
+        callback = (lambda _mav, _msg_id: True) if allow_unsigned else None
+        epoch_10us = int(max(time.time() - SIGNING_EPOCH_S, 0.0) * 1e5)
+        self._conn.setup_signing(
+            key,
+            sign_outgoing=True,
+            allow_unsigned_callback=callback,
+            initial_timestamp=epoch_10us,
+            link_id=link_id,
+        )
+        mav = self._conn.mav
+        mav.check_signature = lambda buf, system, component: check_signature_first(
+            mav, buf, system, component
+        )
+
+    def disable_signing(self) -> None:
+        """Back to unsigned frames, accepting unsigned input."""
+        self._conn.disable_signing()
+
+    # receive
+    def wait_readable(self, timeout_s: float, *extra_fds: int) -> list[int]:
+        """Wait until this link (or one of ``extra_fds``) is readable; the readable fds."""
+        fds = [self.fileno(), *extra_fds]
+        readable, _, _ = select.select(fds, [], [], max(timeout_s, 0.0))
+        return list(readable)
+
+    def recv_messages(self, max_reads: int = 64) -> list[Message]:
+        """Every complete, valid message available now, without blocking (see :meth:`recv`)."""
+        return [frame.message for frame in self.recv(max_reads)]
+
+    def recv(self, max_reads: int = 64) -> list[Frame]:
+        """Every complete, valid message available now with its source, without blocking.
+
+        Frames with bad CRC, bad length, bad signature or unknown ids are dropped and
+        counted; nothing raises for what a peer sends. A UDP datagram is parsed on its own
+        (a frame never spans two senders' datagrams).
+        """
+        out: list[Frame] = []
+        for _ in range(max_reads):
+            chunk = self._read_chunk()
+            if chunk is None:
+                break
+            data, source = chunk
+            out.extend(Frame(msg, source) for msg in self._parse(data))
+        return out
+
+    # the peer
+    def lock_peer(self, address: Address) -> None:
+        """Send only to ``address`` from now on (UDP; pymavlink's ``udpin`` would answer
+        every sender it has heard). None unlocks."""
+        self._peer = address
+
+    @property
+    def peer(self) -> Address:
+        """The locked peer, if any."""
+        return self._peer
+
+    def _read_tcp_client(self) -> tuple[bytes, Address] | None:
+        conn = self._conn
+        if conn.port is None:
+            if time.monotonic() >= self._reconnect_at_s:
+                self._reconnect()
+            return None
+        try:
+            data = conn.port.recv(4096)
+        except (BlockingIOError, InterruptedError):
+            return None  # nothing waiting: an idle socket is not a closed one
+        except OSError:
+            data = b""
+        if not data:  # closed or reset by the peer: reconnect in a second
+            with contextlib.suppress(OSError):
+                conn.port.close()
+            conn.port = None
+            self._reconnect_at_s = time.monotonic() + _TCP_RECONNECT_S
+            return None
+        return bytes(data), None
+
+    def _reconnect(self) -> None:
+        """One short, non-blocking-enough attempt to reach the tcp: server again."""
+        assert self._tcp_address is not None
+        try:
+            sock = socket.create_connection(self._tcp_address, timeout=_TCP_CONNECT_TIMEOUT_S)
+        except OSError:
+            self._reconnect_at_s = time.monotonic() + _TCP_RECONNECT_S
+            return
+        sock.setblocking(False)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self._conn.port = sock
+        self._conn.fd = sock.fileno()
+        self._reset_parser(count_partial=False)
+        self._reconnect_at_s = math.inf
+
+    def _read_chunk(self) -> tuple[bytes, Address] | None:
+        conn = self._conn
+        if self._tcp_client:
+            return self._read_tcp_client()
+        if self._udp:
+            try:
+                data, source = conn.port.recvfrom(65535)
+            except OSError:
+                return None
+            if not data:
+                return None
+            address = (str(source[0]), int(source[1]))
+            if self._peer is None:  # pymavlink's own bookkeeping of whom to answer
+                if conn.udp_server:
+                    conn.clients.add(address)
+                    conn.clients_last_alive[address] = time.time()
+                elif conn.broadcast:
+                    conn.last_address = address
+            # never mix bytes of two datagrams in the parser
+            self._reset_parser()
+            return bytes(data), address
+        try:
+            data = conn.recv(4096)
+        except OSError:
+            return None
+        if isinstance(data, bytes) and not data and self._tcp and conn.port is not None:
+            # orderly close by the peer: go back to waiting for a connection
+            conn.port.close()
+            conn.port = None
+            if hasattr(conn, "listen"):
+                conn.fd = conn.listen.fileno()
+            return None
+        if not data:
+            return None
+        return bytes(data), None
+
+    def _parse(self, chunk: bytes) -> list[Message]:
+        out: list[Message] = []
+        mav = self._conn.mav
+        try:
+            msg = mav.parse_char(chunk)
+            while msg is not None:
+                self._keep(msg, out)
+                msg = mav.parse_char(b"")
+        except Exception:
+            self._bad += 1
+            self._reset_parser(count_partial=False)
+        return out
+
+    def _reset_parser(self, *, count_partial: bool = True) -> None:
+        mav = self._conn.mav
+        if count_partial and len(mav.buf) - mav.buf_index > 0:
+            self._bad += 1  # a partial frame left over
+        mav.buf = bytearray()
+        mav.buf_index = 0
+        mav.expected_length = mavlink.HEADER_LEN_V1 + 2
+
+    def _keep(self, msg: Message, out: list[Message]) -> None:
+        kind = msg.get_type()
+        if kind in ("BAD_DATA", "UNKNOWN") or kind.startswith("UNKNOWN_"):
+            self._bad += 1
+            return
+        self._messages += 1
+        out.append(msg)
+
+    # send
+    def pack(self, msg: Message) -> bytes:
+        """Serialise ``msg`` with this link's next sequence number (and signature)."""
+        mav = self._conn.mav
+        buf = bytes(msg.pack(mav))
+        mav.seq = (mav.seq + 1) % 256
+        mav.total_packets_sent += 1
+        mav.total_bytes_sent += len(buf)
+        return buf
+
+    def write(self, buf: bytes) -> bool:
+        """Send already packed bytes (to the locked peer only, once there is one). False
+        when they did not leave: the socket refused them, or a tcp: client is down. (Never
+        raises: a peer that is not there yet is not an error, but it is not a send.)"""
+        try:
+            if self._udp and self._peer is not None:
+                self._conn.port.sendto(buf, self._peer)
+            elif self._tcp_client:
+                if self._conn.port is None:
+                    return False
+                self._conn.port.send(buf)
+            else:
+                self._conn.write(buf)
+        except OSError:
+            return False
+        return True
+
+    def send(self, msg: Message) -> bool:
+        """Pack and send ``msg`` now; False if it did not leave (see :meth:`write`)."""
+        return self.write(self.pack(msg))
+
+
+def open_link(url: str, *, system_id: int, component_id: int) -> Link:
+    """Open a MAVLink connection from a pymavlink URL (``udpout:127.0.0.1:14550`` ...)."""
+    return Link(url, system_id=system_id, component_id=component_id)

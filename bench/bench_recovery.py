@@ -31,7 +31,7 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=10)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--freeze-s", type=float, default=2.0)
-    parser.add_argument("--mode", choices=["stale", "silent"], default="stale")
+    parser.add_argument("--mode", choices=["stale", "silent", "link"], default="stale")
     args = parser.parse_args()
     rng = random.Random(args.seed)
     good = 0

@@ -29,7 +29,7 @@ Layout (every key optional; see ``docs/sitl_stub.md``)::
       streams: {global_position_int_hz: 10, local_position_ned_hz: 10, attitude_hz: 10,
                 vfr_hud_hz: 4}
       faults: {drop_rate, delay_s, jitter_s, duplicate_rate, reorder_rate, reorder_delay_s,
-               freeze_start_s, freeze_duration_s, freeze_mode: silent | stale,
+               freeze_start_s, freeze_duration_s, freeze_mode: silent | stale | link,
                jump_at_s, jump_north_m, jump_east_m}
 
 Every number has a stated range (the error gives it); positions and offsets are held to the
@@ -93,7 +93,9 @@ class Faults:
     reorder_delay_s: float = 0.2
     freeze_start_s: float = 0.0
     freeze_duration_s: float = 0.0  # 0 = no freeze
-    freeze_mode: str = "silent"  # silent: streams stop; stale: values stop changing
+    # silent: streams stop (heartbeats go on); stale: values stop changing; link: the whole
+    # link is down both ways (nothing sent, heartbeats included, nothing received)
+    freeze_mode: str = "silent"
     jump_at_s: float = -1.0  # < 0 = no jump; from then on the reported position is offset
     jump_north_m: float = 0.0
     jump_east_m: float = 0.0
@@ -107,8 +109,8 @@ class Faults:
         _check("jump_at_s", self.jump_at_s, low=-1e6, high=1e6)
         for name in ("jump_north_m", "jump_east_m"):
             _check(name, getattr(self, name), low=-POSITION_LIMIT_M, high=POSITION_LIMIT_M)
-        if self.freeze_mode not in ("silent", "stale"):
-            raise ConfigError("freeze_mode", self.freeze_mode, "must be silent or stale")
+        if self.freeze_mode not in ("silent", "stale", "link"):
+            raise ConfigError("freeze_mode", self.freeze_mode, "must be silent, stale or link")
 
     @property
     def any(self) -> bool:

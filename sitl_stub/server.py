@@ -216,9 +216,17 @@ class SitlStub:
         except BlockingIOError:
             pass
 
+    def _link_down(self) -> bool:
+        """A ``link`` freeze: nothing goes out and nothing that comes in is heard."""
+        return self.faults.frozen(self._state.t_s) and (
+            self.config.settings.faults.freeze_mode == "link")
+
     def _receive(self, link: Link) -> None:
         assert self.autopilot is not None
-        for msg in link.recv_messages():
+        messages = link.recv_messages()
+        if self._link_down():
+            return
+        for msg in messages:
             try:
                 self.autopilot.handle(msg, self._state.t_s, self._state)
             except Exception:
@@ -228,6 +236,10 @@ class SitlStub:
 
     def _flush(self) -> None:
         assert self._link is not None and self.autopilot is not None
+        if self._link_down():
+            self.autopilot.outbox.clear()
+            self.autopilot.requested.clear()
+            return
         for msg in self.autopilot.outbox:
             self._link.send(msg)
         self.autopilot.outbox.clear()
@@ -259,7 +271,8 @@ class SitlStub:
     def _periodic(self, t_s: float) -> None:
         assert self.autopilot is not None and self._link is not None
         while self._next_heartbeat_s <= t_s + 1e-9:
-            self._link.send(self.autopilot.heartbeat())
+            if not self._link_down():
+                self._link.send(self.autopilot.heartbeat())
             self._next_heartbeat_s += _HEARTBEAT_PERIOD_S
         for stamp, name in self._scheduler.pop_due(t_s):
             self._emit(name, stamp)
@@ -272,7 +285,7 @@ class SitlStub:
             return  # no local origin yet (ArduPilot sends it only once the EKF has one)
         state = self._state
         if self.faults.frozen(stamp_s):
-            if s.faults.freeze_mode == "silent":
+            if s.faults.freeze_mode in ("silent", "link"):
                 return
             if self._stale is None:
                 self._stale = state

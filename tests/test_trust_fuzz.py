@@ -14,8 +14,8 @@ from __future__ import annotations
 import os
 import random
 import socket
-import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -80,8 +80,38 @@ def garbage(rng: random.Random) -> bytes:
     return head + rng.randbytes(rng.randrange(1, 300))
 
 
-def test_fuzzed_and_spoofed_frames_steer_nothing(tmp_path: Path) -> None:
-    rng = random.Random(2026)
+@dataclass
+class Fuzzed:
+    """One fuzzed engagement: what was sent, what the stranger got back, and the flight."""
+
+    flight: Any
+    sent: dict[str, int]
+    to_stranger: list[str]  # message types the stranger received
+
+    def violations(self) -> list[str]:
+        """Everything that went wrong, in words (empty: nothing forged steered anything)."""
+        out: list[str] = []
+        flight = self.flight
+        if flight.outcome is None:
+            return ["the service did not run to its end"]
+        if "SET_POSITION_TARGET_LOCAL_NED" in self.to_stranger:
+            out.append("a setpoint went to the stranger")
+        reasons = {e.data["reason"] for e in flight.events.of_kind(EventKind.FAILSAFE)}
+        if reasons & {"gate", "disagree", "origin", "spoof"}:
+            out.append(f"a trust failsafe: {sorted(reasons)}")
+        if [e for e in flight.events.of_kind(EventKind.STATUSTEXT) if "forged" in e.message]:
+            out.append("a forged STATUSTEXT was reported")
+        if flight.events.of_kind(EventKind.COMMAND_ACK):
+            out.append("a forged COMMAND_ACK was taken")
+        telemetry = flight.service.vehicle_telemetry
+        if telemetry is None or sum(telemetry.refused.values()) >= 10:
+            out.append("the vehicle's own frames were refused")
+        return out
+
+
+def fuzz_engagement(where: Path, rng: random.Random, frames: int) -> Fuzzed:
+    """Fly paper scenario 1 over real UDP while up to ``frames`` fuzzed and spoofed frames
+    arrive from a stranger and through a relay on the vehicle's own address."""
     port = free_udp_port()
     relay = Relay(port)
     stranger = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -89,13 +119,12 @@ def test_fuzzed_and_spoofed_frames_steer_nothing(tmp_path: Path) -> None:
     stranger.setblocking(False)
     to_stranger: list[bytes] = []
     sent = {"stranger": 0, "relay": 0}
-    done = threading.Event()
 
     def attack(service: Any, *_: Any) -> None:
         assert wait_for(service, EventKind.ENGAGED)
         time.sleep(0.4)  # past the lock's 1.5 s (vehicle time) of listening for others
         boot_ms = 0
-        while sent["stranger"] + sent["relay"] < FRAMES and service.phase.value != "done":
+        while sent["stranger"] + sent["relay"] < frames and service.phase.value != "done":
             boot_ms += 20
             if rng.random() < 0.8:
                 stranger.sendto(forged(rng, boot_ms), ("127.0.0.1", port))
@@ -109,31 +138,26 @@ def test_fuzzed_and_spoofed_frames_steer_nothing(tmp_path: Path) -> None:
                     to_stranger.append(stranger.recv(65535))
             except OSError:
                 pass
-        done.set()
 
     try:
         # the vehicle's id configured, as a hardened companion would be: the stranger's 1/1
         # frames are refused, its other autopilots ignored
-        flight = fly(SCENARIO, tmp_path, port=port, stub_port=relay.vehicle_port,
+        flight = fly(SCENARIO, where, port=port, stub_port=relay.vehicle_port,
                      during=attack, target_system=1, target_component=1, max_time_s=60.0,
                      **LIGHT)
     finally:
         relay.close()
         stranger.close()
-    print("FUZZ sent", sent, "received by the stranger", len(to_stranger))
-    # the service ran to its end (no traceback escaped the receive path)
-    assert flight.outcome is not None
     parser = M.MAVLink(None)
     parser.robust_parsing = True
     got = [m.get_type() for data in to_stranger for m in parser.parse_buffer(data) or []]
-    assert "SET_POSITION_TARGET_LOCAL_NED" not in got
-    # nothing forged was believed: no failsafe for trust, no forged mode or STATUSTEXT
-    reasons = {e.data["reason"] for e in flight.events.of_kind(EventKind.FAILSAFE)}
-    assert not reasons & {"gate", "disagree", "origin", "spoof"}
-    assert not [e for e in flight.events.of_kind(EventKind.STATUSTEXT) if "forged" in e.message]
-    assert not flight.events.of_kind(EventKind.COMMAND_ACK)
-    assert flight.service.vehicle_telemetry is not None
-    assert sum(flight.service.vehicle_telemetry.refused.values()) < 10  # only the vehicle's
-    assert sent["stranger"] + sent["relay"] >= min(FRAMES, 300)  # during one engagement
-    _, clearance = assert_honest(flight)
+    return Fuzzed(flight, sent, got)
+
+
+def test_fuzzed_and_spoofed_frames_steer_nothing(tmp_path: Path) -> None:
+    fuzzed = fuzz_engagement(tmp_path, random.Random(2026), FRAMES)
+    print("FUZZ sent", fuzzed.sent, "received by the stranger", len(fuzzed.to_stranger))
+    assert fuzzed.violations() == []
+    assert sum(fuzzed.sent.values()) >= min(FRAMES, 300)  # during one engagement
+    _, clearance = assert_honest(fuzzed.flight)
     assert clearance > 0.0

@@ -37,7 +37,13 @@ def main() -> None:
     scenario = load_scenario(SCENARIO)
     total = engagements = bad = 0
     while total < args.frames:
-        fuzzed = fuzz_engagement(Path(tempfile.mkdtemp()), rng, args.frames - total)
+        try:
+            fuzzed = fuzz_engagement(Path(tempfile.mkdtemp()), rng, args.frames - total)
+        except AssertionError as exc:  # never engaged, or the companion did not finish
+            engagements += 1
+            bad += 1
+            print(f"engagement {engagements}: failed before the attack ended: {exc!r}")
+            continue
         sent = sum(fuzzed.sent.values())
         total += sent
         engagements += 1

@@ -112,6 +112,8 @@ class EventKind(StrEnum):
     ALARM = "alarm"  # input refused as untrusted (data: cause)
     VEHICLE_REFUSED = "vehicle_refused"  # no single vehicle to lock on: named, not guided
     ABORTED = "aborted"  # guidance ended for good: the input stayed untrusted (data: cause)
+    PARAMETER = "parameter"  # a vehicle parameter read (data: name, value)
+    ABANDON = "abandon"  # the abandon path every setpoint is checked against (or none)
 
 
 @dataclass(frozen=True)

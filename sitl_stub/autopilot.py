@@ -30,7 +30,7 @@ from typing import Any
 
 from ezcompanion.wire import Message, euler_from_quaternion, is_finite, mavlink
 from sitl_stub.config import StubConfig
-from sitl_stub.profiles import Behaviour, ModeSpec, px4_custom_mode
+from sitl_stub.profiles import Behaviour, ModeSpec, Profile, px4_custom_mode
 from sitl_stub.telemetry import STREAMED, StreamScheduler
 from sitl_stub.vehicle import (
     FollowCourse,
@@ -387,6 +387,30 @@ class Autopilot:
                                                   bool(msg.start_stop), t_s):
             self._notice(f"Data stream {int(msg.req_stream_id)} unsupported", t_s)
 
+    def parameters(self) -> dict[str, float]:
+        """The parameters the stub answers for: its setpoint timeout, under the imitated
+        autopilot's name (ArduCopter GUID_TIMEOUT, PX4 COM_OF_LOSS_T). ArduPlane's course
+        command has no timeout: nothing."""
+        timeout = self.config.timeout_s("setpoint")
+        if self.spec.profile is Profile.PX4:
+            return {"COM_OF_LOSS_T": timeout}
+        if self.spec.profile is Profile.COPTER:
+            return {"GUID_TIMEOUT": timeout}
+        return {}
+
+    def _on_param_request_read(self, msg: Message, t_s: float, state: VehicleState) -> None:
+        if not self._for_us(msg):
+            return
+        name = msg.param_id.decode("ascii", "replace") if isinstance(msg.param_id, bytes) \
+            else str(msg.param_id)
+        name = name.rstrip("\x00")
+        params = self.parameters()
+        if name in params:  # an unknown name gets no answer, as on ArduPilot
+            index = sorted(params).index(name)
+            self.outbox.append(self._mav.param_value_encode(
+                name.encode("ascii"), params[name], _R.MAV_PARAM_TYPE_REAL32, len(params),
+                index))
+
     def _on_timesync(self, msg: Message, t_s: float, state: VehicleState) -> None:
         if int(msg.tc1) == 0:
             self.outbox.append(self._mav.timesync_encode(int(t_s * 1e9), int(msg.ts1)))
@@ -400,4 +424,5 @@ _HANDLERS = {
     "SET_MODE": Autopilot.set_mode_message,
     "REQUEST_DATA_STREAM": Autopilot._on_data_stream,
     "TIMESYNC": Autopilot._on_timesync,
+    "PARAM_REQUEST_READ": Autopilot._on_param_request_read,
 }

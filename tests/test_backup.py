@@ -454,6 +454,31 @@ def test_the_backup_law_intercepts_both_paper_scenarios_outside_every_zone(
     assert np.abs(run.accel_lat_m_s2).max() < scenario.guidance.accel_max_m_s2
 
 
+@pytest.mark.parametrize("number", [1, 2])
+@pytest.mark.parametrize("lag_s", [0.5, 1.2])
+def test_the_reference_simulator_flies_the_lag_the_law_is_told_and_stays_out(
+    number: int, lag_s: float
+) -> None:
+    """With ``response_lag_s`` set, ``simulate`` flies the lagged vehicle (it used to fly the
+    actuator state at once, a vehicle faster than the law's model), with and without an
+    abandon path checked; outside every zone either way, at the service's 20 ms step."""
+    base = load_scenario(CONFIG / f"paper_scenario{number}.yaml")
+    for abandon in ({}, {"abandon_hold_s": 1.0, "abandon_brake_m_s2": 2.5}):
+        scenario = dataclasses.replace(
+            base,
+            guidance=dataclasses.replace(base.guidance, response_lag_s=lag_s, **abandon),
+            simulation=dataclasses.replace(base.simulation, dt_s=0.02),
+        )
+        run = simulate(scenario, LawName.BACKUP)
+        assert run.clearance_m.min() > 0.0
+        # the flown acceleration is the lagged one: its first steps from rest are below
+        # the actuator's own first-order rise (a_f(t) <= a(t) for a rising a from 0)
+        ideal = simulate(dataclasses.replace(scenario, guidance=dataclasses.replace(
+            scenario.guidance, response_lag_s=0.0)), LawName.BACKUP)  # fmt: skip
+        k = 5
+        assert abs(run.accel_lat_m_s2[k]) < abs(ideal.accel_lat_m_s2[k])
+
+
 def test_the_controller_reports_the_shield() -> None:
     scenario = load_scenario(CONFIG / "paper_scenario1.yaml")
     c = GuidanceController(zones=scenario.zones(), target=scenario.target,

@@ -33,9 +33,11 @@ KEY_B = "22" * 32
 
 
 def scenario_file(tmp_path: Path, number: int = 1, **sections: dict[str, Any]) -> Path:
-    """A paper scenario with extra sections (``sitl_stub``, ``companion``)."""
+    """A paper scenario with extra sections (``sitl_stub``, ``companion``), merged into
+    the file's own."""
     data = yaml.safe_load((CONFIG / f"paper_scenario{number}.yaml").read_text())
-    data.update(sections)
+    for name, section in sections.items():
+        data[name] = {**data.get(name, {}), **section}
     path = tmp_path / f"scenario{number}.yaml"
     path.write_text(yaml.safe_dump(data))
     return path

@@ -13,15 +13,18 @@ Figures (issues 9 and 11, ArduCopter and ArduPlane V4.7.0-dev SITL, PX4 v1.16 SI
   configured horizon of 10 s (long enough for a person to take over), the turn to the
   commanded course (2 s ahead) first. Roll response lag about 1 s.
 
-The law uses ``response_lag_s`` unless the scenario states its own. The abandon figures are
-reported with each profile; the law checks them only where the scenario sets
-``abandon_hold_s`` (at the paper's scale a 3 s hold leaves no room to intercept:
-docs/guidance.md, "Safe to abandon").
+The law uses ``response_lag_s`` unless the scenario states its own. With
+``companion.abandon_check`` (off by default) or a scenario's own ``abandon_hold_s``, every
+setpoint is checked against the abandon path (the turn, the hold, the braking); the hold is
+the vehicle's own timeout parameter where it answers for it (``timeout_parameter``, read at
+discovery), plus what it was measured to overshoot by. At the paper's scale ArduCopter's
+default 3 s leaves no room to intercept (docs/guidance.md, "Safe to abandon").
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 
 from ezcompanion.wire import Message, is_fixed_wing, mavlink
 
@@ -37,15 +40,26 @@ class AutopilotProfile:
     abandon_turn_s: float
     abandon_hold_s: float
     abandon_brake_m_s2: float
+    # the parameter that sets the hold, and how much longer than it the vehicle was seen to
+    # hold (s); None: no such parameter
+    timeout_parameter: str | None = None
+    timeout_overshoot_s: float = 0.0
+
+    def with_parameters(self, values: Mapping[str, float]) -> AutopilotProfile:
+        """This profile with the hold the vehicle's own timeout parameter gives, if known."""
+        name = self.timeout_parameter
+        if name is None or name not in values:
+            return self
+        return replace(self, abandon_hold_s=values[name] + self.timeout_overshoot_s)
 
 
 ARDUCOPTER = AutopilotProfile(
     name="ArduCopter", response_lag_s=0.5, abandon_turn_s=0.0, abandon_hold_s=3.0,
-    abandon_brake_m_s2=2.5,
+    abandon_brake_m_s2=2.5, timeout_parameter="GUID_TIMEOUT",
 )  # fmt: skip
 PX4_COPTER = AutopilotProfile(
     name="PX4", response_lag_s=1.2, abandon_turn_s=0.0, abandon_hold_s=1.15,
-    abandon_brake_m_s2=3.0,
+    abandon_brake_m_s2=3.0, timeout_parameter="COM_OF_LOSS_T", timeout_overshoot_s=0.15,
 )  # fmt: skip
 ARDUPLANE = AutopilotProfile(
     name="ArduPlane", response_lag_s=1.0, abandon_turn_s=2.0, abandon_hold_s=8.0,

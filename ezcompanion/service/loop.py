@@ -66,6 +66,19 @@ class GuidanceLoop:
         guidance = dataclasses.replace(self.scenario.guidance, response_lag_s=lag_s)
         self.update_scenario(dataclasses.replace(self.scenario, guidance=guidance))
 
+    def assume_abandon(self, *, turn_s: float, hold_s: float, brake_m_s2: float) -> bool:
+        """Check every setpoint against what the vehicle flies if it is the last (a turn
+        for ``turn_s``, straight for ``hold_s``, then braking), unless the scenario states
+        its own abandon path; keeps the actuator state. True when this path is in force."""
+        if self.scenario.guidance.abandon_hold_s > 0.0 or hold_s <= 0.0:
+            return False
+        guidance = dataclasses.replace(
+            self.scenario.guidance, abandon_turn_s=turn_s, abandon_hold_s=hold_s,
+            abandon_brake_m_s2=brake_m_s2,
+        )  # fmt: skip
+        self.update_scenario(dataclasses.replace(self.scenario, guidance=guidance))
+        return True
+
     def update_scenario(self, scenario: Scenario) -> None:
         """Fly against new defenders and target from the next tick on, keeping the actuator
         state (the vehicle is mid-turn) and the timing."""

@@ -112,6 +112,7 @@ class CompanionService:
         self._session: VehicleSession | None = None
         self._next_heartbeat_s = 0.0
         self._next_deadline_s = 0.0
+        self._abandon_said = False
         self._last_tick_s = -math.inf
 
     # --- views ----------------------------------------------------------------------------
@@ -302,10 +303,43 @@ class CompanionService:
             self._next_deadline_s = now
             session.telemetry.latch_origin()  # the frame is fixed for the engagement
             session.engaged(now)
+            self._assume_abandon(now)
             self.engagement.start(now, session.mode)
         elif self.phase is Phase.GUIDING and not session.in_guided:
             self.engagement.pause(now, brake=True)
             self.phase = Phase.WAITING
+
+    def _assume_abandon(self, now: float) -> None:
+        """Give the law the path the vehicle flies if this setpoint is its last: the
+        autopilot's (its own timeout parameter where it answered), once per engagement."""
+        profile = self.session.profile
+        guidance = self.loop.scenario.guidance
+        if profile is None or self._abandon_said:
+            return
+        self._abandon_said = True
+        if guidance.abandon_hold_s > 0.0:
+            where = "the scenario's"
+        elif not self.settings.abandon_check:
+            self.events.emit(EventKind.ABANDON, now, "abandon check off (companion."
+                             "abandon_check): a setpoint may not be safe to keep flying")
+            return
+        elif self.loop.assume_abandon(turn_s=profile.abandon_turn_s,
+                                      hold_s=profile.abandon_hold_s,
+                                      brake_m_s2=profile.abandon_brake_m_s2):  # fmt: skip
+            guidance = self.loop.scenario.guidance
+            read = profile.timeout_parameter in self.session.parameters.values
+            where = f"{profile.name}'s" + (
+                f" ({profile.timeout_parameter} as read)" if read else " (its default)")
+        else:
+            return
+        self.events.emit(
+            EventKind.ABANDON, now,
+            f"every setpoint checked against {where} abandon path: turn "
+            f"{guidance.abandon_turn_s:g} s, hold {guidance.abandon_hold_s:g} s, brake "
+            f"{guidance.abandon_brake_m_s2:g} m/s^2",
+            turn_s=guidance.abandon_turn_s, hold_s=guidance.abandon_hold_s,
+            brake_m_s2=guidance.abandon_brake_m_s2,
+        )  # fmt: skip
 
     def _check_distrust(self, now: float) -> None:
         """Out of GUIDED after guidance started (a forged mode change, say), distrust still

@@ -38,7 +38,9 @@ from collections.abc import Callable
 
 from ezcompanion.config import Scenario
 from ezcompanion.records import EventKind, Hold
+from ezcompanion.service.autopilots import AutopilotProfile, autopilot_profile
 from ezcompanion.service.events import EventLog
+from ezcompanion.service.parameters import ParameterReader
 from ezcompanion.service.settings import CompanionSettings, SetpointKind
 from ezcompanion.service.state import TelemetryState
 from ezcompanion.service.trust import Alarms, HeartbeatJudge
@@ -109,6 +111,7 @@ class VehicleSession:
         self.received: dict[str, int] = {}
         self._next_engage_s = 0.0
         self.requested_rate_hz = settings.telemetry_rate_hz
+        self.parameters = ParameterReader(link, send)
 
     @property
     def setpoint_kind(self) -> SetpointKind:
@@ -130,9 +133,9 @@ class VehicleSession:
 
     @property
     def frame_settled(self) -> bool:
-        """The vehicle's origin is known (or, unanswered, assumed): the frame can be
-        latched."""
-        return self.telemetry.origin_known
+        """The vehicle's origin is known (or, unanswered, assumed), and the parameters the
+        safety argument reads are answered (or given up on): the frame can be latched."""
+        return self.telemetry.origin_known and self.parameters.settled
 
     # --- incoming -------------------------------------------------------------------------
 
@@ -160,6 +163,8 @@ class VehicleSession:
             self.alarms.hold(cause, now, why, hold_s=_TELEMETRY_HOLD_S)
         if kind == "COMMAND_ACK":
             self._on_ack(msg, now)
+        elif kind == "PARAM_VALUE":
+            self._on_param(msg, now)
         elif kind == "STATUSTEXT":
             self.events.emit(EventKind.STATUSTEXT, now, str(msg.text), severity=int(msg.severity))
         return used
@@ -179,6 +184,23 @@ class VehicleSession:
                 command=int(msg.command),
                 result=int(msg.result),
             )
+
+    def _on_param(self, msg: Message, now: float) -> None:
+        refused = len(self.parameters.refused)
+        name = self.parameters.take(msg)
+        if name is not None:
+            value = self.parameters.values[name]
+            self.events.emit(EventKind.PARAMETER, now, f"{name} = {value:g}", name=name,
+                             value=value)  # fmt: skip
+        elif len(self.parameters.refused) > refused:
+            self.alarms.say("parameter", now, f"{self.parameters.refused[-1]}: refused")
+
+    @property
+    def profile(self) -> AutopilotProfile | None:
+        """The vehicle's autopilot profile, with what it answered of its parameters."""
+        if self.heartbeat is None:
+            return None
+        return autopilot_profile(self.heartbeat).with_parameters(self.parameters.values)
 
     def _refuse_foreign(self, frame: Frame, now: float) -> None:
         self.refused_frames += 1
@@ -239,6 +261,9 @@ class VehicleSession:
         if first:
             self.heartbeat = msg
             self.fixed_wing = is_fixed_wing(msg)
+            parameter = autopilot_profile(msg).timeout_parameter
+            if parameter is not None and self.settings.abandon_check:
+                self.parameters.ask((parameter,), source, now)
             self.events.emit(
                 EventKind.VEHICLE_FOUND,
                 now,
@@ -317,6 +342,7 @@ class VehicleSession:
         self._check_link(now)
         self._check_rates(now)
         self._request_origin(now)
+        self.parameters.periodic(now)
         if waiting:
             self._engage(now)
 

@@ -14,6 +14,8 @@ Layout (every key optional)::
       stale_after_s: 0.25            # position older than this is never fed to the law
       link_lost_after_s: 3.0         # no heartbeat for this long: link lost
       engage: false                  # ask for GUIDED/OFFBOARD ourselves
+      abandon_check: false           # check every setpoint is safe to keep flying if it is
+                                     # the last (the autopilot's timeout read from it)
       gate_position_m: 0.5           # estimate gate: position innovation allowed
       gate_accel_m_s2: 0.0           # the gate's acceleration bound; 0 = 2 x accel_max
       distrust_give_up_s: 3.0        # untrusted input this long without a break ends guidance
@@ -75,6 +77,7 @@ class CompanionSettings:
     stale_after_s: float = 0.25
     link_lost_after_s: float = 3.0
     engage: bool = False
+    abandon_check: bool = False
     gate_position_m: float = 0.5
     gate_accel_m_s2: float = 0.0
     distrust_give_up_s: float = 3.0
@@ -125,6 +128,8 @@ class CompanionSettings:
             )
         if not isinstance(self.setpoint, SetpointKind):
             raise ConfigError("setpoint", self.setpoint, "must be auto, velocity or course")
+        if not isinstance(self.abandon_check, bool):
+            raise ConfigError("abandon_check", self.abandon_check, "must be true or false")
         if not isinstance(self.engage, bool):
             raise ConfigError("engage", self.engage, "must be true or false")
         given = [

@@ -4,7 +4,11 @@ Each step of ``dt_s``: the controller sees the exact state (position, course, sp
 one law step and advances its actuator state from a_k to a_k+1 with a_c held; the vehicle
 (:mod:`ezcompanion.sim.kinematics`, no wind) is integrated with classical RK4 while its
 lateral acceleration moves linearly from a_k to a_k+1 over the step, which is the
-actuator's own path to second order. The run ends at the intercept radius or at
+actuator's own path to second order. Where the scenario states a response lag tau
+(``guidance.response_lag_s``), the vehicle flies the lagged a_f instead (tau a_f_dot =
+a - a_f, closed form over the step: :func:`ezcompanion.sim.kinematics.flown_accel_m_s2`)
+and the controller is given its measured course rate a_f / v, as the law's model assumes;
+``accel_lat_m_s2`` is then the flown a_f. The run ends at the intercept radius or at
 ``duration_s``.
 """
 
@@ -18,7 +22,7 @@ import numpy.typing as npt
 from ezcompanion.config import Scenario
 from ezcompanion.frames import wrap_pi
 from ezcompanion.guidance import GuidanceController, KinematicState, LawName
-from ezcompanion.sim.kinematics import rk4_step, unicycle_rates
+from ezcompanion.sim.kinematics import flown_accel_m_s2, rk4_step, unicycle_rates
 
 __all__ = ["LAW_SERIES", "TRACK_SERIES", "Outcome", "SimResult", "simulate"]
 
@@ -126,16 +130,19 @@ def simulate(scenario: Scenario, law: LawName | None = None) -> SimResult:
     x = np.array([scenario.start.north_m, scenario.start.east_m, scenario.start.course_rad])
     rows: dict[str, list[FloatArray]] = {name: [] for name in _SERIES}
     captured = False
+    lag = np.array(params.response_lag_s)
+    flown = 0.0  # the lagged a_f (with no lag: a itself)
     for k in range(steps + 1):
         t = k * dt
-        step = controller.step(KinematicState(x[0], x[1], x[2], speed), dt)
+        rate = flown / speed if params.response_lag_s > 0.0 else None
+        step = controller.step(KinematicState(x[0], x[1], x[2], speed, rate), dt)
         out = step.law
         for name, value in (
             ("t_s", t),
             ("north_m", x[0]),
             ("east_m", x[1]),
             ("heading_rad", wrap_pi(float(x[2]))),
-            ("accel_lat_m_s2", step.accel_lat_m_s2),
+            ("accel_lat_m_s2", flown if params.response_lag_s > 0.0 else step.accel_lat_m_s2),
             ("h_m", out.h_m),
             ("alpha", out.alpha),
             ("accel_safety_m_s2", out.accel_safety_m_s2),
@@ -158,11 +165,14 @@ def simulate(scenario: Scenario, law: LawName | None = None) -> SimResult:
         slope = (float(step.accel_lat_cmd_m_s2) - a0) / dt
 
         def rates(
-            tau: float, state: FloatArray, a0: float = a0, slope: float = slope, t0: float = t
+            tau: float, state: FloatArray, a0: float = a0, slope: float = slope, t0: float = t,
+            af0: float = flown,
         ) -> FloatArray:
-            return unicycle_rates(state, speed, a0 + slope * (tau - t0))
+            accel = flown_accel_m_s2(np.array(a0), np.array(slope), np.array(af0), lag, tau - t0)
+            return unicycle_rates(state, speed, float(accel))
 
         x = rk4_step(rates, t, x, dt)
+        flown = float(flown_accel_m_s2(np.array(a0), np.array(slope), np.array(flown), lag, dt))
     arrays = {name: np.array(values) for name, values in rows.items()}
     return SimResult(
         scenario=scenario, law=law, captured=captured, zone_names=zones.names, **arrays

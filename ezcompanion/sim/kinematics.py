@@ -9,8 +9,11 @@ optional steady wind ``wind_north_m_s``/``wind_east_m_s``:
     east_dot    = v sin(heading) + wind_east
     heading_dot = a / v
 
-Without wind, heading and course over ground coincide. The reference simulator and the
-loopback vehicle (``sitl_stub``) both integrate this model with :func:`rk4_step`.
+Without wind, heading and course over ground coincide. A vehicle with a response lag tau
+flies a_f, which follows the commanded a through tau a_f_dot = a - a_f
+(:func:`flown_accel_m_s2`, in closed form over a step where a moves linearly). The
+reference simulator and the loopback vehicle (``sitl_stub``) both integrate this model
+with :func:`rk4_step`.
 """
 
 from __future__ import annotations
@@ -21,7 +24,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["Wind", "course_and_ground_speed", "rk4_step", "unicycle_rates"]
+__all__ = [
+    "Wind", "course_and_ground_speed", "flown_accel_m_s2", "rk4_step", "unicycle_rates",
+]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -66,3 +71,18 @@ def rk4_step(
     k3 = f(t_s + 0.5 * dt_s, x + 0.5 * dt_s * k2)
     k4 = f(t_s + dt_s, x + dt_s * k3)
     return x + (dt_s / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+
+def flown_accel_m_s2(
+    a0: FloatArray, slope: FloatArray, af0: FloatArray, lag_s: FloatArray, t_s: float
+) -> FloatArray:
+    """a_f at ``t_s`` into a step where a = a0 + slope t, from a_f = ``af0`` (closed form;
+    a_f = a where the lag is 0)."""
+    a_t = a0 + slope * t_s
+    lagged = lag_s > 0.0
+    if not lagged.any():
+        return a_t
+    tau = np.where(lagged, lag_s, 1.0)
+    decay = np.exp(-t_s / tau)
+    value = a_t - slope * tau + (af0 - a0 + slope * tau) * decay
+    return np.where(lagged, value, a_t)

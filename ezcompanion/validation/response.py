@@ -35,6 +35,8 @@ from enum import IntEnum
 import numpy as np
 import numpy.typing as npt
 
+from ezcompanion.sim.kinematics import flown_accel_m_s2
+
 __all__ = ["ResponseClass", "draw_response", "flown_accel_m_s2", "lag_levels_s"]
 
 FloatArray = npt.NDArray[np.float64]
@@ -92,18 +94,3 @@ def draw_response(
         np.concatenate(factors)[pick].astype(np.float64),
         np.concatenate(classes)[pick].astype(np.int64),
     )
-
-
-def flown_accel_m_s2(
-    a0: FloatArray, slope: FloatArray, af0: FloatArray, lag_s: FloatArray, t_s: float
-) -> FloatArray:
-    """a_f at ``t_s`` into a step where a = a0 + slope t, from a_f = ``af0`` (closed form;
-    a_f = a where the lag is 0)."""
-    a_t = a0 + slope * t_s
-    lagged = lag_s > 0.0
-    if not lagged.any():
-        return a_t
-    tau = np.where(lagged, lag_s, 1.0)
-    decay = np.exp(-t_s / tau)
-    value = a_t - slope * tau + (af0 - a0 + slope * tau) * decay
-    return np.where(lagged, value, a_t)

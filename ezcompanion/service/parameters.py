@@ -1,0 +1,92 @@
+"""The autopilot parameters the safety argument depends on, read from the vehicle itself.
+
+What a vehicle flies when the companion's setpoints stop is the autopilot's: ArduCopter
+flies the last velocity for ``GUID_TIMEOUT`` seconds (3 by default), PX4 for
+``COM_OF_LOSS_T`` (1.0 by default; measured 1.04 to 1.15 s), then each brakes. The law
+checks that every setpoint is safe to keep flying that long (docs/guidance.md, "Safe to
+abandon"), so the service asks the vehicle for the value rather than trusting a default
+that a user may have changed: PARAM_REQUEST_READ by name, a few times, at discovery.
+
+A reply counts only from the locked vehicle (the session filters by id and address), with
+the name asked for, a finite value within the parameter's documented range. Until one
+arrives, or if none does, the profile's default stands (see
+:mod:`ezcompanion.service.autopilots`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+from ezcompanion.wire import Link, Message
+
+__all__ = ["PARAMETER_RANGES", "ParameterReader"]
+
+#: The parameters read, with the range their autopilot documents (s).
+PARAMETER_RANGES = {
+    "GUID_TIMEOUT": (0.1, 5.0),  # ArduCopter: guided setpoint timeout
+    "COM_OF_LOSS_T": (0.0, 60.0),  # PX4: offboard loss timeout
+}
+_RETRY_S = 0.5
+_TRIES = 6
+
+
+class ParameterReader:
+    """Asks for named parameters until each is answered (or the tries run out)."""
+
+    def __init__(self, link: Link, send: Callable[[Message], object]) -> None:
+        self._link = link
+        self._send = send
+        self._wanted: tuple[str, ...] = ()
+        self._target: tuple[int, int] | None = None
+        self._tries = 0
+        self._next_s = math.inf
+        self.values: dict[str, float] = {}
+        self.refused: list[str] = []  # replies out of range, in words
+
+    def ask(self, names: tuple[str, ...], target: tuple[int, int], now: float) -> None:
+        """Start asking ``target`` for ``names`` (kept: answers already heard)."""
+        self._wanted = tuple(n for n in names if n in PARAMETER_RANGES)
+        self._target = target
+        self._tries = 0
+        self._next_s = now
+
+    @property
+    def settled(self) -> bool:
+        """Every name asked for is answered, or the tries ran out."""
+        missing = any(n not in self.values for n in self._wanted)
+        return not missing or (self._tries >= _TRIES and self._next_s == math.inf)
+
+    def periodic(self, now: float) -> None:
+        """Ask again for what is still unanswered, every half second, six times at most."""
+        missing = [n for n in self._wanted if n not in self.values]
+        if now < self._next_s or self._target is None or not missing:
+            return
+        if self._tries >= _TRIES:
+            self._next_s = math.inf
+            return
+        self._tries += 1
+        self._next_s = now + _RETRY_S
+        for name in missing:
+            self._send(
+                self._link.mav.param_request_read_encode(
+                    self._target[0], self._target[1], name.encode("ascii"), -1
+                )
+            )
+
+    def take(self, msg: Message) -> str | None:
+        """A PARAM_VALUE from the vehicle: the name taken, or None (not asked for, or out
+        of range: then the reason is kept in ``refused``)."""
+        name = msg.param_id
+        if isinstance(name, bytes):
+            name = name.decode("ascii", "replace")
+        name = str(name).rstrip("\x00")
+        if name not in self._wanted:
+            return None
+        value = float(msg.param_value)
+        low, high = PARAMETER_RANGES[name]
+        if not (math.isfinite(value) and low <= value <= high):
+            self.refused.append(f"{name} = {value!r} is outside [{low:g}, {high:g}]")
+            return None
+        self.values[name] = value
+        return name

@@ -1,0 +1,98 @@
+"""The abandon check in the service: the autopilot's own timeout, read from the vehicle.
+
+With ``companion.abandon_check`` the service asks the vehicle for its guided-setpoint
+timeout (ArduCopter GUID_TIMEOUT, PX4 COM_OF_LOSS_T) before it engages, and the law checks
+every setpoint against flying it that long, then braking. Over real UDP with the loopback
+vehicle, whose timeout is set in its own section.
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+from pathlib import Path
+
+from test_service_loopback import fly, scenario_file
+
+from ezcompanion.config import load_scenario
+from ezcompanion.records import EventKind
+from ezcompanion.service.demo import judge_truth
+from ezcompanion.service.parameters import ParameterReader
+from ezcompanion.wire import mavlink, open_link
+
+
+def test_the_service_reads_the_vehicles_timeout_and_checks_every_setpoint_against_it(
+    tmp_path: Path,
+) -> None:
+    config = scenario_file(tmp_path, 2, sitl_stub={"setpoint_timeout_s": 1.25})
+    flight = fly(config, tmp_path, abandon_check=True, max_time_s=40.0)
+    read = flight.events.of_kind(EventKind.PARAMETER)
+    assert [(e.data["name"], e.data["value"]) for e in read] == [("GUID_TIMEOUT", 1.25)]
+    abandon = flight.events.of_kind(EventKind.ABANDON)
+    assert len(abandon) == 1 and "GUID_TIMEOUT as read" in abandon[0].message
+    assert abandon[0].data["hold_s"] == 1.25 and abandon[0].data["brake_m_s2"] == 2.5
+    # the parameter was read before guidance started: the check was on from the first tick
+    engaged = flight.events.of_kind(EventKind.ENGAGED)
+    assert engaged and read[0].time_s <= engaged[0].time_s
+    _, _, _, clearance, _ = judge_truth(load_scenario(config), flight.truth)
+    assert min(clearance) > 0.0
+
+
+def test_without_the_check_nothing_is_asked(tmp_path: Path) -> None:
+    config = scenario_file(tmp_path, 1)
+    flight = fly(config, tmp_path, max_time_s=40.0)
+    assert not flight.events.of_kind(EventKind.PARAMETER)
+    abandon = flight.events.of_kind(EventKind.ABANDON)
+    assert len(abandon) == 1 and "abandon check off" in abandon[0].message
+
+
+def _reader_and_peer() -> tuple[ParameterReader, socket.socket, list[bytes]]:
+    peer = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    peer.bind(("127.0.0.1", 0))
+    peer.settimeout(1.0)
+    link = open_link(f"udpout:127.0.0.1:{peer.getsockname()[1]}", system_id=1,
+                     component_id=191)  # fmt: skip
+    sent: list[bytes] = []
+
+    def send(msg: object) -> None:
+        sent.append(link.pack(msg))
+        link.write(sent[-1])
+
+    return ParameterReader(link, send), peer, sent
+
+
+def _value(name: str, value: float) -> object:
+    return mavlink.MAVLink_param_value_message(name.encode(), value,
+                                               mavlink.MAV_PARAM_TYPE_REAL32, 1, 0)  # fmt: skip
+
+
+def test_the_reader_asks_over_the_wire_and_takes_only_a_valid_answer() -> None:
+    reader, peer, _ = _reader_and_peer()
+    try:
+        reader.ask(("GUID_TIMEOUT",), (1, 1), 0.0)
+        reader.periodic(0.0)
+        parser = mavlink.MAVLink(None)
+        request = parser.parse_buffer(peer.recv(512))[0]
+        assert request.get_type() == "PARAM_REQUEST_READ"
+        assert request.param_id == "GUID_TIMEOUT" and request.param_index == -1
+        assert (request.target_system, request.target_component) == (1, 1)
+        assert not reader.settled
+        assert reader.take(_value("WPNAV_SPEED", 500.0)) is None  # not asked for
+        for bad in (math.nan, math.inf, 0.0, 30.0):  # GUID_TIMEOUT is 0.1 to 5 s
+            assert reader.take(_value("GUID_TIMEOUT", bad)) is None
+        assert len(reader.refused) == 4 and "GUID_TIMEOUT" not in reader.values
+        assert reader.take(_value("GUID_TIMEOUT", 2.0)) == "GUID_TIMEOUT"
+        assert reader.values == {"GUID_TIMEOUT": 2.0} and reader.settled
+    finally:
+        peer.close()
+
+
+def test_an_unanswered_request_is_given_up_after_six_tries() -> None:
+    reader, peer, sent = _reader_and_peer()
+    try:
+        reader.ask(("COM_OF_LOSS_T",), (1, 1), 0.0)
+        for k in range(40):
+            reader.periodic(0.1 * k)
+        assert len(sent) == 6 and reader.settled and not reader.values
+    finally:
+        peer.close()

@@ -27,7 +27,7 @@ filtered or finite-difference derivative is used; the tests check this one again
 differences along the flow. The softmin weights' rates fold into sums:
 w_i_dot = w_i (h_dot - b_i_dot) / beta, so sum w_i_dot x_i = (h_dot sum w x - sum w b_dot x) / beta.
 
-Law variants (``LawName``), numbered as the typos and hazards in docs/paper-notes:
+Law variants (``LawName``), numbered as the typos in docs/guidance.md:
 
 ``paper``: the equations as published, with only the guards needed to compute: |S| floored
   at ``gradient_floor_m`` keeping its sign, ranges floored at ``range_floor_m``, the

@@ -125,8 +125,9 @@ class GuidanceParams:
     """Gains and design constants; defaults are the paper's simulation values.
 
     ``margin_m`` (the paper's epsilon) is not given in the paper; 0.2 m is the value its
-    figures imply (see docs/paper-notes). Fields under "robust law" are used by the robust
-    law only; "guards" are the numerical floors that both laws need to compute at all.
+    figures imply (docs/guidance.md, "The paper, checked"). Fields under "robust law" are
+    used by the robust law only; "guards" are the numerical floors that both laws need to
+    compute at all.
     """
 
     k_safety_1_s: float = 0.3

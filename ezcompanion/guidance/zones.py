@@ -6,8 +6,8 @@ lead angle sigma = course - line of sight to the defender's origin:
     rho(sigma) = mu R [cos(sigma) + sqrt(cos^2(sigma) - 1 + (R + c)^2 / (mu R)^2)]
 
 Its first derivative is the paper's gradient (nabla rho); the second is needed for the exact
-time derivative of the law. Both were checked symbolically (docs/paper-notes) and are
-checked against finite differences in the tests.
+time derivative of the law. Both were checked symbolically (docs/guidance.md, "The paper,
+checked") and are checked against finite differences in the tests.
 
 The boundary takes cos(sigma) and sin(sigma) rather than sigma: the law never needs the
 angle itself, and working with the pair avoids atan2 and angle wrapping per zone.

@@ -126,6 +126,8 @@ def run_service(
 ) -> int:
     """Steer a vehicle through one engagement. 0 if intercepted; 1 if it ended otherwise;
     3 if no vehicle was heard or the link was lost at the end; 130 if stopped by a signal.
+    Whatever the end, the vehicle is then left in the mode of ``on_exit`` (a warning on
+    stderr if it did not take it; ``ezcompanion.service.ending``).
 
     ``connect`` (an override, or the scenario's ``companion.connect``) may be written in
     MAVProxy's or MAVSDK's form; it is checked and passed on as pymavlink's string.
@@ -168,6 +170,10 @@ def run_service(
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+    report = service.exit_report
+    if report is not None and report.failed:
+        print(f"ezcompanion: warning: on_exit {report.choice.value}: {report.detail}",
+              file=sys.stderr)  # fmt: skip
     if outcome.intercepted:
         return ExitCode.OK
     if signalled:
@@ -275,6 +281,14 @@ def _parser() -> argparse.ArgumentParser:
         help="ask the vehicle for GUIDED/OFFBOARD (never arms)",
     )
     run.add_argument(
+        "--on-exit",
+        choices=["default", "hold", "loiter", "rtl", "none"],
+        help="the mode the vehicle is left in when the companion stops (intercepted, missed, "
+        "aborted, SIGINT/SIGTERM), if it is still in GUIDED/OFFBOARD: hold (copter BRAKE, "
+        "plane LOITER, PX4 AUTO.LOITER), loiter, rtl, none (send nothing), default (hold; "
+        "loiter for a plane). See docs/field.md",
+    )
+    run.add_argument(
         "--setpoint",
         choices=["auto", "velocity", "course"],
         help="how the acceleration reaches the autopilot: velocity (copter, PX4), course "
@@ -369,6 +383,7 @@ def _dispatch(args: argparse.Namespace) -> int:
             track_csv=args.track,
             connect=args.connect,
             engage=args.engage,
+            on_exit=args.on_exit,
             setpoint=args.setpoint,
             signing_key_file=str(args.signing_key_file) if args.signing_key_file else None,
             tlog=str(args.tlog) if args.tlog else None,

@@ -112,6 +112,7 @@ class EventKind(StrEnum):
     ALARM = "alarm"  # input refused as untrusted (data: cause)
     VEHICLE_REFUSED = "vehicle_refused"  # no single vehicle to lock on: named, not guided
     ABORTED = "aborted"  # guidance ended for good: the input stayed untrusted (data: cause)
+    ON_EXIT = "on_exit"  # the end mode asked for, and whether the vehicle took it (data: failed)
 
 
 @dataclass(frozen=True)

@@ -34,6 +34,7 @@ from ezcompanion.guidance import LawName
 from ezcompanion.records import EventKind, TickCommand
 from ezcompanion.service.autopilots import autopilot_profile
 from ezcompanion.service.clock import ScaledClock
+from ezcompanion.service.ending import ExitReport, leave_vehicle
 from ezcompanion.service.engagement import Engagement, EngagementOutcome
 from ezcompanion.service.events import EventLog
 from ezcompanion.service.inbox import ScenarioInbox
@@ -113,6 +114,7 @@ class CompanionService:
         self._next_heartbeat_s = 0.0
         self._next_deadline_s = 0.0
         self._last_tick_s = -math.inf
+        self.exit_report: ExitReport | None = None  # where the vehicle was left (on_exit)
 
     # --- views ----------------------------------------------------------------------------
 
@@ -263,7 +265,23 @@ class CompanionService:
             self._check_distrust(now)
             if self._ticking() and now >= self._next_deadline_s:
                 self._tick(now)
+        self.phase = Phase.DONE
         self.engagement.finish(clock.now_s())
+        self.exit_report = leave_vehicle(  # a defined end: the mode of on_exit (ending.py)
+            self.settings.on_exit, session, self.events, now=clock.now_s, pump=self._pump
+        )
+
+    def _pump(self, timeout_s: float) -> None:
+        """Frames in and heartbeats out while the service ends (the phase is done: no
+        ticks), for at most ``timeout_s`` of clock time."""
+        clock, link = self.clock, self._link
+        assert link is not None
+        now = clock.now_s()
+        link.wait_readable(clock.wall_s(max(0.0, min(timeout_s, self._next_heartbeat_s - now))))
+        for frame in link.recv():
+            self._on_frame(frame, clock.now_s())
+        if clock.now_s() >= self._next_heartbeat_s:
+            self._send_heartbeat(clock.now_s())
 
     def _on_frame(self, frame: Frame, now: float) -> None:
         if self._tlog is not None:

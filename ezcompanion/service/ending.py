@@ -1,0 +1,187 @@
+"""A defined end: the vehicle is left in the mode the user chose when the companion stops.
+
+Without it the vehicle flies on its last setpoint: ArduCopter for its GUIDED timeout (3 s)
+and then brakes, PX4 for its offboard-loss timeout (1.0-1.15 s) and then declares a
+failsafe, ArduPlane flies its last course for ever (issue 11, measured on SITL). So on every
+end (intercepted, missed, aborted, SIGINT/SIGTERM) the companion asks for the mode of
+``on_exit`` and waits until the vehicle has acknowledged it and reports it in a heartbeat.
+
+======================  ==================  ==============  ==============  ==============
+on_exit                 ArduCopter          ArduPlane       ArduRover       PX4
+======================  ==================  ==============  ==============  ==============
+``hold``                BRAKE               LOITER          HOLD            AUTO.LOITER
+``loiter``              LOITER              LOITER          LOITER          AUTO.LOITER
+``rtl``                 RTL                 RTL             RTL             AUTO.RTL
+``none``                nothing is sent: the autopilot's own timeout decides
+``default``             hold                loiter          hold            hold
+======================  ==================  ==============  ==============  ==============
+
+BRAKE, not LOITER, is the copter's hold: ArduCopter's LOITER reads the throttle stick as a
+climb rate, so with no RC (or the stick low) it descends; BRAKE holds position and
+altitude whatever the sticks say.
+
+The mode is asked for only while the vehicle is in its guided mode (GUIDED, OFFBOARD) and
+the link is up: a vehicle a pilot (or a failsafe) has already taken elsewhere is left
+there. The request (MAV_CMD_DO_SET_MODE) is repeated every ``_RETRY_S`` until it is
+acknowledged, at most ``_TRIES`` times; a refusal or no answer is reported (an ``on_exit``
+event with ``acknowledged`` false, and a warning), never taken for success.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import ezcompanion.wire  # noqa: F401  (sets the dialect before pymavlink is loaded)
+from ezcompanion.records import EventKind
+from ezcompanion.service.events import EventLog
+from ezcompanion.service.session import VehicleSession
+from ezcompanion.service.settings import OnExit
+from ezcompanion.wire import Message, is_fixed_wing, is_ground_vehicle, mavlink
+
+__all__ = ["ExitReport", "end_mode", "exit_choice", "leave_vehicle"]
+
+_RETRY_S = 0.5  # vehicle seconds between requests
+_TRIES = 4
+_CONFIRM_S = 2.5  # after the ack, wait this long for a heartbeat showing the mode (1 Hz)
+
+# mode names as pymavlink's tables spell them (PX4's LOITER is AUTO.LOITER, 0x03040000)
+_MODES = {
+    "ArduCopter": {OnExit.HOLD: "BRAKE", OnExit.LOITER: "LOITER", OnExit.RTL: "RTL"},
+    "ArduPlane": {OnExit.HOLD: "LOITER", OnExit.LOITER: "LOITER", OnExit.RTL: "RTL"},
+    "ArduRover": {OnExit.HOLD: "HOLD", OnExit.LOITER: "LOITER", OnExit.RTL: "RTL"},
+    "PX4": {OnExit.HOLD: "LOITER", OnExit.LOITER: "LOITER", OnExit.RTL: "RTL"},
+}
+_DEFAULTS = {"ArduCopter": OnExit.HOLD, "ArduPlane": OnExit.LOITER, "ArduRover": OnExit.HOLD,
+             "PX4": OnExit.HOLD}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class ExitReport:
+    """What became of the vehicle at the end."""
+
+    choice: OnExit  # resolved (never DEFAULT)
+    mode: str | None  # the mode asked for (None: nothing asked)
+    acknowledged: bool  # COMMAND_ACK accepted
+    confirmed: bool  # and a heartbeat reported the mode
+    detail: str
+
+    @property
+    def failed(self) -> bool:
+        """A mode was asked for and the vehicle did not take it (refused or silent)."""
+        return self.mode is not None and not (self.acknowledged and self.confirmed)
+
+
+def vehicle_class(heartbeat: Message) -> str:
+    """ArduCopter, ArduPlane, ArduRover or PX4, from a heartbeat."""
+    if heartbeat.autopilot == mavlink.MAV_AUTOPILOT_PX4:
+        return "PX4"
+    if is_fixed_wing(heartbeat):
+        return "ArduPlane"
+    if is_ground_vehicle(heartbeat):
+        return "ArduRover"
+    return "ArduCopter"
+
+
+def exit_choice(choice: OnExit, heartbeat: Message) -> OnExit:
+    """``choice`` with ``default`` resolved for the vehicle that sent ``heartbeat``."""
+    return _DEFAULTS[vehicle_class(heartbeat)] if choice is OnExit.DEFAULT else choice
+
+
+def end_mode(choice: OnExit, heartbeat: Message) -> tuple[str, float, float, float] | None:
+    """The mode ``choice`` stands for on this vehicle and the parameters of
+    MAV_CMD_DO_SET_MODE that ask for it, from pymavlink's tables; None for ``none``.
+
+    (Belongs beside ``ezcompanion.wire.guided_mode``: kept here while wire.py is split.)
+    """
+    from pymavlink import mavutil
+
+    resolved = exit_choice(choice, heartbeat)
+    if resolved is OnExit.NONE:
+        return None
+    kind = vehicle_class(heartbeat)
+    name = _MODES[kind][resolved]
+    if kind == "PX4":
+        base, main, sub = mavutil.px4_map[name]
+        return name, float(base), float(main), float(sub)
+    number = (mavutil.mode_mapping_byname(heartbeat.type) or {}).get(name)
+    if number is None:
+        return None
+    return name, float(mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED), float(number), 0.0
+
+
+def leave_vehicle(
+    choice: OnExit,
+    session: VehicleSession,
+    events: EventLog,
+    *,
+    now: Callable[[], float],
+    pump: Callable[[float], None],
+) -> ExitReport:
+    """Ask for the end mode and wait for its ack and a heartbeat showing it.
+
+    ``pump(timeout_s)`` waits up to ``timeout_s`` (vehicle time) for frames and feeds them to
+    ``session`` (and keeps the companion's heartbeat going)."""
+    heartbeat = session.heartbeat
+    if heartbeat is None or session.target is None:
+        return _report(events, now(), choice, None, detail="no vehicle: nothing to leave")
+    resolved = exit_choice(choice, heartbeat)
+    if resolved is OnExit.NONE:
+        return _report(events, now(), resolved, None, detail="none: nothing sent, the "
+                       "autopilot's own timeout decides what the vehicle does")  # fmt: skip
+    if not session.connected:
+        return _report(events, now(), resolved, None, warn=True,
+                       detail="link lost: the end mode cannot be asked for")  # fmt: skip
+    if not session.in_guided:
+        return _report(events, now(), resolved, None,
+                       detail=f"the vehicle is in {session.mode or 'an unknown mode'}, not "
+                       "following the companion: left as it is")  # fmt: skip
+    mode = end_mode(resolved, heartbeat)
+    if mode is None:
+        return _report(events, now(), resolved, None, warn=True,
+                       detail=f"{vehicle_class(heartbeat)} has no mode for {resolved.value}")
+    name, p1, p2, p3 = mode
+    command = int(mavlink.MAV_CMD_DO_SET_MODE)
+    started = now()
+    session.acks.pop(command, None)
+    ack: tuple[int, float] | None = None
+    for _ in range(_TRIES):
+        session.request_mode(p1, p2, p3)
+        until = now() + _RETRY_S
+        while (ack := session.acks.get(command)) is None and now() < until:
+            pump(until - now())
+        if ack is not None:
+            break
+    if ack is None:
+        return _report(events, now(), resolved, name, warn=True,
+                       detail=f"{name} asked {_TRIES} times, never acknowledged")
+    if ack[0] != mavlink.MAV_RESULT_ACCEPTED:
+        return _report(events, now(), resolved, name, warn=True,
+                       detail=f"{name} refused (result {ack[0]})")
+    until = now() + _CONFIRM_S
+    while session.mode != name and now() < until and session.connected:
+        pump(until - now())
+    if session.mode != name:
+        return _report(events, now(), resolved, name, acknowledged=True, warn=True,
+                       detail=f"{name} acknowledged but the vehicle reports {session.mode}")
+    took = now() - started
+    return _report(events, now(), resolved, name, acknowledged=True, confirmed=True,
+                   detail=f"vehicle in {name} {took:.2f} s after the end")
+
+
+def _report(
+    events: EventLog,
+    time_s: float,
+    choice: OnExit,
+    mode: str | None,
+    *,
+    detail: str,
+    acknowledged: bool = False,
+    confirmed: bool = False,
+    warn: bool = False,
+) -> ExitReport:
+    report = ExitReport(choice, mode, acknowledged, confirmed, detail)
+    events.emit(EventKind.ON_EXIT, time_s, f"{choice.value}: {'NOT APPLIED: ' if warn else ''}"
+                f"{detail}", on_exit=choice.value, mode=mode, acknowledged=acknowledged,
+                confirmed=confirmed, failed=warn)  # fmt: skip
+    return report

@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any
 from ezcompanion import __version__
 from ezcompanion.config import Scenario, scenario_to_dict, scenario_update
 from ezcompanion.errors import ConfigError
+from ezcompanion.field import VehiclePlacement, placement_warnings
 from ezcompanion.guidance import LawName
 from ezcompanion.records import EventKind, TickCommand
 from ezcompanion.service.autopilots import autopilot_profile
@@ -115,6 +116,7 @@ class CompanionService:
         self._next_deadline_s = 0.0
         self._last_tick_s = -math.inf
         self.exit_report: ExitReport | None = None  # where the vehicle was left (on_exit)
+        self.placement: VehiclePlacement | None = None  # frame: vehicle, latched at engage
 
     # --- views ----------------------------------------------------------------------------
 
@@ -315,7 +317,12 @@ class CompanionService:
                     profile = autopilot_profile(session.heartbeat)
                     self.loop.assume_response_lag(profile.response_lag_s)
             self.phase = Phase.WAITING
-        if self.phase is Phase.WAITING and session.in_guided and session.frame_settled:
+        if (
+            self.phase is Phase.WAITING
+            and session.in_guided
+            and session.frame_settled
+            and self._placed(now)
+        ):
             self.phase = Phase.GUIDING
             self._next_deadline_s = now
             session.telemetry.latch_origin()  # the frame is fixed for the engagement
@@ -324,6 +331,38 @@ class CompanionService:
         elif self.phase is Phase.GUIDING and not session.in_guided:
             self.engagement.pause(now, brake=True)
             self.phase = Phase.WAITING
+
+    def _placed(self, now: float) -> bool:
+        """``frame: vehicle``: the scenario is put on the vehicle as guidance engages, once
+        (then latched, as the origin is); False while no fresh position says where it is."""
+        if not self.scenario.frame.at_vehicle or self.placement is not None:
+            return True
+        stale_s = self.settings.stale_after_s
+        state = self.session.telemetry.snapshot(stale_s, now)
+        if state is None or state.age_s(now) > stale_s:
+            return False
+        course = state.course_rad(0.5 * self.scenario.start.speed_m_s)
+        self.placement = VehiclePlacement.at_engage(
+            self.scenario, north_m=state.north_m, east_m=state.east_m, course_rad=course
+        )
+        self.scenario = self.placement.place(self.scenario)
+        self.loop.update_scenario(self.scenario)
+        p = self.placement
+        self.events.emit(
+            EventKind.SCENARIO, now, f"placed at the vehicle ({p.vehicle_north_m:.2f}, "
+            f"{p.vehicle_east_m:.2f}) m, turned {math.degrees(p.turn_rad):+.1f} deg",
+            defenders=len(self.scenario.defenders),
+        )  # fmt: skip
+        problems = placement_warnings(self.scenario, course_rad=course)
+        for problem in problems:
+            self.events.emit(EventKind.WARNING, now, f"placed scenario: {problem}")
+        if problems and "starts inside" in problems[0]:  # no guarantee from there: refused
+            self.events.emit(EventKind.ABORTED, now, "the vehicle is inside a zone of the "
+                             "placed scenario: not guided", cause="placement")  # fmt: skip
+            self.engagement.done = True
+            self.phase = Phase.DONE
+            return False
+        return True
 
     def _check_distrust(self, now: float) -> None:
         """Out of GUIDED after guidance started (a forged mode change, say), distrust still
@@ -358,6 +397,8 @@ class CompanionService:
         scenario = self.scenario_inbox.take()
         if scenario is None:
             return
+        if self.placement is not None:  # in the file's frame: placed as the first one was
+            scenario = self.placement.zones(scenario)
         self.scenario = scenario
         self.loop.update_scenario(scenario)
         if self._publisher is not None:

@@ -84,6 +84,7 @@ class VehicleSession:
         self._send = send
         self.telemetry = TelemetryState(
             origin=scenario.origin,
+            adopt_origin=not scenario.origin_given,
             accel_bound_m_s2=settings.gate_accel_m_s2 or 2.0 * scenario.guidance.accel_max_m_s2,
             gate_position_m=settings.gate_position_m,
         )

@@ -291,7 +291,7 @@ def scenario_from_dict(data: object) -> Scenario:
         frame=place.frame,
     )
     if "scale" in top:
-        from ezcompanion.field import scale_scenario  # (it builds on this module)
+        from ezcompanion.field import scale_to_vehicle  # (it builds on this module)
 
         fixed = [
             path
@@ -305,8 +305,8 @@ def scenario_from_dict(data: object) -> Scenario:
                               "geometry to scale as north_m/east_m")  # fmt: skip
 
         spec = read_scale(top["scale"])
-        scenario = scale_scenario(
-            scenario, spec.factors(speed_m_s=start.speed_m_s, accel_max_m_s2=accel_max)
+        scenario = scale_to_vehicle(
+            scenario, speed_m_s=spec.speed_m_s, accel_max_m_s2=spec.accel_max_m_s2
         )
     return scenario
 

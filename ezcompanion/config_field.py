@@ -42,7 +42,7 @@ import pymap3d
 
 from ezcompanion.config_limits import POSITION_LIMIT_M, Bound, check_number
 from ezcompanion.errors import ConfigError
-from ezcompanion.guidance.scaling import ScaleFactors, accel_from_bank
+from ezcompanion.guidance.scaling import accel_from_bank
 
 __all__ = [
     "GEODETIC_KEYS",
@@ -125,15 +125,6 @@ class ScaleSpec:
 
     speed_m_s: float
     accel_max_m_s2: float
-
-    def factors(self, *, speed_m_s: float, accel_max_m_s2: float) -> ScaleFactors:
-        """From the file's vehicle (``speed_m_s``, ``accel_max_m_s2``) to this one."""
-        return ScaleFactors.between(
-            speed_m_s=speed_m_s,
-            accel_max_m_s2=accel_max_m_s2,
-            to_speed_m_s=self.speed_m_s,
-            to_accel_max_m_s2=self.accel_max_m_s2,
-        )
 
 
 _SPEED = Bound(0.0, 1000.0, low_open=True)

@@ -1,7 +1,8 @@
 """A scenario on a real field: scaled to the vehicle, placed where the vehicle is.
 
 - :func:`scale_scenario`: the geometry times L, the speed times L/T, every gain by its units
-  (``ezcompanion.guidance.scaling``), the simulation step and length times T. Used by the
+  (``ezcompanion.guidance.scaling``), the simulation step and length times T;
+  :func:`scale_to_vehicle` finds L and T for a vehicle's speed and bound. Used by the
   ``scale:`` key of a scenario file and by ``ezcompanion scale``.
 - :class:`VehiclePlacement`: for ``frame: vehicle`` (and ``vehicle_course``), the
   translation (and rotation) that puts the scenario's start on the vehicle at engage;
@@ -27,7 +28,7 @@ from ezcompanion.guidance.scaling import (
     scale_target,
 )
 
-__all__ = ["VehiclePlacement", "placement_warnings", "scale_scenario"]
+__all__ = ["VehiclePlacement", "placement_warnings", "scale_scenario", "scale_to_vehicle"]
 
 
 def scale_scenario(scenario: Scenario, factors: ScaleFactors) -> Scenario:
@@ -50,6 +51,24 @@ def scale_scenario(scenario: Scenario, factors: ScaleFactors) -> Scenario:
             dt_s=scenario.simulation.dt_s * time,
             duration_s=scenario.simulation.duration_s * time,
         ),
+    )
+
+
+def scale_to_vehicle(scenario: Scenario, *, speed_m_s: float, accel_max_m_s2: float) -> Scenario:
+    """``scenario`` scaled from its own vehicle to one of ``speed_m_s`` and lateral-
+    acceleration bound ``accel_max_m_s2``: L = (v^2/a) / (v0^2/a0), T = (v/a) / (v0/a0)
+    (:func:`scale_scenario`), with the speed and the bound set exactly as asked."""
+    factors = ScaleFactors.between(
+        speed_m_s=scenario.start.speed_m_s,
+        accel_max_m_s2=scenario.guidance.accel_max_m_s2,
+        to_speed_m_s=speed_m_s,
+        to_accel_max_m_s2=accel_max_m_s2,
+    )
+    scaled = scale_scenario(scenario, factors)
+    return dataclasses.replace(
+        scaled,
+        start=dataclasses.replace(scaled.start, speed_m_s=speed_m_s),
+        guidance=dataclasses.replace(scaled.guidance, accel_max_m_s2=accel_max_m_s2),
     )
 
 

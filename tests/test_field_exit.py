@@ -49,7 +49,7 @@ def test_sigint_leaves_the_copter_braking_and_exits_130(tmp_path: Path) -> None:
         with stub_process(CONFIG / "paper_scenario1.yaml", port, tmp_path / "truth.csv",
                           "--initial-mode", "GUIDED"):  # fmt: skip
             wait_for_line(companion.stdout, "engaged:")
-            wait_for_line(companion.stdout, "setpoints")  # any line after: guiding a while
+            wait_for_line(companion.stdout, "following velocity")  # the stub follows it
             companion.send_signal(signal.SIGINT)
             out, err = companion.communicate(timeout=30)
     finally:
@@ -70,7 +70,7 @@ def test_after_an_intercept_the_vehicle_reports_the_chosen_mode(
     profile: str, start_mode: str, on_exit: str | None, mode_number: int, tmp_path: Path
 ) -> None:
     flight = fly(CONFIG / "paper_scenario1.yaml", tmp_path, profile=profile,
-                 start_mode=start_mode, on_exit=on_exit)  # fmt: skip
+                 start_mode=start_mode, on_exit=on_exit, max_time_s=60.0)  # fmt: skip
     assert flight.outcome.intercepted
     report = flight.service.exit_report
     assert report is not None and report.acknowledged and report.confirmed, report

@@ -32,7 +32,6 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-import ezcompanion.wire  # noqa: F401  (sets the dialect before pymavlink is loaded)
 from ezcompanion.records import EventKind
 from ezcompanion.service.events import EventLog
 from ezcompanion.service.session import VehicleSession
@@ -94,7 +93,7 @@ def end_mode(choice: OnExit, heartbeat: Message) -> tuple[str, float, float, flo
 
     (Belongs beside ``ezcompanion.wire.guided_mode``: kept here while wire.py is split.)
     """
-    from pymavlink import mavutil
+    from pymavlink import mavutil  # ezcompanion.wire, imported above, has set the dialect
 
     resolved = exit_choice(choice, heartbeat)
     if resolved is OnExit.NONE:

@@ -17,6 +17,8 @@ from test_service_loopback import CONFIG, SPEEDUP, fly, stub_process
 from ezcompanion.cli import main
 from ezcompanion.records import EventKind
 from ezcompanion.service.demo import free_udp_port, wait_for_line
+from ezcompanion.service.ending import end_mode
+from ezcompanion.service.settings import OnExit
 from sitl_stub.profiles import px4_custom_mode
 
 M = mavutil.mavlink
@@ -123,3 +125,27 @@ def test_every_other_end_has_its_own_code(
     assert main(["run", "--config", config, "--connect", f"udpin:127.0.0.1:{port}",
                  "--speedup", "10", "--max-time", "3", "--no-telemetry"]) == 3  # fmt: skip
     assert "no vehicle heard" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("mav_type", "autopilot", "choice", "expected"),
+    [
+        (M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA, "default", ("BRAKE", 1, 17, 0)),
+        (M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA, "loiter", ("LOITER", 1, 5, 0)),
+        (M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA, "rtl", ("RTL", 1, 6, 0)),
+        (M.MAV_TYPE_FIXED_WING, M.MAV_AUTOPILOT_ARDUPILOTMEGA, "default", ("LOITER", 1, 12, 0)),
+        (M.MAV_TYPE_FIXED_WING, M.MAV_AUTOPILOT_ARDUPILOTMEGA, "hold", ("LOITER", 1, 12, 0)),
+        (M.MAV_TYPE_GROUND_ROVER, M.MAV_AUTOPILOT_ARDUPILOTMEGA, "default", ("HOLD", 1, 4, 0)),
+        (M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_PX4, "default", ("LOITER", 29, 4, 3)),
+        (M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_PX4, "rtl", ("RTL", 29, 4, 5)),
+        (M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_PX4, "none", None),
+    ],
+)
+def test_each_vehicle_class_has_its_end_mode(
+    mav_type: int, autopilot: int, choice: str, expected: tuple[str, int, int, int] | None
+) -> None:
+    """The DO_SET_MODE parameters of each end mode: ArduPilot's custom mode numbers (Copter
+    BRAKE 17, LOITER 5, RTL 6; Plane LOITER 12; Rover HOLD 4), PX4's main/sub modes
+    (AUTO = 4; LOITER sub mode 3, RTL 5), from pymavlink's tables."""
+    heartbeat = M.MAVLink_heartbeat_message(mav_type, autopilot, 0, 0, 0, 3)
+    assert end_mode(OnExit(choice), heartbeat) == expected

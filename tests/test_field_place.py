@@ -151,3 +151,54 @@ def test_a_misplaced_scenario_is_one_line_naming_the_field(
     assert main(["simulate", str(write(tmp_path, "bad.yaml", data))]) == 2
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"ezcompanion: error: {message}")
+
+
+def test_no_origin_means_the_vehicles_own_and_it_is_latched_at_engage() -> None:
+    """A scenario without origin: its frame is the vehicle's EKF origin. Global positions
+    wait for it; the first origin told is taken (not ArduPilot's default home), a moved one
+    before engage is taken again, a moved one after engage is refused with an alarm."""
+    from ezcompanion.config import GeoOrigin
+    from ezcompanion.records import Hold
+    from ezcompanion.service.state import TelemetryState
+    from ezcompanion.wire import deg_to_e7, m_to_mm, mavlink, ned_to_geodetic
+
+    def origin(lat: float, lon: float) -> object:
+        return mavlink.MAVLink_gps_global_origin_message(
+            deg_to_e7(lat), deg_to_e7(lon), m_to_mm(FIELD[2]), 0)  # fmt: skip
+
+    def global_at(boot_ms: int, north: float, east: float) -> object:
+        lat, lon, alt = ned_to_geodetic(north, east, -20.0, origin_lat_deg=FIELD[0],
+                                        origin_lon_deg=FIELD[1], origin_alt_m=FIELD[2])  # fmt: skip
+        return mavlink.MAVLink_global_position_int_message(
+            boot_ms, deg_to_e7(lat), deg_to_e7(lon), m_to_mm(alt), 20000, 0, 0, 0, 0)  # fmt: skip
+
+    assert not load_scenario(CONFIG / "paper_scenario1.yaml").origin_given
+    t = TelemetryState(origin=GeoOrigin(), adopt_origin=True)  # GeoOrigin(): Canberra
+    assert t.update(global_at(1000, 5.0, 3.0), 1.0) is None  # no frame yet: waits
+    assert t.update(origin(FIELD[0], FIELD[1]), 1.1) == "GPS_GLOBAL_ORIGIN"
+    assert t.origin.lat_deg == pytest.approx(FIELD[0], abs=1e-7)
+    assert t.update(global_at(1100, 5.0, 3.0), 1.2) == "GLOBAL_POSITION_INT"
+    state = t.snapshot(0.25, 1.2)
+    assert state is not None
+    assert (state.north_m, state.east_m) == pytest.approx((5.0, 3.0), abs=0.02)
+    moved = FIELD[1] + 2.0 / 75_000.0  # about 2 m east
+    assert t.update(origin(FIELD[0], moved), 1.3) == "GPS_GLOBAL_ORIGIN"  # before engage
+    assert t.origin.lon_deg == pytest.approx(moved, abs=1e-7) and t.alarm is None
+    t.latch_origin()
+    assert t.update(origin(FIELD[0], moved), 1.4) == "GPS_GLOBAL_ORIGIN"  # the same: fine
+    assert t.update(origin(FIELD[0], FIELD[1]), 1.5) is None  # moved after engage
+    assert t.alarm is Hold.ORIGIN and t.origin.lon_deg == pytest.approx(moved, abs=1e-7)
+
+
+def test_a_placed_start_inside_a_zone_is_named() -> None:
+    """Placed on a vehicle whose course at engage points into a zone, the start is named as
+    inside it (the service then refuses to guide: aborted, cause placement)."""
+    from ezcompanion.field import placement_warnings
+
+    scenario = load_scenario(CONFIG / "paper_scenario1.yaml")
+    assert placement_warnings(scenario, course_rad=scenario.start.course_rad) == ()
+    d = scenario.defenders[0]
+    near = dataclasses.replace(scenario, start=dataclasses.replace(
+        scenario.start, north_m=d.north_m, east_m=d.east_m - 1.0))  # fmt: skip
+    (problem,) = placement_warnings(near, course_rad=math.pi / 2)  # 1 m off, straight at D1
+    assert "starts inside the engagement zone of D1" in problem

@@ -20,11 +20,13 @@ BRAKE, not LOITER, is the copter's hold: ArduCopter's LOITER reads the throttle 
 climb rate, so with no RC (or the stick low) it descends; BRAKE holds position and
 altitude whatever the sticks say.
 
-The mode is asked for only while the vehicle is in its guided mode (GUIDED, OFFBOARD) and
-the link is up: a vehicle a pilot (or a failsafe) has already taken elsewhere is left
-there. The request (MAV_CMD_DO_SET_MODE) is repeated every ``_RETRY_S`` until it is
-acknowledged, at most ``_TRIES`` times; a refusal or no answer is reported (an ``on_exit``
-event with ``acknowledged`` false, and a warning), never taken for success.
+The mode is asked for only while the vehicle is in its guided mode (GUIDED, OFFBOARD), the
+link is up and one vehicle alone was heard (never after a ``vehicle_refused``): a vehicle
+a pilot (or a failsafe) has already taken elsewhere is left there. The request
+(MAV_CMD_DO_SET_MODE) is repeated every ``_RETRY_S`` until it is acknowledged, at most
+``_TRIES`` times, and then the vehicle must report the mode in a heartbeat within
+``_CONFIRM_S``; a refusal, no answer or another mode is reported (an ``on_exit`` event with
+``failed`` true, and a warning on stderr from ``ezcompanion run``), never taken for success.
 """
 
 from __future__ import annotations
@@ -128,6 +130,9 @@ def leave_vehicle(
     if resolved is OnExit.NONE:
         return _report(events, now(), resolved, None, detail="none: nothing sent, the "
                        "autopilot's own timeout decides what the vehicle does")  # fmt: skip
+    if session.refused:
+        return _report(events, now(), resolved, None, warn=True,
+                       detail="several autopilots heard: none is asked for anything")  # fmt: skip
     if not session.connected:
         return _report(events, now(), resolved, None, warn=True,
                        detail="link lost: the end mode cannot be asked for")  # fmt: skip

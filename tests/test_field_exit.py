@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
+import yaml
 from pymavlink import mavutil
 from test_service_loopback import CONFIG, SPEEDUP, fly, stub_process
 
@@ -91,17 +92,20 @@ def test_a_refused_end_mode_is_reported_and_a_miss_exits_1(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     port = free_udp_port()
-    config = CONFIG / "paper_scenario1.yaml"
+    data = yaml.safe_load((CONFIG / "paper_scenario1.yaml").read_text())
+    data["vehicle"]["north_m"] = 60.0  # a minute from the target: not intercepted in 15 s
+    config = tmp_path / "far.yaml"
+    config.write_text(yaml.safe_dump(data))
     with stub_process(config, port, tmp_path / "truth.csv", "--initial-mode", "GUIDED"):
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:  # the stub is up
             sock.bind(("127.0.0.1", port))
             sock.settimeout(30.0)
             sock.recv(1024)
         code = main(["run", "--config", str(config), "--connect", f"udpin:127.0.0.1:{port}",
-                     "--engage", "--speedup", f"{SPEEDUP:g}", "--max-time", "4",
+                     "--engage", "--speedup", f"{SPEEDUP:g}", "--max-time", "15",
                      "--on-exit", "rtl", "--no-telemetry"])  # fmt: skip
     captured = capsys.readouterr()
-    assert code == 1  # ran, not intercepted in 4 s
+    assert code == 1  # ran, not intercepted in 15 s
     # the loopback copter has no RTL: it answers MAV_RESULT_FAILED, which is said, not hidden
     assert "on_exit: rtl: NOT APPLIED: RTL refused (result 4)" in captured.out
     assert "ezcompanion: warning: on_exit rtl: RTL refused (result 4)" in captured.err

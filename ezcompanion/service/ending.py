@@ -66,11 +66,7 @@ class ExitReport:
     acknowledged: bool  # COMMAND_ACK accepted
     confirmed: bool  # and a heartbeat reported the mode
     detail: str
-
-    @property
-    def failed(self) -> bool:
-        """A mode was asked for and the vehicle did not take it (refused or silent)."""
-        return self.mode is not None and not (self.acknowledged and self.confirmed)
+    failed: bool  # an end mode was wanted and the vehicle is not known to be in it
 
 
 def vehicle_class(heartbeat: Message) -> str:
@@ -184,7 +180,7 @@ def _report(
     confirmed: bool = False,
     warn: bool = False,
 ) -> ExitReport:
-    report = ExitReport(choice, mode, acknowledged, confirmed, detail)
+    report = ExitReport(choice, mode, acknowledged, confirmed, detail, failed=warn)
     events.emit(EventKind.ON_EXIT, time_s, f"{choice.value}: {'NOT APPLIED: ' if warn else ''}"
                 f"{detail}", on_exit=choice.value, mode=mode, acknowledged=acknowledged,
                 confirmed=confirmed, failed=warn)  # fmt: skip

@@ -1,6 +1,7 @@
 """Every ``ezcompanion`` command in docs/field.md, run: the scale and simulate commands as
 written (in a scratch directory), the ``run`` command against the loopback vehicle over
-real UDP with its ``--connect`` pointed there. The run is the latitude/longitude scenario
+real UDP with its ``--connect`` pointed there (and its file's telemetry at 20 Hz, as every
+loopback test runs on this shared machine). The run is the latitude/longitude scenario
 flown end to end: intercepted with true clearance > 0, then left in the mode of its
 ``--on-exit`` (LOITER, overriding the file's ``hold``), as the vehicle's heartbeats say."""
 
@@ -12,6 +13,7 @@ import socket
 from pathlib import Path
 
 import pytest
+import yaml
 from test_field_exit import LOITER, vehicle_modes
 from test_service_loopback import SPEEDUP, stub_process
 
@@ -70,7 +72,13 @@ def test_the_run_command_flies_the_field_scenario_and_leaves_it_loitering(
     tlog = tmp_path / "companion.tlog"
     args += ["--speedup", f"{SPEEDUP:g}", "--no-telemetry", "--max-time", "60", "--tlog",
              str(tlog)]  # fmt: skip
-    config = ROOT / args[args.index("--config") + 1]
+    # the file as the doc gives it, with the rates the loopback tests use on a shared machine
+    at = args.index("--config") + 1
+    data = yaml.safe_load((ROOT / args[at]).read_text())
+    data["companion"].update(telemetry_rate_hz=20.0, loop_rate_hz=20.0)
+    config = tmp_path / Path(args[at]).name
+    config.write_text(yaml.safe_dump(data))
+    args[at] = str(config)
     with stub_process(config, port, tmp_path / "truth.csv", "--initial-mode", "GUIDED"):
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:  # the stub is up
             sock.bind(("127.0.0.1", port))

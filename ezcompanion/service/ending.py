@@ -20,9 +20,10 @@ BRAKE, not LOITER, is the copter's hold: ArduCopter's LOITER reads the throttle 
 climb rate, so with no RC (or the stick low) it descends; BRAKE holds position and
 altitude whatever the sticks say.
 
-The mode is asked for only while the vehicle is in its guided mode (GUIDED, OFFBOARD), the
-link is up and one vehicle alone was heard (never after a ``vehicle_refused``): a vehicle
-a pilot (or a failsafe) has already taken elsewhere is left there. The request
+The mode is asked for only of a vehicle the companion has sent setpoints to, while it is
+still in its guided mode (GUIDED, OFFBOARD), the link is up and one vehicle alone was heard
+(never after a ``vehicle_refused``): a vehicle a pilot (or a failsafe) has already taken
+elsewhere is left there. The request
 (MAV_CMD_DO_SET_MODE) is repeated every ``_RETRY_S`` until it is acknowledged, at most
 ``_TRIES`` times, and then the vehicle must report the mode in a heartbeat within
 ``_CONFIRM_S``; a refusal, no answer or another mode is reported (an ``on_exit`` event with
@@ -42,9 +43,9 @@ from ezcompanion.wire import Message, is_fixed_wing, is_ground_vehicle, mavlink
 
 __all__ = ["ExitReport", "end_mode", "exit_choice", "leave_vehicle"]
 
-_RETRY_S = 0.5  # vehicle seconds between requests
+_RETRY_S = 1.0  # vehicle seconds between requests (an autopilot acks within 0.1 s)
 _TRIES = 4
-_CONFIRM_S = 2.5  # after the ack, wait this long for a heartbeat showing the mode (1 Hz)
+_CONFIRM_S = 3.0  # after the ack, wait this long for a heartbeat showing the mode (1 Hz)
 
 # mode names as pymavlink's tables spell them (PX4's LOITER is AUTO.LOITER, 0x03040000)
 _MODES = {
@@ -112,13 +113,16 @@ def leave_vehicle(
     session: VehicleSession,
     events: EventLog,
     *,
+    commanded: bool,
     now: Callable[[], float],
     pump: Callable[[float], None],
 ) -> ExitReport:
     """Ask for the end mode and wait for its ack and a heartbeat showing it.
 
-    ``pump(timeout_s)`` waits up to ``timeout_s`` (vehicle time) for frames and feeds them to
-    ``session`` (and keeps the companion's heartbeat going)."""
+    ``commanded``: the companion sent the vehicle something to fly (else it is not flying
+    the companion's setpoint, and is left alone). ``pump(timeout_s)`` waits up to
+    ``timeout_s`` (vehicle time) for frames and feeds them to ``session`` (and keeps the
+    companion's heartbeat going)."""
     heartbeat = session.heartbeat
     if heartbeat is None or session.target is None:
         return _report(events, now(), choice, None, detail="no vehicle: nothing to leave")
@@ -129,6 +133,9 @@ def leave_vehicle(
     if session.refused:
         return _report(events, now(), resolved, None, warn=True,
                        detail="several autopilots heard: none is asked for anything")  # fmt: skip
+    if not commanded:
+        return _report(events, now(), resolved, None,
+                       detail="no setpoint was sent to the vehicle: left as it is")
     if not session.connected:
         return _report(events, now(), resolved, None, warn=True,
                        detail="link lost: the end mode cannot be asked for")  # fmt: skip
@@ -146,6 +153,10 @@ def leave_vehicle(
     session.acks.pop(command, None)
     ack: tuple[int, float] | None = None
     for _ in range(_TRIES):
+        if session.refused or not session.connected:  # learnt while waiting
+            return _report(events, now(), resolved, None, warn=True,
+                           detail="the vehicle was lost or refused while asking for the end "
+                           "mode")  # fmt: skip
         session.request_mode(p1, p2, p3)
         until = now() + _RETRY_S
         while (ack := session.acks.get(command)) is None and now() < until:

@@ -269,9 +269,11 @@ class CompanionService:
                 self._tick(now)
         self.phase = Phase.DONE
         self.engagement.finish(clock.now_s())
+        commanded = self.engagement.setpoints_sent + self.engagement.brakes_sent > 0
         self.exit_report = leave_vehicle(  # a defined end: the mode of on_exit (ending.py)
-            self.settings.on_exit, session, self.events, now=clock.now_s, pump=self._pump
-        )
+            self.settings.on_exit, session, self.events, commanded=commanded,
+            now=clock.now_s, pump=self._pump,
+        )  # fmt: skip
 
     def _pump(self, timeout_s: float) -> None:
         """Frames in and heartbeats out while the service ends (the phase is done: no

@@ -44,6 +44,7 @@ __all__ = [
     "output_directory",
     "run_demo",
     "run_reference_demo",
+    "run_scale",
     "run_service",
     "run_simulate",
 ]
@@ -126,6 +127,8 @@ def run_service(
 ) -> int:
     """Steer a vehicle through one engagement. 0 if intercepted; 1 if it ended otherwise;
     3 if no vehicle was heard or the link was lost at the end; 130 if stopped by a signal.
+    Whatever the end, the vehicle is then left in the mode of ``on_exit`` (a warning on
+    stderr if it did not take it; ``ezcompanion.service.ending``).
 
     ``connect`` (an override, or the scenario's ``companion.connect``) may be written in
     MAVProxy's or MAVSDK's form; it is checked and passed on as pymavlink's string.
@@ -168,6 +171,10 @@ def run_service(
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+    report = service.exit_report
+    if report is not None and report.failed:
+        print(f"ezcompanion: warning: on_exit {report.choice.value}: {report.detail}",
+              file=sys.stderr)  # fmt: skip
     if outcome.intercepted:
         return ExitCode.OK
     if signalled:
@@ -181,6 +188,62 @@ def run_service(
             "connect", settings.connect, f"link to the vehicle lost at {lost[-1].time_s:.1f} s"
         )
     return ExitCode.FAILED
+
+
+def run_scale(
+    config: Path,
+    *,
+    speed_m_s: float,
+    accel_max_m_s2: float | None,
+    bank_deg: float | None,
+    out: Path,
+) -> int:
+    """Write ``config`` scaled to a vehicle of ``speed_m_s`` and lateral-acceleration bound
+    ``accel_max_m_s2`` (or g tan(``bank_deg``)) to ``out``: lengths times L = v^2 / a_max,
+    times times T = v / a_max (relative to the file's vehicle), every gain by its units."""
+    import yaml
+
+    from ezcompanion.config import load_scenario, scenario_from_dict, scenario_to_dict
+    from ezcompanion.config_yaml import read_yaml_file
+    from ezcompanion.errors import ConfigError
+    from ezcompanion.guidance.scaling import ScaleFactors
+
+    raw = read_yaml_file(config)
+    if isinstance(raw, dict) and "scale" in raw:
+        raise ConfigError("scale", raw["scale"], f"{config} is scaled already (its scale: key); "
+                          "scale the file it scales")  # fmt: skip
+    source = load_scenario(config)
+    wanted: dict[str, float] = {"speed_m_s": speed_m_s}
+    if bank_deg is not None:
+        wanted["bank_deg"] = bank_deg
+    else:
+        assert accel_max_m_s2 is not None
+        wanted["accel_max_m_s2"] = accel_max_m_s2
+    scaled = scenario_from_dict({**raw, "scale": wanted})  # the scale: key's own path
+    factors = ScaleFactors.between(
+        speed_m_s=source.start.speed_m_s,
+        accel_max_m_s2=source.guidance.accel_max_m_s2,
+        to_speed_m_s=scaled.start.speed_m_s,
+        to_accel_max_m_s2=scaled.guidance.accel_max_m_s2,
+    )
+    length, time = factors.length, factors.time
+    data = scenario_to_dict(scaled)
+    data.update({key: raw[key] for key in scaled.sections})  # the component sections, as given
+    header = (
+        f"# {source.name} ({config.name}) scaled by `ezcompanion scale` to {speed_m_s:g} m/s "
+        f"and a_max {scaled.guidance.accel_max_m_s2:.6g} m/s^2:\n"
+        f"# lengths x L = {length:.6g}, times x T = {time:.6g}, every gain by its units\n"
+    )
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(header + yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    g = scaled.guidance
+    print(f"{source.name}: L = {length:.6g} (lengths), T = {time:.6g} (times); "
+          f"speed {scaled.start.speed_m_s:g} m/s, a_max {g.accel_max_m_s2:.6g} m/s^2, "
+          f"margin {g.margin_m:.4g} m, intercept radius {g.intercept_radius_m:.4g} m, "
+          f"K_s {g.k_safety_1_s:.4g} 1/s, K_T {g.k_intercept_1_s:.4g} 1/s, "
+          f"K_a {g.k_track_m_s3:.4g} m/s^3")  # fmt: skip
+    print(f"  wrote {out}")
+    return ExitCode.OK
 
 
 def run_demo(*, scenarios: Sequence[int], out_dir: Path, speedup: float, profile: str) -> int:
@@ -275,6 +338,14 @@ def _parser() -> argparse.ArgumentParser:
         help="ask the vehicle for GUIDED/OFFBOARD (never arms)",
     )
     run.add_argument(
+        "--on-exit",
+        choices=["default", "hold", "loiter", "rtl", "none"],
+        help="the mode the vehicle is left in when the companion stops (intercepted, missed, "
+        "aborted, SIGINT/SIGTERM), if it is still in GUIDED/OFFBOARD: hold (copter BRAKE, "
+        "plane LOITER, PX4 AUTO.LOITER), loiter, rtl, none (send nothing), default (hold; "
+        "loiter for a plane). See docs/field.md",
+    )
+    run.add_argument(
         "--setpoint",
         choices=["auto", "velocity", "course"],
         help="how the acceleration reaches the autopilot: velocity (copter, PX4), course "
@@ -307,6 +378,25 @@ def _parser() -> argparse.ArgumentParser:
         dest="telemetry_enabled",
         help="do not publish over zenoh",
     )
+
+    scale = commands.add_parser(
+        "scale", help="scale a scenario to a vehicle's speed and lateral-acceleration bound"
+    )
+    scale.add_argument("config", type=Path, help="scenario YAML file (north_m/east_m geometry)")
+    scale.add_argument(
+        "--speed-m-s", type=number_within(0.0, 1000.0, unit=" m/s"), required=True,
+        help="the vehicle's speed (m/s)",
+    )  # fmt: skip
+    bound = scale.add_mutually_exclusive_group(required=True)
+    bound.add_argument(
+        "--accel-max-m-s2", type=number_within(0.0, 1000.0, unit=" m/s^2"),
+        help="its lateral-acceleration bound (m/s^2)",
+    )  # fmt: skip
+    bound.add_argument(
+        "--bank-deg", type=number_within(0.0, 80.0, unit=" deg"),
+        help="or its bank-angle limit: a_max = g tan(bank)",
+    )  # fmt: skip
+    scale.add_argument("--out", type=Path, required=True, help="the scaled scenario file")
 
     demo = commands.add_parser("demo", help="fly the paper's scenarios on the loopback vehicle")
     demo.add_argument("--scenario", type=int, choices=sorted(PAPER_SCENARIOS), help="just one")
@@ -369,6 +459,7 @@ def _dispatch(args: argparse.Namespace) -> int:
             track_csv=args.track,
             connect=args.connect,
             engage=args.engage,
+            on_exit=args.on_exit,
             setpoint=args.setpoint,
             signing_key_file=str(args.signing_key_file) if args.signing_key_file else None,
             tlog=str(args.tlog) if args.tlog else None,
@@ -379,6 +470,14 @@ def _dispatch(args: argparse.Namespace) -> int:
                 "vehicle_id": args.vehicle_id,
                 "enabled": args.telemetry_enabled,
             },
+        )
+    if args.command == "scale":
+        return run_scale(
+            args.config,
+            speed_m_s=args.speed_m_s,
+            accel_max_m_s2=args.accel_max_m_s2,
+            bank_deg=args.bank_deg,
+            out=args.out,
         )
     scenarios = [args.scenario] if args.scenario else sorted(PAPER_SCENARIOS)
     out_dir = output_directory(args.out, Path("demo-out"))

@@ -16,17 +16,24 @@ what is odd but still meaningful (a capture radius larger than the range, say).
 Layout (see ``config/paper_scenario1.yaml`` for a commented example)::
 
     name: str
-    law: paper | robust                  # optional, default robust
+    law: paper | robust | backup         # optional, default backup
     vehicle: {north_m, east_m, speed_m_s, accel_max_m_s2,
               course_deg | course_from_los_deg}
     target: {north_m, east_m}
     defenders: [{name?, north_m, east_m, range_m, capture_radius_m, speed_ratio}, ...]
     guidance: {any GuidanceParams field except accel_max_m_s2}   # optional
     simulation: {dt_s, duration_s}                               # optional
-    origin: {lat_deg, lon_deg, alt_m}    # optional: where local NED (0, 0) is on Earth
+    origin: {lat_deg, lon_deg, alt_m}    # optional: where local NED (0, 0) is on Earth;
+                                         # none: the vehicle's EKF origin
+    frame: local | vehicle | vehicle_course              # optional, default local
+    scale: {speed_m_s, accel_max_m_s2 | bank_deg}        # optional: scale to this vehicle
     sitl_stub: {...}                     # optional: validated by sitl_stub, kept raw here
     companion: {...}                     # optional: validated by ezcompanion.service
     telemetry: {...}                     # optional: validated by ezcompanion.telemetry
+
+Any position (vehicle, target, defender) may be given as ``lat_deg, lon_deg`` instead of
+``north_m, east_m``; it then needs ``origin:``. ``frame`` and ``scale``: see
+``ezcompanion.config_field``.
 """
 
 from __future__ import annotations
@@ -39,6 +46,7 @@ from pathlib import Path
 from typing import Any
 
 from ezcompanion import config_checks
+from ezcompanion.config_field import ScenarioFrame, local_position, read_frame, read_scale
 from ezcompanion.config_limits import (
     ACCEL_LIMIT_M_S2,
     ANGLE,
@@ -65,6 +73,7 @@ __all__ = [
     "COMPONENT_SECTIONS",
     "GeoOrigin",
     "Scenario",
+    "ScenarioFrame",
     "SimulationSettings",
     "VehicleStart",
     "build_dataclass",
@@ -151,6 +160,10 @@ class Scenario:
     simulation: SimulationSettings = field(default_factory=SimulationSettings)
     origin: GeoOrigin = field(default_factory=GeoOrigin)
     sections: Mapping[str, Any] = field(default_factory=dict)
+    # ``origin`` was given: else the local frame is the vehicle's EKF origin, and ``origin``
+    # only places the loopback vehicle (ArduPilot SITL's default home)
+    origin_given: bool = False
+    frame: ScenarioFrame = ScenarioFrame.LOCAL
 
     def zones(self) -> ZoneSet:
         """The defenders as the law's vectorised zone set."""
@@ -183,19 +196,27 @@ def scenario_from_dict(data: object) -> Scenario:
         "",
         top,
         required={"name", "vehicle", "target", "defenders"},
-        optional={"law", "guidance", "simulation", "origin", *COMPONENT_SECTIONS},
-    )
+        optional={"law", "guidance", "simulation", "origin", "frame", "scale",
+                  *COMPONENT_SECTIONS},
+    )  # fmt: skip
     name = _name(top["name"])
+    origin = build_dataclass(
+        "origin",
+        GeoOrigin,
+        _mapping("origin", top.get("origin", {})),
+        limits=GUIDANCE_LIMITS["GeoOrigin"],
+    )
+    place = _Place(origin if "origin" in top else None, read_frame(top.get("frame", "local")))
 
-    vehicle = _mapping("vehicle", top["vehicle"])
+    vehicle = place.local("vehicle", _mapping("vehicle", top["vehicle"]))
     _only(
         "vehicle",
         vehicle,
         required={"north_m", "east_m", "speed_m_s", "accel_max_m_s2"},
         optional={"course_deg", "course_from_los_deg"},
     )
-    target = _target(top["target"])
-    defenders = _defenders(top["defenders"])
+    target = _target(top["target"], place)
+    defenders = _defenders(top["defenders"], place)
 
     start_n = check_number("vehicle.north_m", vehicle["north_m"], POSITION)
     start_e = check_number("vehicle.east_m", vehicle["east_m"], POSITION)
@@ -250,19 +271,13 @@ def scenario_from_dict(data: object) -> Scenario:
         _mapping("simulation", top.get("simulation", {})),
         limits=GUIDANCE_LIMITS["SimulationSettings"],
     )
-    origin = build_dataclass(
-        "origin",
-        GeoOrigin,
-        _mapping("origin", top.get("origin", {})),
-        limits=GUIDANCE_LIMITS["GeoOrigin"],
-    )
     config_checks.check_target(defenders, target, guidance)
     config_checks.check_start(
         defenders, target, guidance, north_m=start_n, east_m=start_e, course_rad=course_rad
     )
     law = _enum("law", LawName, top.get("law", LawName.BACKUP.value))
     sections = {key: _mapping(key, top[key]) for key in COMPONENT_SECTIONS if key in top}
-    return Scenario(
+    scenario = Scenario(
         name=name,
         defenders=defenders,
         target=target,
@@ -272,7 +287,43 @@ def scenario_from_dict(data: object) -> Scenario:
         simulation=simulation,
         origin=origin,
         sections=sections,
+        origin_given=place.origin is not None,
+        frame=place.frame,
     )
+    if "scale" in top:
+        from ezcompanion.field import scale_to_vehicle  # (it builds on this module)
+
+        fixed = [
+            path
+            for path, item in (("vehicle", top["vehicle"]), ("target", top["target"]),
+                               *((f"defenders[{i}]", d) for i, d in enumerate(top["defenders"])))
+            if isinstance(item, Mapping) and "lat_deg" in item
+        ]  # fmt: skip
+        if fixed:
+            raise ConfigError("scale", top["scale"], f"scales positions about the origin, but "
+                              f"{fixed[0]} is fixed on the ground (lat_deg/lon_deg): give the "
+                              "geometry to scale as north_m/east_m")  # fmt: skip
+
+        spec = read_scale(top["scale"])
+        scenario = scale_to_vehicle(
+            scenario, speed_m_s=spec.speed_m_s, accel_max_m_s2=spec.accel_max_m_s2
+        )
+    return scenario
+
+
+@dataclass(frozen=True)
+class _Place:
+    """Where the file's positions are: its origin (None: not given) and its frame."""
+
+    origin: GeoOrigin | None
+    frame: ScenarioFrame
+
+    def local(self, path: str, data: Mapping[str, Any]) -> dict[str, Any]:
+        o = self.origin
+        return local_position(
+            path, data, origin=None if o is None else (o.lat_deg, o.lon_deg, o.alt_m),
+            frame=self.frame,
+        )  # fmt: skip
 
 
 def scenario_to_dict(scenario: Scenario) -> dict[str, Any]:
@@ -299,7 +350,8 @@ def scenario_to_dict(scenario: Scenario) -> dict[str, Any]:
         "defenders": [dataclasses.asdict(d) for d in scenario.defenders],
         "guidance": guidance,
         "simulation": dataclasses.asdict(scenario.simulation),
-        "origin": dataclasses.asdict(scenario.origin),
+        "frame": scenario.frame.value,
+        **({"origin": dataclasses.asdict(scenario.origin)} if scenario.origin_given else {}),
     }
 
 
@@ -316,8 +368,9 @@ def scenario_update(current: Scenario, data: object) -> Scenario:
         defenders, target, name = whole.defenders, whole.target, whole.name
     else:
         _only("", top, required={"defenders", "target"}, optional={"name"})
-        defenders = _defenders(top["defenders"])
-        target = _target(top["target"])
+        place = _Place(current.origin if current.origin_given else None, current.frame)
+        defenders = _defenders(top["defenders"], place)
+        target = _target(top["target"], place)
         name = _name(top.get("name", current.name))
         config_checks.check_target(defenders, target, current.guidance)
     return dataclasses.replace(current, name=name, defenders=defenders, target=target)
@@ -330,14 +383,17 @@ def _name(value: object) -> str:
     return value
 
 
-def _target(value: object) -> Target:
+def _target(value: object, place: _Place) -> Target:
     target: Target = build_dataclass(
-        "target", Target, _mapping("target", value), limits=GUIDANCE_LIMITS["Target"]
+        "target",
+        Target,
+        place.local("target", _mapping("target", value)),
+        limits=GUIDANCE_LIMITS["Target"],
     )
     return target
 
 
-def _defenders(value: object) -> tuple[Defender, ...]:
+def _defenders(value: object, place: _Place) -> tuple[Defender, ...]:
     if not isinstance(value, list) or not value:
         raise ConfigError("defenders", value, "must be a non-empty list")
     if len(value) > config_checks.MAX_ZONES:
@@ -349,7 +405,7 @@ def _defenders(value: object) -> tuple[Defender, ...]:
         build_dataclass(
             f"defenders[{i}]",
             Defender,
-            _mapping(f"defenders[{i}]", item),
+            place.local(f"defenders[{i}]", _mapping(f"defenders[{i}]", item)),
             limits=GUIDANCE_LIMITS["Defender"],
         )
         for i, item in enumerate(value)

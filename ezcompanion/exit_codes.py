@@ -1,6 +1,8 @@
 """Exit codes of ``ezcompanion`` and ``sitl-stub``: one per kind of ending, documented once.
 
-Every ending other than ``OK`` comes with one line on stderr that says why. Scripts can tell
+Every ending other than ``OK`` and ``FAILED`` comes with one line on stderr that says why
+(``FAILED``: the ``ended`` event does). For ``run``, the vehicle is then left in the mode of
+``on_exit`` whatever the code (``ezcompanion.service.ending``). Scripts can tell
 a bad scenario (fix the file) from a link that failed (check the cabling) from an engagement
 that ran and missed (look at the gains).
 
@@ -8,8 +10,8 @@ that ran and missed (look at the gains).
 name                code   meaning
 ==================  =====  ==================================================================
 ``OK``              0      done; for ``run`` and ``demo``: intercepted outside every zone
-``FAILED``          1      the job ran but its outcome failed: not intercepted, or a zone
-                           entered
+``FAILED``          1      the job ran but its outcome failed: not intercepted (in
+                           ``--max-time``, aborted on untrusted input), or a zone entered
 ``BAD_INPUT``       2      a scenario file, a section of it or a flag is invalid (argparse's
                            usage errors use 2 as well)
 ``LINK_FAILURE``    3      the MAVLink link or the vehicle failed: the endpoint cannot be

@@ -19,6 +19,7 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from ezcompanion.config import load_scenario
+from ezcompanion.field import scale_scenario
 from ezcompanion.guidance import (
     Defender,
     GuidanceController,
@@ -32,6 +33,7 @@ from ezcompanion.guidance import backup as bk
 from ezcompanion.guidance import lookahead as lk
 from ezcompanion.guidance.abandon import ABANDON_PROFILES, abandon_gap_m
 from ezcompanion.guidance.controller import GuidanceStep
+from ezcompanion.guidance.scaling import ScaleFactors, scale_params
 from ezcompanion.sim.engine import SimResult, simulate
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
@@ -177,7 +179,11 @@ def test_the_lookahead_circle_gap_matches_dense_sampling(
         qn = north + mur * np.cos(heading) - zones.north_m[0, i]
         qe = east + mur * np.sin(heading) - zones.east_m[0, i]
         best = min(best, float((np.hypot(qn, qe) - zones.reach_m[0, i]).min()))
-    assert got == pytest.approx(best, abs=1e-5)
+    # the closed form is the exact least gap; the samples can only miss it, by at most the
+    # arc between two samples of the look-ahead circle (first order: where the circle passes
+    # through a zone's centre the distance is a cone, not a smooth minimum)
+    spacing = math.hypot(radius, float(zones.mu_range_m.max())) * (phase[1] - phase[0])
+    assert best - spacing - 1e-9 <= got <= best + 1e-9
 
 
 # 3-4. certificates are lower bounds on the flows they certify ----------------------------
@@ -367,18 +373,9 @@ def test_along_its_own_flow_a_backup_certificate_never_drops_by_more_than_theta(
 # 5. the law at scale -------------------------------------------------------------------
 
 
-UNITS = {"m": (1, 0), "s": (0, 1), "1_s": (0, -1), "m_s": (1, -1), "m_s2": (1, -2), "m_s3": (1, -3)}
-
-
 def scaled(params: GuidanceParams, length: float, time: float) -> GuidanceParams:
-    """Every dimensional field scaled by its unit (from its name)."""
-    changes = {}
-    for f in dataclasses.fields(params):
-        for suffix, (pl, pt) in sorted(UNITS.items(), key=lambda u: -len(u[0])):
-            if f.name.endswith("_" + suffix):
-                changes[f.name] = getattr(params, f.name) * length**pl * time**pt
-                break
-    return dataclasses.replace(params, **changes)
+    """Every dimensional field scaled by its unit (from its name): the package's scaler."""
+    return scale_params(params, ScaleFactors(length=length, time=time))
 
 
 @pytest.mark.parametrize("law", [LawName.BACKUP, LawName.ROBUST])
@@ -416,23 +413,7 @@ def _scaled_runs(law: LawName, length: float, time: float) -> tuple[SimResult, S
     base = dataclasses.replace(
         base, simulation=dataclasses.replace(base.simulation, dt_s=0.02, duration_s=5.0)
     )
-    big = dataclasses.replace(
-        base,
-        defenders=tuple(
-            dataclasses.replace(d, north_m=d.north_m * length, east_m=d.east_m * length,
-                                range_m=d.range_m * length,
-                                capture_radius_m=d.capture_radius_m * length)
-            for d in base.defenders
-        ),
-        target=dataclasses.replace(base.target, north_m=base.target.north_m * length,
-                                   east_m=base.target.east_m * length),
-        start=dataclasses.replace(
-            base.start, north_m=base.start.north_m * length, east_m=base.start.east_m * length,
-            speed_m_s=base.start.speed_m_s * length / time,
-        ),
-        guidance=scaled(base.guidance, length, time),
-        simulation=dataclasses.replace(base.simulation, dt_s=0.02 * time, duration_s=5.0 * time),
-    )
+    big = scale_scenario(base, ScaleFactors(length=length, time=time))  # the package's
     return simulate(base, law), simulate(big, law)
 
 

@@ -128,6 +128,7 @@ def fly(
     telemetry: Any = None,
     port: int | None = None,
     stub_port: int | None = None,
+    stub_config: Path | None = None,
     **companion: Any,
 ) -> Flight:
     """The companion in a thread, the vehicle in a process, until the engagement ends.
@@ -160,7 +161,8 @@ def fly(
         assert listening.wait(30.0), "the companion never opened its link"
         mode = ["--initial-mode", start_mode] if start_mode else []
         to = port if stub_port is None else stub_port
-        with stub_process(config, to, truth, "--profile", profile, *mode) as stub:
+        vehicle = config if stub_config is None else stub_config  # the vehicle's own file
+        with stub_process(vehicle, to, truth, "--profile", profile, *mode) as stub:
             if during is not None:
                 during(service, stub, port, truth)
             thread.join(timeout=max_time_s / SPEEDUP + 30.0)

@@ -241,3 +241,5 @@ def test_an_autopilot_heard_first_is_refused_with_the_vehicle_both_named(
     refused = flight.events.of_kind(EventKind.VEHICLE_REFUSED)
     assert refused and "2/1" in refused[0].message and "1/1" in refused[0].message
     assert flight.outcome.setpoints_sent == 0 and not flight.outcome.intercepted
+    (end,) = flight.events.of_kind(EventKind.ON_EXIT)
+    assert end.data["mode"] is None  # no end mode asked of either

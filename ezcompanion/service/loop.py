@@ -48,6 +48,7 @@ class GuidanceLoop:
         self.captured = False
         self.miss_distance_m = math.inf
         self._last_tick_s: float | None = None
+        self._assumed: dict[str, float] = {}  # guidance fields found from the vehicle
         # Run the law once now: compiled, this loads it from numba's disk cache (or compiles
         # it on a first run), which must not happen on the first tick and stall the link.
         start = scenario.start
@@ -61,10 +62,9 @@ class GuidanceLoop:
     def assume_response_lag(self, lag_s: float) -> None:
         """Give the law the vehicle's response lag ``lag_s`` (its autopilot's measured
         default) unless the scenario states one; keeps the actuator state."""
-        if self.scenario.guidance.response_lag_s > 0.0 or lag_s <= 0.0:
-            return
-        guidance = dataclasses.replace(self.scenario.guidance, response_lag_s=lag_s)
-        self.update_scenario(dataclasses.replace(self.scenario, guidance=guidance))
+        if lag_s > 0.0:
+            self._assumed["response_lag_s"] = lag_s
+            self.update_scenario(self.scenario)
 
     def assume_abandon(self, *, turn_s: float, hold_s: float, brake_m_s2: float) -> bool:
         """Check every setpoint against what the vehicle flies if it is the last (a turn
@@ -72,17 +72,32 @@ class GuidanceLoop:
         its own abandon path; keeps the actuator state. True when this path is in force."""
         if self.scenario.guidance.abandon_hold_s > 0.0 or hold_s <= 0.0:
             return False
-        guidance = dataclasses.replace(
-            self.scenario.guidance, abandon_turn_s=turn_s, abandon_hold_s=hold_s,
-            abandon_brake_m_s2=brake_m_s2,
-        )  # fmt: skip
-        self.update_scenario(dataclasses.replace(self.scenario, guidance=guidance))
+        self._assumed.update(abandon_turn_s=turn_s, abandon_hold_s=hold_s,
+                             abandon_brake_m_s2=brake_m_s2)  # fmt: skip
+        self.update_scenario(self.scenario)
         return True
+
+    def _with_assumed(self, scenario: Scenario) -> Scenario:
+        """``scenario`` with what the vehicle was found to be (its lag, its abandon path)
+        where the scenario itself leaves them at 0: a scenario that arrives later (a zenoh
+        update, a placement) keeps them."""
+        guidance = scenario.guidance
+        changes = dict(self._assumed)
+        if guidance.response_lag_s > 0.0:
+            changes.pop("response_lag_s", None)
+        if guidance.abandon_hold_s > 0.0:
+            for name in ("abandon_turn_s", "abandon_hold_s", "abandon_brake_m_s2"):
+                changes.pop(name, None)
+        if not changes:
+            return scenario
+        changed = dataclasses.replace(guidance, **changes)  # type: ignore[arg-type]
+        return dataclasses.replace(scenario, guidance=changed)
 
     def update_scenario(self, scenario: Scenario) -> None:
         """Fly against new defenders and target from the next tick on, keeping the actuator
-        state (the vehicle is mid-turn) and the timing."""
+        state (the vehicle is mid-turn), the timing and what was assumed of the vehicle."""
         accel = self.controller.accel_m_s2
+        scenario = self._with_assumed(scenario)
         self.scenario = scenario
         self.controller = GuidanceController(
             zones=scenario.zones(),

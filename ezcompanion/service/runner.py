@@ -30,10 +30,12 @@ from typing import TYPE_CHECKING, Any
 from ezcompanion import __version__
 from ezcompanion.config import Scenario, scenario_to_dict, scenario_update
 from ezcompanion.errors import ConfigError
+from ezcompanion.field import VehiclePlacement, placement_warnings
 from ezcompanion.guidance import LawName
 from ezcompanion.records import EventKind, TickCommand
 from ezcompanion.service.autopilots import autopilot_profile
 from ezcompanion.service.clock import ScaledClock
+from ezcompanion.service.ending import ExitReport, leave_vehicle
 from ezcompanion.service.engagement import Engagement, EngagementOutcome
 from ezcompanion.service.events import EventLog
 from ezcompanion.service.inbox import ScenarioInbox
@@ -114,6 +116,8 @@ class CompanionService:
         self._next_deadline_s = 0.0
         self._abandon_said = False
         self._last_tick_s = -math.inf
+        self.exit_report: ExitReport | None = None  # where the vehicle was left (on_exit)
+        self.placement: VehiclePlacement | None = None  # frame: vehicle, latched at engage
 
     # --- views ----------------------------------------------------------------------------
 
@@ -264,7 +268,25 @@ class CompanionService:
             self._check_distrust(now)
             if self._ticking() and now >= self._next_deadline_s:
                 self._tick(now)
+        self.phase = Phase.DONE
         self.engagement.finish(clock.now_s())
+        commanded = self.engagement.setpoints_sent + self.engagement.brakes_sent > 0
+        self.exit_report = leave_vehicle(  # a defined end: the mode of on_exit (ending.py)
+            self.settings.on_exit, session, self.events, commanded=commanded,
+            now=clock.now_s, pump=self._pump,
+        )  # fmt: skip
+
+    def _pump(self, timeout_s: float) -> None:
+        """Frames in and heartbeats out while the service ends (the phase is done: no
+        ticks), for at most ``timeout_s`` of clock time."""
+        clock, link = self.clock, self._link
+        assert link is not None
+        now = clock.now_s()
+        link.wait_readable(clock.wall_s(max(0.0, min(timeout_s, self._next_heartbeat_s - now))))
+        for frame in link.recv():
+            self._on_frame(frame, clock.now_s())
+        if clock.now_s() >= self._next_heartbeat_s:
+            self._send_heartbeat(clock.now_s())
 
     def _on_frame(self, frame: Frame, now: float) -> None:
         if self._tlog is not None:
@@ -298,7 +320,12 @@ class CompanionService:
                     profile = autopilot_profile(session.heartbeat)
                     self.loop.assume_response_lag(profile.response_lag_s)
             self.phase = Phase.WAITING
-        if self.phase is Phase.WAITING and session.in_guided and session.frame_settled:
+        if (
+            self.phase is Phase.WAITING
+            and session.in_guided
+            and session.frame_settled
+            and self._placed(now)
+        ):
             self.phase = Phase.GUIDING
             self._next_deadline_s = now
             session.telemetry.latch_origin()  # the frame is fixed for the engagement
@@ -340,6 +367,37 @@ class CompanionService:
             turn_s=guidance.abandon_turn_s, hold_s=guidance.abandon_hold_s,
             brake_m_s2=guidance.abandon_brake_m_s2,
         )  # fmt: skip
+    def _placed(self, now: float) -> bool:
+        """``frame: vehicle``: the scenario is put on the vehicle as guidance engages, once
+        (then latched, as the origin is); False while no fresh position says where it is."""
+        if not self.scenario.frame.at_vehicle or self.placement is not None:
+            return True
+        stale_s = self.settings.stale_after_s
+        state = self.session.telemetry.snapshot(stale_s, now)
+        if state is None or state.age_s(now) > stale_s:
+            return False
+        course = state.course_rad(0.5 * self.scenario.start.speed_m_s)
+        self.placement = VehiclePlacement.at_engage(
+            self.scenario, north_m=state.north_m, east_m=state.east_m, course_rad=course
+        )
+        self.scenario = self.placement.place(self.scenario)
+        self.loop.update_scenario(self.scenario)
+        p = self.placement
+        self.events.emit(
+            EventKind.SCENARIO, now, f"placed at the vehicle ({p.vehicle_north_m:.2f}, "
+            f"{p.vehicle_east_m:.2f}) m, turned {math.degrees(p.turn_rad):+.1f} deg",
+            defenders=len(self.scenario.defenders),
+        )  # fmt: skip
+        problems = placement_warnings(self.scenario, course_rad=course)
+        for problem in problems:
+            self.events.emit(EventKind.WARNING, now, f"placed scenario: {problem}")
+        if problems and "starts inside" in problems[0]:  # no guarantee from there: refused
+            self.events.emit(EventKind.ABORTED, now, "the vehicle is inside a zone of the "
+                             "placed scenario: not guided", cause="placement")  # fmt: skip
+            self.engagement.done = True
+            self.phase = Phase.DONE
+            return False
+        return True
 
     def _check_distrust(self, now: float) -> None:
         """Out of GUIDED after guidance started (a forged mode change, say), distrust still
@@ -374,6 +432,8 @@ class CompanionService:
         scenario = self.scenario_inbox.take()
         if scenario is None:
             return
+        if self.placement is not None:  # in the file's frame: placed as the first one was
+            scenario = self.placement.zones(scenario)
         self.scenario = scenario
         self.loop.update_scenario(scenario)
         if self._publisher is not None:

@@ -86,6 +86,7 @@ class VehicleSession:
         self._send = send
         self.telemetry = TelemetryState(
             origin=scenario.origin,
+            adopt_origin=not scenario.origin_given,
             accel_bound_m_s2=settings.gate_accel_m_s2 or 2.0 * scenario.guidance.accel_max_m_s2,
             gate_position_m=settings.gate_position_m,
         )
@@ -109,6 +110,7 @@ class VehicleSession:
         self._rate_checks = 0
         self._counts_at_request: dict[str, int] = {}
         self.received: dict[str, int] = {}
+        self.acks: dict[int, tuple[int, float]] = {}  # command -> (result, time) of its last ack
         self._next_engage_s = 0.0
         self.requested_rate_hz = settings.telemetry_rate_hz
         self.parameters = ParameterReader(link, send)
@@ -176,6 +178,7 @@ class VehicleSession:
             s.component_id,
         ):
             return  # another component's command (behind a router: the GCS's)
+        self.acks[int(msg.command)] = (int(msg.result), now)
         if msg.result != mavlink.MAV_RESULT_ACCEPTED:
             self.events.emit(
                 EventKind.COMMAND_ACK,
@@ -411,6 +414,14 @@ class VehicleSession:
         if mode is None or self.target is None:
             return
         name, param1, param2, param3 = mode
+        self.request_mode(param1, param2, param3)
+        self._next_engage_s = now + _ENGAGE_RETRY_S
+        self.events.emit(EventKind.MODE, now, f"asking for {name}", requested=name)
+
+    def request_mode(self, param1: float, param2: float, param3: float) -> None:
+        """Send MAV_CMD_DO_SET_MODE with these parameters to the vehicle (its ack lands in
+        :attr:`acks`)."""
+        assert self.target is not None
         self._send(
             self._link.mav.command_long_encode(
                 self.target[0],
@@ -426,8 +437,6 @@ class VehicleSession:
                 0,
             )
         )
-        self._next_engage_s = now + _ENGAGE_RETRY_S
-        self.events.emit(EventKind.MODE, now, f"asking for {name}", requested=name)
 
     def _request_origin(self, now: float) -> None:
         """Ask for GPS_GLOBAL_ORIGIN: ArduPilot and PX4 send it only when it is set or

@@ -16,6 +16,7 @@ Layout (every key optional)::
       engage: false                  # ask for GUIDED/OFFBOARD ourselves
       abandon_check: false           # check every setpoint is safe to keep flying if it is
                                      # the last (the autopilot's timeout read from it)
+      on_exit: default               # hold | loiter | rtl | none | default (per vehicle class)
       gate_position_m: 0.5           # estimate gate: position innovation allowed
       gate_accel_m_s2: 0.0           # the gate's acceleration bound; 0 = 2 x accel_max
       distrust_give_up_s: 3.0        # untrusted input this long without a break ends guidance
@@ -48,7 +49,16 @@ from ezcompanion.wire import (
     signing_key_from_passphrase,
 )
 
-__all__ = ["SIGNING_ENV", "CompanionSettings", "SetpointKind", "companion_settings", "signing_key"]
+__all__ = [
+    "SIGNING_ENV",
+    "CompanionSettings",
+    "OnExit",
+    "SetpointKind",
+    "companion_settings",
+    "signing_key",
+]
+
+_ON_EXIT = "hold, loiter, rtl, none or default"
 
 #: Environment variables a signing key may come from (hex key, passphrase).
 SIGNING_ENV = ("EZCOMPANION_SIGNING_KEY", "EZCOMPANION_SIGNING_PASSPHRASE")
@@ -60,6 +70,16 @@ class SetpointKind(StrEnum):
     AUTO = "auto"  # from the vehicle's heartbeat: fixed wing -> course, else velocity
     VELOCITY = "velocity"  # SET_POSITION_TARGET_LOCAL_NED velocity + yaw rate (copter, PX4)
     COURSE = "course"  # MAV_CMD_GUIDED_CHANGE_HEADING as COMMAND_INT (ArduPlane)
+
+
+class OnExit(StrEnum):
+    """Where the vehicle is left when the companion stops (``ezcompanion.service.ending``)."""
+
+    DEFAULT = "default"  # by vehicle class: copter and PX4 hold, plane loiter
+    HOLD = "hold"  # ArduCopter BRAKE, ArduPlane LOITER, ArduRover HOLD, PX4 AUTO.LOITER
+    LOITER = "loiter"  # LOITER (PX4 AUTO.LOITER)
+    RTL = "rtl"  # RTL (PX4 AUTO.RTL)
+    NONE = "none"  # nothing sent: the autopilot's own timeout decides
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -78,6 +98,7 @@ class CompanionSettings:
     link_lost_after_s: float = 3.0
     engage: bool = False
     abandon_check: bool = False
+    on_exit: OnExit = OnExit.DEFAULT
     gate_position_m: float = 0.5
     gate_accel_m_s2: float = 0.0
     distrust_give_up_s: float = 3.0
@@ -130,6 +151,8 @@ class CompanionSettings:
             raise ConfigError("setpoint", self.setpoint, "must be auto, velocity or course")
         if not isinstance(self.abandon_check, bool):
             raise ConfigError("abandon_check", self.abandon_check, "must be true or false")
+        if not isinstance(self.on_exit, OnExit):
+            raise ConfigError("on_exit", self.on_exit, f"must be one of {_ON_EXIT}")
         if not isinstance(self.engage, bool):
             raise ConfigError("engage", self.engage, "must be true or false")
         given = [
@@ -198,5 +221,11 @@ def companion_settings(scenario: Scenario, **overrides: Any) -> CompanionSetting
             raise ConfigError(
                 "companion.setpoint", raw["setpoint"], "must be auto, velocity or course"
             ) from None
+    if "on_exit" in raw:
+        try:
+            raw["on_exit"] = OnExit(raw["on_exit"])
+        except ValueError:
+            raise ConfigError("companion.on_exit", raw["on_exit"], f"must be one of {_ON_EXIT}"
+                              ) from None  # fmt: skip
     settings: CompanionSettings = build_dataclass("companion", CompanionSettings, raw)
     return settings

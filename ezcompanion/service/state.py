@@ -124,6 +124,9 @@ class TelemetryState:
     """
 
     origin: GeoOrigin
+    # the scenario gave no origin: its frame is the vehicle's EKF origin, adopted when the
+    # vehicle tells it (GPS_GLOBAL_ORIGIN); global positions wait for it
+    adopt_origin: bool = False
     accel_bound_m_s2: float = 2.0
     gate_position_m: float = 0.5
     refused: dict[str, int] = field(default_factory=dict)
@@ -134,6 +137,7 @@ class TelemetryState:
     _attitude_boot_s: float = -math.inf
     _local_offset: tuple[float, float, float] | None = None  # vehicle origin in ours
     _latched: bool = False
+    _origin_told: bool = False  # adopt_origin: the vehicle's origin has been taken
     _refusal: tuple[Hold, str] | None = None
 
     def update(self, msg: Message, now_s: float) -> str | None:
@@ -210,6 +214,8 @@ class TelemetryState:
         return self._accept("local", sample)
 
     def _on_global(self, msg: Message, now_s: float) -> bool:
+        if self.adopt_origin and self._local_offset is None:
+            return False  # the frame is the vehicle's origin, not told yet
         lat, lon = e7_to_deg(msg.lat), e7_to_deg(msg.lon)
         if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0) or (msg.lat, msg.lon) == (0, 0):
             return False
@@ -263,6 +269,18 @@ class TelemetryState:
         )
         if not is_finite(*offset):
             return False
+        if self.adopt_origin:
+            # the scenario's frame is the vehicle's: take the first origin told (and, before
+            # engage, a moved one); ``offset`` is the move from the one taken
+            moved = math.dist((0.0, 0.0), offset[:2]) > _SAME_ORIGIN_M
+            if not self._origin_told or (moved and not self._latched):
+                self.origin = GeoOrigin(lat_deg=lat, lon_deg=lon, alt_m=mm_to_m(msg.altitude))
+                self._origin_told = True
+                self._local_offset = (0.0, 0.0, 0.0)
+                self._tracks.pop("global", None)  # converted through the old one
+                self._tracks.pop("local", None)  # not known to be in this frame until now
+                return True
+            # else judged below as any told origin (the local offset taken is zero)
         offset = (round(offset[0], 6), round(offset[1], 6), round(offset[2], 6))  # to 1 um
         old = self._local_offset
         if old is not None and math.dist(old[:2], offset[:2]) <= _SAME_ORIGIN_M:

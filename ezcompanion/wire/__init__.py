@@ -25,6 +25,7 @@ from ezcompanion.wire.commands import (
     is_fixed_wing,
     is_ground_vehicle,
     mode_name,
+    mode_parameters,
     roll_setpoint,
     velocity_setpoint,
 )
@@ -82,6 +83,7 @@ __all__ = [
     "mavutil",
     "mm_to_m",
     "mode_name",
+    "mode_parameters",
     "ms_to_s",
     "ned_to_geodetic",
     "open_link",

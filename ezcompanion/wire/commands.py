@@ -130,21 +130,32 @@ def mode_name(heartbeat: Message) -> str:
     return str(mavutil.mode_string_v10(heartbeat))
 
 
-def guided_mode(heartbeat: Message) -> tuple[str, float, float, float] | None:
-    """The mode in which this autopilot follows a companion's setpoints, with the parameters
-    of MAV_CMD_DO_SET_MODE that ask for it: ``(name, param1, param2, param3)``.
+def mode_parameters(heartbeat: Message, name: str) -> tuple[float, float, float] | None:
+    """The parameters of MAV_CMD_DO_SET_MODE that ask the autopilot that sent ``heartbeat``
+    for mode ``name`` (as pymavlink's tables spell it: "GUIDED", "BRAKE", "OFFBOARD",
+    "AUTO.LOITER"); None if it has no such mode.
 
-    ArduPilot: GUIDED, (MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, custom_mode, 0). PX4: OFFBOARD,
-    (base mode, main mode, sub mode), as PX4's commander reads the command. None if the
-    vehicle type has no such mode.
+    ArduPilot: (MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, custom_mode, 0). PX4: (base mode, main
+    mode, sub mode), as PX4's commander reads the command.
     """
     if heartbeat.autopilot == mavlink.MAV_AUTOPILOT_PX4:
-        base_mode, main_mode, sub_mode = mavutil.px4_map["OFFBOARD"]
-        return "OFFBOARD", float(base_mode), float(main_mode), float(sub_mode)
-    mapping = mavutil.mode_mapping_byname(heartbeat.type) or {}
-    if "GUIDED" not in mapping:
+        if name not in mavutil.px4_map:
+            return None
+        base_mode, main_mode, sub_mode = mavutil.px4_map[name]
+        return float(base_mode), float(main_mode), float(sub_mode)
+    number = (mavutil.mode_mapping_byname(heartbeat.type) or {}).get(name)
+    if number is None:
         return None
-    return "GUIDED", float(mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED), float(mapping["GUIDED"]), 0.0
+    return float(mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED), float(number), 0.0
+
+
+def guided_mode(heartbeat: Message) -> tuple[str, float, float, float] | None:
+    """The mode in which this autopilot follows a companion's setpoints (GUIDED; OFFBOARD on
+    PX4), with the parameters of MAV_CMD_DO_SET_MODE that ask for it:
+    ``(name, param1, param2, param3)``. None if the vehicle type has no such mode."""
+    name = "OFFBOARD" if heartbeat.autopilot == mavlink.MAV_AUTOPILOT_PX4 else "GUIDED"
+    params = mode_parameters(heartbeat, name)
+    return None if params is None else (name, *params)
 
 
 def is_ground_vehicle(heartbeat: Message) -> bool:

@@ -60,13 +60,14 @@ def run_bridge(
     vehicle: str = "*",
     duration_s: float | None = None,
     stop: threading.Event | None = None,
-    out: TextIO = sys.stdout,
+    out: TextIO | None = None,
     started: threading.Event | None = None,
 ) -> FoxgloveTelemetry:
     """Serve ``vehicle``'s (``*``: every vehicle's) telemetry to Foxglove clients on
     ``host:port`` (0: any free port) until ``stop`` is set or ``duration_s`` has passed;
     returns the telemetry translator (its counts). ``started`` is set once the server
     listens (``out`` has its address then)."""
+    out = out if out is not None else sys.stdout
     warning = exposure_warning(host)
     if warning is not None:
         _log.warning("%s", warning)

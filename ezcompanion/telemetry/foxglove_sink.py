@@ -28,6 +28,7 @@ skipped (logged once per vehicle and leaf), never raised.
 from __future__ import annotations
 
 import collections
+import json
 import logging
 from dataclasses import dataclass, field
 from typing import Any
@@ -57,6 +58,11 @@ _log = logging.getLogger("ezcompanion.telemetry.foxglove")
 TRACK_POINTS = 2000  # the newest positions drawn as the track
 _VEHICLE_COLOR = Color(r=0.1, g=0.2, b=0.9, a=1.0)
 _TARGET_COLOR = Color(r=0.1, g=0.7, b=0.2, a=1.0)
+_PLOT_SCHEMA = foxglove.Schema(
+    name=str(PLOT_SCHEMA["title"]),
+    encoding="jsonschema",
+    data=json.dumps(PLOT_SCHEMA).encode(),
+)
 _LEVELS = {"failsafe": LogLevel.Warning, "link_lost": LogLevel.Warning, "refused": LogLevel.Error}
 
 
@@ -210,7 +216,9 @@ class FoxgloveTelemetry:
             vehicle = _Vehicle(
                 vehicle_id,
                 scene=SceneUpdateChannel(names["scene"], context=ctx),
-                plots=foxglove.Channel(names["plots"], schema=PLOT_SCHEMA, context=ctx),
+                plots=foxglove.Channel(
+                    names["plots"], schema=_PLOT_SCHEMA, message_encoding="json", context=ctx
+                ),
                 events=LogChannel(names["events"], context=ctx),
             )
             self.vehicles[vehicle_id] = vehicle

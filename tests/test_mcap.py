@@ -1,0 +1,113 @@
+"""``monitor --record FILE.mcap``: the bridge's Foxglove channels in an MCAP file, read back
+with the ``mcap`` package's reader and decoded (protobuf from the recorded schemas, JSON);
+the values are the ticks the publisher sent. A real zenoh publisher and monitor on
+127.0.0.1 (fresh port, no multicast)."""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from test_foxglove import decoder  # type: ignore[import-not-found]
+from test_telemetry import SCENARIO_RAW, free_endpoint, publisher, wait_for  # type: ignore[import-not-found]
+from test_telemetry_monitor import fly  # type: ignore[import-not-found]
+
+from ezcompanion.cli import main
+from ezcompanion.config import scenario_from_dict
+from ezcompanion.telemetry.foxglove_sink import topics
+from ezcompanion.wire import geodetic_to_ned
+
+
+def read_mcap(path: Path) -> tuple[dict[str, str], dict[str, list[tuple[int, Any]]]]:
+    """(schema name by topic, decoded (log_time_ns, message) by topic) of an MCAP file."""
+    schemas: dict[str, str] = {}
+    messages: dict[str, list[tuple[int, Any]]] = {}
+    decoders: dict[int, Any] = {}
+    with path.open("rb") as handle:
+        reader = make_reader(handle)
+        summary = reader.get_summary()
+        assert summary is not None and summary.statistics is not None  # a finished file
+        for schema, channel, message in reader.iter_messages():
+            assert schema is not None
+            schemas[channel.topic] = schema.name
+            if channel.id not in decoders:
+                decoders[channel.id] = decoder(channel.message_encoding, schema.name, schema.data)
+            decoded = decoders[channel.id](message.data)
+            messages.setdefault(channel.topic, []).append((message.log_time, decoded))
+    return schemas, messages
+
+
+def test_monitor_records_the_foxglove_channels_to_mcap(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    endpoint = free_endpoint()
+    record = tmp_path / "run.mcap"
+    status = {"phase": "guiding", "scenario": SCENARIO_RAW}
+    done: list[int] = []
+    args = ["monitor", "--connect", endpoint, "--record", str(record), "--duration", "6"]
+    with publisher(endpoint, status=lambda: status, publish_rate_hz=1000.0) as pub:
+        thread = threading.Thread(target=lambda: done.append(main(args)))
+        thread.start()
+        try:
+            assert wait_for(lambda: pub.has_subscribers("guidance"), 5.0)
+            assert wait_for(lambda: pub.has_subscribers("event") and pub.has_subscribers("state"))
+            commands = fly(pub)
+        finally:
+            thread.join(20.0)
+    assert done == [0]
+    schemas, messages = read_mcap(record)
+    vehicle = topics("vehicle1")
+    assert schemas == {
+        vehicle["map_vehicle"]: "foxglove.LocationFix",
+        vehicle["map_target"]: "foxglove.LocationFix",
+        vehicle["scene"]: "foxglove.SceneUpdate",
+        vehicle["plots"]: "ezcompanion.plots.v1",
+        vehicle["events"]: "foxglove.Log",
+    }
+    counts = Counter({topic: len(m) for topic, m in messages.items()})
+    ticks = len(commands)
+    assert counts[vehicle["plots"]] == counts[vehicle["scene"]] == ticks
+    assert counts[vehicle["map_target"]] == counts[vehicle["map_vehicle"]] == ticks
+    assert counts[vehicle["events"]] == 2  # engaged, intercepted
+
+    plots = [p for _, p in messages[vehicle["plots"]]]
+    np.testing.assert_allclose([p["time_s"] for p in plots], [c.time_s for c in commands])
+    np.testing.assert_allclose([p["h_m"] for p in plots], [float(c.step.law.h_m) for c in commands])
+    np.testing.assert_allclose(
+        [p["clearance_m"]["D2"] for p in plots],
+        [float(c.step.law.clearance_m.reshape(-1)[1]) for c in commands],
+    )
+    scenario = scenario_from_dict(SCENARIO_RAW)
+    origin = scenario.origin
+    for (_, fix), command in zip(messages[vehicle["map_vehicle"]], commands, strict=True):
+        back = geodetic_to_ned(
+            fix.latitude, fix.longitude, fix.altitude, origin_lat_deg=origin.lat_deg,
+            origin_lon_deg=origin.lon_deg, origin_alt_m=origin.alt_m,
+        )  # fmt: skip
+        s = command.state
+        np.testing.assert_allclose(back, (s.north_m, s.east_m, s.down_m), atol=1e-6)
+        assert fix.heading == pytest.approx(s.yaw_rad)
+    log_times = [t for t, _ in messages[vehicle["plots"]]]
+    assert log_times == sorted(log_times)  # the vehicle's wall time of each tick
+    _, scene = messages[vehicle["scene"]][-1]
+    assert {e.id for e in scene.entities} == {"zone/D1", "zone/D2", "zone/D3", "target", "track",
+                                             "vehicle"}  # fmt: skip
+    track = next(e for e in scene.entities if e.id == "track").lines[0].points
+    last = commands[-1].state
+    assert len(track) == ticks
+    assert math.hypot(track[-1].x - last.east_m, track[-1].y - last.north_m) < 1e-12
+    events = [m.message for _, m in messages[vehicle["events"]]]
+    assert events == ["engaged: guiding in GUIDED", "intercepted: within 0.1 m"]
+    assert {p["mode"] for p in plots} <= {"intercept", "blend", "safety", "captured"}
+
+    # an MCAP file is written once: recording onto an existing one is refused, in one line
+    capsys.readouterr()
+    assert main(["monitor", "--connect", endpoint, "--record", str(record)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--record" in err[0] and "exists" in err[0]

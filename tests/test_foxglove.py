@@ -273,7 +273,7 @@ def test_a_foxglove_client_decodes_map_scene_and_plots_of_a_loopback_engagement(
 def test_the_cli_serves_foxglove_and_refuses_bad_flags(capsys: pytest.CaptureFixture[str]) -> None:
     endpoint, port = free_endpoint(), free_tcp_port()
     done: list[int] = []
-    args = ["foxglove", "--connect", endpoint, "--port", str(port), "--duration", "3"]
+    args = ["foxglove", "--connect", endpoint, "--port", str(port), "--duration", "2"]
     thread = threading.Thread(target=lambda: done.append(main(args)))
     thread.start()
     try:

@@ -6,6 +6,8 @@ the values are the ticks the publisher sent. A real zenoh publisher and monitor 
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 import threading
 from collections import Counter
 from pathlib import Path
@@ -14,12 +16,14 @@ from typing import Any
 import numpy as np
 import pytest
 from mcap.reader import make_reader
-from test_foxglove import decoder  # type: ignore[import-not-found]
+from test_foxglove import SCENARIO, decoder  # type: ignore[import-not-found]
+from test_service_loopback import SPEEDUP, stub_process  # type: ignore[import-not-found]
 from test_telemetry import SCENARIO_RAW, free_endpoint, publisher, wait_for  # type: ignore[import-not-found]
 from test_telemetry_monitor import fly  # type: ignore[import-not-found]
 
 from ezcompanion.cli import main
 from ezcompanion.config import scenario_from_dict
+from ezcompanion.service.demo import free_udp_port, wait_for_line
 from ezcompanion.telemetry.foxglove_sink import topics
 from ezcompanion.wire import geodetic_to_ned
 
@@ -50,7 +54,7 @@ def test_monitor_records_the_foxglove_channels_to_mcap(
     record = tmp_path / "run.mcap"
     status = {"phase": "guiding", "scenario": SCENARIO_RAW}
     done: list[int] = []
-    args = ["monitor", "--connect", endpoint, "--record", str(record), "--duration", "6"]
+    args = ["monitor", "--connect", endpoint, "--record", str(record), "--duration", "5"]
     with publisher(endpoint, status=lambda: status, publish_rate_hz=1000.0) as pub:
         thread = threading.Thread(target=lambda: done.append(main(args)))
         thread.start()
@@ -111,3 +115,38 @@ def test_monitor_records_the_foxglove_channels_to_mcap(
     assert main(["monitor", "--connect", endpoint, "--record", str(record)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--record" in err[0] and "exists" in err[0]
+
+
+def test_run_records_its_own_telemetry_to_mcap(tmp_path: Path) -> None:
+    # `ezcompanion run --record FILE.mcap` as its own process (as `make demo` runs the
+    # companion), the loopback vehicle in another, joined once the companion listens
+    endpoint, port = free_endpoint(), free_udp_port()
+    record = tmp_path / "run.mcap"
+    companion = subprocess.Popen(
+        [sys.executable, "-m", "ezcompanion", "run", "--config", str(SCENARIO),
+         "--connect", f"udpin:127.0.0.1:{port}", "--engage", "--speedup", f"{SPEEDUP:g}",
+         "--zenoh-listen", endpoint, "--record", str(record), "--max-time", "150"],
+        stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    assert companion.stdout is not None
+    lines: list[str] = []
+    try:
+        wait_for_line(companion.stdout, "listening:")
+        drain = threading.Thread(target=lambda: lines.extend(companion.stdout or []))
+        drain.start()
+        with stub_process(SCENARIO, port, tmp_path / "truth.csv", "--initial-mode", "GUIDED"):
+            code = companion.wait(timeout=90)
+        drain.join(10.0)
+    finally:
+        companion.kill()
+        companion.wait()
+    assert code == 0, "".join(lines)
+    schemas, messages = read_mcap(record)
+    vehicle = topics("vehicle1")
+    assert set(schemas) == set(vehicle.values())
+    plots = [p for _, p in messages[vehicle["plots"]]]
+    assert len(plots) >= 10 and len(messages[vehicle["map_vehicle"]]) >= 10
+    assert len(messages[vehicle["scene"]]) == len(plots) == len(messages[vehicle["map_target"]])
+    assert plots[-1]["range_to_target_m"] <= 0.3  # it intercepted (radius 0.1 m)
+    kinds = [m.message.split(":")[0] for _, m in messages[vehicle["events"]]]
+    assert kinds[-2:] == ["intercepted", "ended"] and "engaged" in kinds

@@ -179,13 +179,14 @@ def run_monitor(
     stop: threading.Event | None = None,
     sink: SampleSink | None = None,
     show: bool = True,
+    ready: threading.Event | None = None,
 ) -> MonitorView:
     """Show ``vehicle`` (``*``: all) until ``stop`` is set or ``duration_s`` has passed.
 
     Returns the final view. ``json_lines`` prints every sample as a JSON line instead of
     the table; ``record`` appends the same lines to a file (``*.mcap``: writes an MCAP
     recording of the Foxglove channels instead); ``sink`` takes every sample; ``show``
-    False draws no table.
+    False draws no table; ``ready`` is set once the subscriptions are declared.
     """
     from ezcompanion.telemetry.mcap_recording import McapRecorder, is_mcap
 
@@ -223,6 +224,8 @@ def run_monitor(
                     key(vehicle, "alive"), on_alive, history=True
                 ),
             )
+            if ready is not None:
+                ready.set()
             while not stop.is_set():
                 now = time.monotonic()
                 if deadline is not None and now >= deadline:

@@ -10,7 +10,8 @@ Pure builders, shared by the live bridge (``ezcompanion foxglove``) and the MCAP
   horizontal plane as ENU (x east, y north, z up; everything at z = 0, the altitude is on
   the map): per defender its reach disc (radius R + c), its engagement-zone boundary for
   the vehicle's current course and that boundary pushed out by the margin (where h = 0);
-  the target and its intercept radius; the vehicle's track and an arrow along its course.
+  the target and its intercept radius; the vehicle's track (thinned to about ``TRACK_DRAWN``
+  points) and an arrow along its course.
 - ``plot_sample``: a JSON object (schema ``PLOT_SCHEMA``) of h, alpha, the accelerations
   and their bound, and each zone's clearance and margin, by zone name.
 
@@ -52,9 +53,11 @@ __all__ = [
     "OUTLINE_POINTS",
     "PLOT_SCHEMA",
     "SCENE_FRAME",
+    "TRACK_DRAWN",
     "Geometry",
     "ZoneShape",
     "ez_outline_ne_m",
+    "ez_radius_m",
     "location_fix",
     "plot_sample",
     "scene_update",
@@ -63,6 +66,8 @@ __all__ = [
 
 SCENE_FRAME = "local_enu"  # x east, y north, z up, from the scenario's local origin
 OUTLINE_POINTS = 96  # points of a zone's boundary loop
+TRACK_DRAWN = 500  # the track is drawn with at most about this many points
+_BEARINGS = np.linspace(0.0, 2.0 * math.pi, OUTLINE_POINTS, endpoint=False)
 
 _ZONE = Color(r=0.85, g=0.1, b=0.1, a=0.9)
 _ZONE_FILL = Color(r=0.85, g=0.1, b=0.1, a=0.12)
@@ -214,20 +219,27 @@ def location_fix(
     )
 
 
-def ez_outline_ne_m(zone: ZoneShape, course_rad: float, extra_m: float = 0.0) -> np.ndarray:
-    """(OUTLINE_POINTS, 2) north, east (m) of the zone's boundary for a vehicle on
-    ``course_rad``, pushed out by ``extra_m``: the point at bearing theta from the defender
-    is at rho(sigma) + extra_m from it, sigma = course - (theta + pi) being the lead angle a
-    vehicle there has to the defender. Inside the loop the clearance is < -extra_m."""
-    theta = np.linspace(0.0, 2.0 * math.pi, OUTLINE_POINTS, endpoint=False)
-    sigma = course_rad - theta - math.pi
-    rho = np.array(
+def ez_radius_m(zone: ZoneShape, course_rad: float) -> np.ndarray:
+    """rho (m) of the zone's boundary at each of the ``OUTLINE_POINTS`` bearings theta_k =
+    2 pi k / OUTLINE_POINTS from the defender (clockwise from north), for a vehicle on
+    ``course_rad``: sigma = course - (theta + pi) is the lead angle a vehicle there has to
+    the defender."""
+    sigma = course_rad - _BEARINGS - math.pi
+    return np.array(
         [ez_boundary_point(zone.mu_range_m, zone.reach_term, math.cos(s), math.sin(s))[0]
          for s in sigma]
     )  # fmt: skip
-    radius = rho + extra_m
+
+
+def ez_outline_ne_m(
+    zone: ZoneShape, course_rad: float, extra_m: float = 0.0, *, radius_m: np.ndarray | None = None
+) -> np.ndarray:
+    """(OUTLINE_POINTS, 2) north, east (m) of the zone's boundary for a vehicle on
+    ``course_rad`` (``radius_m``: its ``ez_radius_m``, if computed already), pushed out by
+    ``extra_m``. Inside the loop the clearance is < -extra_m."""
+    radius = (ez_radius_m(zone, course_rad) if radius_m is None else radius_m) + extra_m
     return np.column_stack(
-        (zone.north_m + radius * np.cos(theta), zone.east_m + radius * np.sin(theta))
+        (zone.north_m + radius * np.cos(_BEARINGS), zone.east_m + radius * np.sin(_BEARINGS))
     )
 
 
@@ -243,6 +255,14 @@ def _pose(north_m: float, east_m: float, course_rad: float = math.pi / 2.0) -> P
         position=Vector3(x=east_m, y=north_m, z=0.0),
         orientation=Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0)),
     )
+
+
+def _thinned(track_ne_m: Sequence[tuple[float, float]]) -> list[tuple[float, float]]:
+    """Every k-th point of the track, so that at most about ``TRACK_DRAWN`` are drawn, and
+    always its newest one."""
+    points = list(track_ne_m)
+    step = max(1, math.ceil(len(points) / TRACK_DRAWN))
+    return points[-1::-step][::-1]  # counted back from the newest point
 
 
 def _label(north_m: float, east_m: float, text: str) -> TextPrimitive:
@@ -269,6 +289,7 @@ def _loop(points_ne_m: np.ndarray, color: Color, thickness: float) -> LinePrimit
 def _zone_entity(
     zone: ZoneShape, course_rad: float, geometry: Geometry, stamp: Timestamp
 ) -> SceneEntity:
+    radius = ez_radius_m(zone, course_rad)
     diameter = 2.0 * zone.reach_m
     height = 0.02 * zone.reach_m
     return SceneEntity(
@@ -285,8 +306,12 @@ def _zone_entity(
             )
         ],
         lines=[
-            _loop(ez_outline_ne_m(zone, course_rad), _ZONE, 2.0),
-            _loop(ez_outline_ne_m(zone, course_rad, geometry.margin_m), _MARGIN, 1.0),
+            _loop(ez_outline_ne_m(zone, course_rad, radius_m=radius), _ZONE, 2.0),
+            _loop(
+                ez_outline_ne_m(zone, course_rad, geometry.margin_m, radius_m=radius),
+                _MARGIN,
+                1.0,
+            ),
         ],
         texts=[_label(zone.north_m, zone.east_m, zone.name)],
     )
@@ -335,7 +360,7 @@ def scene_update(
                         type=LinePrimitiveLineType.LineStrip,
                         thickness=2.0,
                         scale_invariant=True,
-                        points=[_point(n, e) for n, e in track_ne_m],
+                        points=[_point(n, e) for n, e in _thinned(track_ne_m)],
                         color=_TRACK,
                     )
                 ],

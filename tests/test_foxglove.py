@@ -420,3 +420,55 @@ def test_a_scenario_from_the_status_draws_its_zones_and_a_bad_one_is_refused() -
     bad["defenders"][0]["speed_ratio"] = 1.5
     telemetry.take("ezcompanion/v/status", {"scenario": bad}, time.time())
     assert telemetry.refused == 1 and telemetry.vehicles["v"].geometry == GEOMETRY
+
+
+# --- the documented commands -------------------------------------------------------------
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def documented_commands() -> list[list[str]]:
+    """The Foxglove and MCAP command lines in docs/telemetry.md's and README.md's shell
+    blocks (continuations joined, comments dropped), as argv."""
+    import shlex
+
+    commands = []
+    for doc in (ROOT / "docs" / "telemetry.md", ROOT / "README.md"):
+        blocks = doc.read_text().split("```")[1::2]
+        for block in blocks:
+            text = block.replace("\\\n", " ")
+            for line in text.splitlines():
+                argv = shlex.split(line, comments=True)
+                if argv[:1] == ["ezcompanion"] and ("foxglove" in argv or "run.mcap" in argv):
+                    commands.append(argv[1:])
+    return commands
+
+
+def test_the_documented_foxglove_and_mcap_commands_parse_as_documented(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # the commands themselves run in the tests above (with test ports) and in test_mcap.py;
+    # here: every one shown still parses, with the defaults the docs give
+    from ezcompanion.cli import _parser
+
+    commands = documented_commands()
+    assert {c[0] for c in commands} == {"foxglove", "monitor", "run"}
+    for argv in commands:
+        args = _parser().parse_args(argv)
+        if args.command == "foxglove":
+            assert (args.host, args.port, args.origin) == ("127.0.0.1", 8765, None)
+            assert args.connect in (None, ["tcp/127.0.0.1:7447"])
+        else:
+            assert args.record == Path("run.mcap")
+    # run --record refuses, before flying, telemetry it cannot record
+    monkeypatch.setenv("EZCOMPANION_JIT", "0")
+    for flags, said in (
+        (["--no-telemetry"], "--no-telemetry"),
+        (["--zenoh-listen", "tls/127.0.0.1:7000"], "needs a tcp/ endpoint"),
+    ):
+        argv = ["run", "--config", str(SCENARIO), *flags, "--record", "unused.mcap"]
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and said in err[0]
+        assert err[0].startswith("ezcompanion: error: --record:")
+    assert not Path("unused.mcap").exists()

@@ -149,12 +149,6 @@ def run_service(
     settings = companion_settings(scenario, **overrides)
     zenoh = telemetry_settings(scenario.sections.get("telemetry", {}), **(telemetry or {}))
     events = EventLog(lambda event: print(event.line(), flush=True))
-    recorder = None
-    if record is not None:  # the monitor's recorder on the service's own telemetry
-        from ezcompanion.telemetry.mcap_run import ServiceRecorder
-
-        recorder = ServiceRecorder(zenoh, record)
-        events.add_sink(recorder.on_event)
     service = CompanionService(
         scenario,
         settings,
@@ -163,6 +157,12 @@ def run_service(
         track_csv=track_csv,
         telemetry=zenoh,
     )
+    recorder = None
+    if record is not None:  # the monitor's recorder on the service's own telemetry
+        from ezcompanion.telemetry.mcap_run import ServiceRecorder
+
+        recorder = ServiceRecorder(zenoh, record)
+        events.add_sink(recorder.on_event)
     signalled: list[int] = []
 
     def on_signal(signum: int, _frame: object) -> None:

@@ -472,3 +472,46 @@ def test_the_documented_foxglove_and_mcap_commands_parse_as_documented(
         assert len(err) == 1 and said in err[0]
         assert err[0].startswith("ezcompanion: error: --record:")
     assert not Path("unused.mcap").exists()
+
+
+def test_a_new_session_or_new_zones_clear_the_scene_and_restart_the_track() -> None:
+    import foxglove
+    from mcap.reader import make_reader
+
+    buffer = io.BytesIO()
+    context = foxglove.Context()
+    writer = foxglove.open_mcap(buffer, context=context)
+    telemetry = FoxgloveTelemetry(context=context)
+    scenario = scenario_to_dict(load_scenario(SCENARIO))
+    moved = json.loads(json.dumps(scenario))
+    moved["defenders"] = moved["defenders"][:2]
+
+    def guidance(k: int) -> dict[str, Any]:
+        zones = [{"name": d["name"] or f"D{i + 1}", "clearance_m": 1.0, "margin_m": 0.8}
+                 for i, d in enumerate(scenario["defenders"])]  # fmt: skip
+        return {"time_s": 0.1 * k, "mode": "intercept", "north_m": 0.1 * k, "east_m": 0.0,
+                "course_rad": 0.0, "h_m": 0.5, "alpha": 0.0, "zones": zones,
+                "accel_safety_m_s2": 0.0, "accel_intercept_m_s2": 0.1, "accel_desired_m_s2": 0.1,
+                "accel_command_m_s2": 0.1, "accel_lat_m_s2": 0.1}  # fmt: skip
+
+    sent = [
+        ("alive", True), ("status", {"scenario": scenario}),
+        *[("guidance", guidance(k)) for k in range(3)],
+        ("alive", False), ("alive", True), *[("guidance", guidance(k)) for k in range(2)],
+        ("status", {"scenario": moved}), ("guidance", guidance(5)),
+    ]  # fmt: skip
+    for leaf, payload in sent:
+        telemetry.take(f"ezcompanion/v/{leaf}", payload, time.time())
+    writer.close()
+    assert telemetry.refused == 0
+    buffer.seek(0)
+    scenes = [
+        protobuf_decoder(schema.name, schema.data)(message.data)
+        for schema, channel, message in make_reader(buffer).iter_messages()
+        if channel.topic == topics("v")["scene"] and schema is not None
+    ]
+    assert [len(s.deletions) for s in scenes] == [1, 0, 0, 1, 0, 1]
+    tracks = [len(next(e for e in s.entities if e.id == "track").lines[0].points) for s in scenes]
+    assert tracks == [1, 2, 3, 1, 2, 3]
+    zones = [sorted(e.id for e in s.entities if e.id.startswith("zone/")) for s in scenes]
+    assert zones[0] == ["zone/D1", "zone/D2", "zone/D3"] and zones[-1] == ["zone/D1", "zone/D2"]

@@ -38,6 +38,8 @@ from foxglove.messages import (
     Pose,
     Quaternion,
     SceneEntity,
+    SceneEntityDeletion,
+    SceneEntityDeletionType,
     SceneUpdate,
     SpherePrimitive,
     TextPrimitive,
@@ -323,9 +325,11 @@ def scene_update(
     track_ne_m: Sequence[tuple[float, float]],
     course_rad: float,
     unix_s: float,
+    clear: bool = False,
 ) -> SceneUpdate:
     """The scene of one guidance sample: zones (for ``course_rad``), target, track and
-    vehicle (at the track's last point); without a geometry, the track and vehicle only."""
+    vehicle (at the track's last point); without a geometry, the track and vehicle only.
+    ``clear`` first deletes every entity drawn before (a new engagement, new zones)."""
     stamp = timestamp(unix_s)
     scale = geometry.scale_m if geometry is not None else 1.0
     entities: list[SceneEntity] = []
@@ -383,7 +387,8 @@ def scene_update(
                 ],
             )
         )
-    return SceneUpdate(entities=entities)
+    deletions = [SceneEntityDeletion(timestamp=stamp, type=SceneEntityDeletionType.All)]
+    return SceneUpdate(deletions=deletions if clear else [], entities=entities)
 
 
 def plot_sample(

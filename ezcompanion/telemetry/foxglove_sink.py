@@ -21,6 +21,10 @@ made (said once per vehicle in the log). A live WebSocket server or an MCAP writ
 same context is the sink: the messages are built once, in
 :mod:`ezcompanion.telemetry.foxglove_messages`.
 
+A vehicle's track starts again when its liveliness token comes (a new session: the demo
+flies each scenario as ``vehicle1``), and the scene update after that, or after new zones,
+first deletes everything drawn before.
+
 The samples come from the network: one that does not parse is counted in ``refused`` and
 skipped (logged once per vehicle and leaf), never raised.
 """
@@ -93,6 +97,7 @@ class _Vehicle:
     track_ne_m: collections.deque[tuple[float, float]] = field(
         default_factory=lambda: collections.deque(maxlen=TRACK_POINTS)
     )
+    clear_scene: bool = True  # the next scene update deletes what was drawn before
     said: set[str] = field(default_factory=set)  # what was logged once already
 
 
@@ -116,6 +121,9 @@ class FoxgloveTelemetry:
             return
         vehicle = self._vehicle(vehicle_id)
         if leaf == "alive":
+            if payload is True:  # a (new) session of the vehicle: a new track
+                vehicle.track_ne_m.clear()
+                vehicle.clear_scene = True
             return
         try:
             if not isinstance(payload, dict):
@@ -143,6 +151,8 @@ class FoxgloveTelemetry:
             geometry = Geometry.of(scenario_from_dict(raw))
         except ConfigError as exc:
             raise ValueError(f"its scenario is invalid: {exc}") from None
+        if geometry != vehicle.geometry:
+            vehicle.clear_scene = True  # zones that are gone must not stay drawn
         vehicle.geometry = geometry
         self._set_origin(vehicle, geometry.origin, "the scenario in its status")
 
@@ -177,10 +187,15 @@ class FoxgloveTelemetry:
         vehicle.plots.log(plots, log_time=log_time)
         vehicle.scene.log(
             scene_update(
-                vehicle.geometry, track_ne_m=vehicle.track_ne_m, course_rad=course, unix_s=unix_s
+                vehicle.geometry,
+                track_ne_m=vehicle.track_ne_m,
+                course_rad=course,
+                unix_s=unix_s,
+                clear=vehicle.clear_scene,
             ),
             log_time=log_time,
         )
+        vehicle.clear_scene = False
         self.logged += 2
         geometry = vehicle.geometry
         if geometry is not None and vehicle.map_target is not None and vehicle.origin is not None:

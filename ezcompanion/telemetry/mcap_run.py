@@ -25,7 +25,7 @@ from typing import Any
 
 from ezcompanion.errors import ConfigError
 from ezcompanion.records import Event, EventKind
-from ezcompanion.telemetry.mcap_recording import is_mcap
+from ezcompanion.telemetry.mcap_recording import McapRecorder, is_mcap
 from ezcompanion.telemetry.monitor import run_monitor
 from ezcompanion.telemetry.schema import key
 from ezcompanion.telemetry.settings import TelemetrySettings, session_config
@@ -65,11 +65,10 @@ class ServiceRecorder:
     Give ``on_event`` to the service's event log and call ``close()`` after its run."""
 
     def __init__(self, settings: TelemetrySettings, path: Path) -> None:
-        if is_mcap(path) and path.exists():
-            raise ConfigError("--record", str(path), "exists: an MCAP recording is written once, "
-                              "give a new file name")  # fmt: skip
         endpoint = own_endpoint(settings)
         self.path = path
+        # made now: a file that exists or cannot be written is refused before the flight
+        self._mcap = McapRecorder(path) if is_mcap(path) else None
         monitor = TelemetrySettings(
             mode="peer", listen=(), connect=(endpoint,), multicast_scouting=False
         )
@@ -88,16 +87,18 @@ class ServiceRecorder:
             if not self._ready.wait(READY_TIMEOUT_S):
                 _log.warning("record: not subscribed after %.0f s; going on", READY_TIMEOUT_S)
 
-    def take(self, key_expr: str, payload: Any, _received_unix_s: float) -> None:
-        """A sample sink: notes when the vehicle's liveliness token goes."""
+    def take(self, key_expr: str, payload: Any, received_unix_s: float) -> None:
+        """A sample sink: records it (MCAP), notes when the vehicle's token goes."""
+        if self._mcap is not None:
+            self._mcap.take(key_expr, payload, received_unix_s)
         if key_expr == key(self._vehicle, "alive") and payload is False:
             self._gone.set()
 
     def _run(self) -> None:
         try:
             run_monitor(
-                self._conf, vehicle=self._vehicle, record=self.path, stop=self._stop,
-                sink=self, show=False, ready=self._ready,
+                self._conf, vehicle=self._vehicle, stop=self._stop, sink=self, show=False,
+                record=self.path if self._mcap is None else None, ready=self._ready,
             )  # fmt: skip
         except BaseException as exc:  # reported by close(), in the main thread
             self._error.append(exc)
@@ -110,5 +111,7 @@ class ServiceRecorder:
             self._gone.wait(DRAIN_TIMEOUT_S)
             self._stop.set()
             self._thread.join(DRAIN_TIMEOUT_S + 5.0)
+        if self._mcap is not None:
+            self._mcap.close()
         if self._error:
             raise self._error[0]

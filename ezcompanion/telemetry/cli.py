@@ -2,8 +2,9 @@
 underneath.
 
 ``ezcompanion.cli`` adds them with ``add_telemetry_parsers(subparsers)`` and dispatches with
-``run_telemetry_command(args)`` (None when the command is not one of these). ``foxglove``
-is in :mod:`ezcompanion.telemetry.foxglove_bridge`.
+``run_telemetry_command(args)`` (None when the command is not one of these). ``foxglove``'s
+own flags are in :mod:`ezcompanion.telemetry.foxglove_cli`, the bridge in
+:mod:`ezcompanion.telemetry.foxglove_bridge` (imported only to run it).
 """
 
 from __future__ import annotations
@@ -162,7 +163,7 @@ def _watch_config(args: argparse.Namespace) -> zenoh.Config:
 
 def add_telemetry_parsers(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add ``monitor``, ``foxglove`` and ``router`` to ``ezcompanion``'s subcommands."""
-    from ezcompanion.telemetry.foxglove_bridge import add_foxglove_parser
+    from ezcompanion.telemetry.foxglove_cli import add_foxglove_parser
 
     mon = subparsers.add_parser("monitor", help="watch the engagements live over zenoh")
     _add_watch_flags(mon)

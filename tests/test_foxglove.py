@@ -197,7 +197,7 @@ def test_a_foxglove_client_decodes_map_scene_and_plots_of_a_loopback_engagement(
                 SCENARIO,
                 tmp_path,
                 telemetry=telemetry_settings({"mode": "client", "connect": [endpoint]}),
-                max_time_s=60.0,
+                max_time_s=150.0,  # from the companion's start: room for a slow stub
             )
             vehicle = topics("vehicle1")
             assert wait_for(lambda: bool(client.of(vehicle["events"])), 10.0)

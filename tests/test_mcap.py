@@ -106,6 +106,11 @@ def test_monitor_records_the_foxglove_channels_to_mcap(
     last = commands[-1].state
     assert len(track) == ticks
     assert math.hypot(track[-1].x - last.east_m, track[-1].y - last.north_m) < 1e-12
+    # the vehicle's arrow (its +x axis) points along its course: x east, y north
+    q = next(e for e in scene.entities if e.id == "vehicle").arrows[0].pose.orientation
+    pointing = (1.0 - 2.0 * (q.y**2 + q.z**2), 2.0 * (q.x * q.y + q.w * q.z))
+    course = commands[-1].course_rad
+    np.testing.assert_allclose(pointing, (math.sin(course), math.cos(course)), atol=1e-9)
     events = [m.message for _, m in messages[vehicle["events"]]]
     assert events == ["engaged: guiding in GUIDED", "intercepted: within 0.1 m"]
     assert {p["mode"] for p in plots} <= {"intercept", "blend", "safety", "captured"}

@@ -9,7 +9,8 @@ Pure builders, shared by the live bridge (``ezcompanion foxglove``) and the MCAP
 - ``scene_update``: a ``foxglove.SceneUpdate`` in the frame ``SCENE_FRAME``, the law's
   horizontal plane as ENU (x east, y north, z up; everything at z = 0, the altitude is on
   the map): per defender its reach disc (radius R + c), its engagement-zone boundary for
-  the vehicle's current course and that boundary pushed out by the margin (where h = 0);
+  the vehicle's current course (clearance 0) and that boundary pushed out by the margin
+  (the zone's margin, clearance - margin_m, 0);
   the target and its intercept radius; the vehicle's track (thinned to about ``TRACK_DRAWN``
   points) and an arrow along its course.
 - ``plot_sample``: a JSON object (schema ``PLOT_SCHEMA``) of h, alpha, the accelerations
@@ -48,6 +49,7 @@ from foxglove.messages import (
 )
 
 from ezcompanion.config import GeoOrigin, Scenario
+from ezcompanion.frames import enu_yaw_rad
 from ezcompanion.guidance.zones import ez_boundary_point
 from ezcompanion.wire import ned_to_geodetic
 
@@ -238,7 +240,7 @@ def ez_outline_ne_m(
 ) -> np.ndarray:
     """(OUTLINE_POINTS, 2) north, east (m) of the zone's boundary for a vehicle on
     ``course_rad`` (``radius_m``: its ``ez_radius_m``, if computed already), pushed out by
-    ``extra_m``. Inside the loop the clearance is < -extra_m."""
+    ``extra_m``. Inside the loop the clearance is < extra_m."""
     radius = (ez_radius_m(zone, course_rad) if radius_m is None else radius_m) + extra_m
     return np.column_stack(
         (zone.north_m + radius * np.cos(_BEARINGS), zone.east_m + radius * np.sin(_BEARINGS))
@@ -250,9 +252,8 @@ def _point(north_m: float, east_m: float) -> Point3:
 
 
 def _pose(north_m: float, east_m: float, course_rad: float = math.pi / 2.0) -> Pose:
-    """A pose in the ENU scene: yaw about z up is pi/2 - course (course clockwise from
-    north, yaw anticlockwise from east)."""
-    yaw = math.pi / 2.0 - course_rad
+    """A pose in the ENU scene (x east, y north), turned to ``course_rad``."""
+    yaw = enu_yaw_rad(course_rad)
     return Pose(
         position=Vector3(x=east_m, y=north_m, z=0.0),
         orientation=Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0)),

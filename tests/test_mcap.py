@@ -145,13 +145,19 @@ def test_run_records_its_own_telemetry_to_mcap(tmp_path: Path) -> None:
     finally:
         companion.kill()
         companion.wait()
-    assert code == 0, "".join(lines)
+    # (whether it intercepted is the loopback tests' business: on a saturated machine the
+    # stub's stalls can make it miss; the recording must hold the engagement either way)
+    assert code in (0, 1), "".join(lines)
     schemas, messages = read_mcap(record)
     vehicle = topics("vehicle1")
     assert set(schemas) == set(vehicle.values())
     plots = [p for _, p in messages[vehicle["plots"]]]
     assert len(plots) >= 10 and len(messages[vehicle["map_vehicle"]]) >= 10
     assert len(messages[vehicle["scene"]]) == len(plots) == len(messages[vehicle["map_target"]])
-    assert plots[-1]["range_to_target_m"] <= 0.3  # it intercepted (radius 0.1 m)
+    # every event the companion printed after it listened is in the recording, in order
+    # (and `listening` itself, when the subscription reached the vehicle before it went out)
+    printed = [line.split("] ", 1)[1].split(":")[0] for line in lines if line.startswith("[")]
     kinds = [m.message.split(":")[0] for _, m in messages[vehicle["events"]]]
-    assert kinds[-2:] == ["intercepted", "ended"] and "engaged" in kinds
+    after_listening = kinds[1:] if kinds[:1] == ["listening"] else kinds
+    assert after_listening == printed and kinds[-1] == "ended" and "engaged" in kinds
+    assert ("intercepted" in kinds) == (code == 0)

@@ -123,6 +123,7 @@ def run_service(
     max_time_s: float | None,
     track_csv: Path | None,
     telemetry: dict[str, object] | None = None,
+    record: Path | None = None,
     **overrides: object,
 ) -> int:
     """Steer a vehicle through one engagement. 0 if intercepted; 1 if it ended otherwise;
@@ -159,6 +160,12 @@ def run_service(
         track_csv=track_csv,
         telemetry=zenoh,
     )
+    recorder = None
+    if record is not None:  # the monitor's recorder on the service's own telemetry
+        from ezcompanion.telemetry.mcap_run import ServiceRecorder
+
+        recorder = ServiceRecorder(zenoh, record)
+        events.add_sink(recorder.on_event)
     signalled: list[int] = []
 
     def on_signal(signum: int, _frame: object) -> None:
@@ -171,6 +178,8 @@ def run_service(
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+        if recorder is not None:
+            recorder.close()
     report = service.exit_report
     if report is not None and report.failed:
         print(f"ezcompanion: warning: on_exit {report.choice.value}: {report.detail}",
@@ -361,6 +370,11 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--tlog", type=Path, help="record every frame in and out to this .tlog")
     run.add_argument("--track", type=Path, help="write the companion's view to this CSV")
     run.add_argument(
+        "--record",
+        type=Path,
+        help="record the telemetry as `monitor --record` does: FILE.mcap for Foxglove",
+    )
+    run.add_argument(
         "--speedup", type=SPEEDUP, help="clock speed-up, to match a loopback vehicle (0, 1000]"
     )
     run.add_argument(
@@ -457,6 +471,7 @@ def _dispatch(args: argparse.Namespace) -> int:
             law=args.law,
             max_time_s=args.max_time,
             track_csv=args.track,
+            record=args.record,
             connect=args.connect,
             engage=args.engage,
             on_exit=args.on_exit,

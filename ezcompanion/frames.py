@@ -24,6 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 __all__ = [
+    "enu_yaw_rad",
     "line_of_sight_rad",
     "wrap_pi",
 ]
@@ -47,3 +48,9 @@ def line_of_sight_rad(
 ) -> float:
     """Bearing from one point to another, clockwise from north, in [-pi, pi]."""
     return math.atan2(to_east_m - from_east_m, to_north_m - from_north_m)
+
+
+def enu_yaw_rad(course_rad: float) -> float:
+    """A course (clockwise from north) as an ENU yaw (anticlockwise from east, about z up),
+    for viewers in ENU such as Foxglove's 3D panel."""
+    return math.pi / 2.0 - course_rad

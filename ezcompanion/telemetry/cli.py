@@ -1,7 +1,10 @@
-"""The ``monitor`` and ``router`` commands: argparse here, typed functions underneath.
+"""The ``monitor``, ``foxglove`` and ``router`` commands: argparse here, typed functions
+underneath.
 
 ``ezcompanion.cli`` adds them with ``add_telemetry_parsers(subparsers)`` and dispatches with
-``run_telemetry_command(args)`` (None when the command is not one of these).
+``run_telemetry_command(args)`` (None when the command is not one of these). ``foxglove``'s
+own flags are in :mod:`ezcompanion.telemetry.foxglove_cli`, the bridge in
+:mod:`ezcompanion.telemetry.foxglove_bridge` (imported only to run it).
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from pathlib import Path
 
 import zenoh
 
+from ezcompanion.cli_args import number_within
 from ezcompanion.config import load_scenario
 from ezcompanion.telemetry.monitor import MonitorView, run_monitor
 from ezcompanion.telemetry.recording import iter_recording, plot_recording, read_recording
@@ -122,25 +126,60 @@ def _stop_on_signals(stop: threading.Event) -> Iterator[None]:
             signal.signal(sig, handler)
 
 
-def add_telemetry_parsers(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    """Add ``monitor`` and ``router`` to ``ezcompanion``'s subcommands."""
-    mon = subparsers.add_parser("monitor", help="watch the engagements live over zenoh")
-    mon.add_argument(
+def _add_watch_flags(parser: argparse.ArgumentParser) -> None:
+    """The zenoh flags of a session that watches (``monitor``, ``foxglove``)."""
+    parser.add_argument(
         "--connect",
         action="append",
         help=f"zenoh endpoint of a vehicle or router (repeatable; default {DEFAULT_ENDPOINT})",
     )
-    mon.add_argument("--vehicle", default="*", help="only this vehicle id (default: all)")
+    parser.add_argument("--vehicle", default="*", help="only this vehicle id (default: all)")
+    parser.add_argument(
+        "--duration",
+        type=number_within(0.0, 1e9, unit=" s"),
+        metavar="SECONDS",
+        help="stop after this many seconds",
+    )
+    parser.add_argument(
+        "--mode",
+        choices=["peer", "client"],
+        default="peer",
+        help="zenoh session mode: peer (default) or client (of a router)",
+    )
+    parser.add_argument("--zenoh-config", help="a zenoh json5 config file instead of the flags")
+    parser.add_argument(
+        "--multicast-scouting", action="store_true", help="find peers on the LAN"
+    )
+
+
+def _watch_config(args: argparse.Namespace) -> zenoh.Config:
+    return monitor_config(
+        connect=args.connect or [DEFAULT_ENDPOINT],
+        mode=args.mode,
+        config_file=args.zenoh_config,
+        multicast_scouting=args.multicast_scouting,
+    )
+
+
+def add_telemetry_parsers(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add ``monitor``, ``foxglove`` and ``router`` to ``ezcompanion``'s subcommands."""
+    from ezcompanion.telemetry.foxglove_cli import add_foxglove_parser
+
+    mon = subparsers.add_parser("monitor", help="watch the engagements live over zenoh")
+    _add_watch_flags(mon)
     mon.add_argument("--json", action="store_true", help="print raw JSON lines, no table")
-    mon.add_argument("--record", type=Path, help="append every sample to this JSON-lines file")
-    mon.add_argument("--duration", type=float, help="stop after this many seconds")
-    mon.add_argument("--mode", choices=["peer", "client"], default="peer")
-    mon.add_argument("--zenoh-config", help="a zenoh json5 config file instead of the flags")
-    mon.add_argument("--multicast-scouting", action="store_true", help="find peers on the LAN")
+    mon.add_argument(
+        "--record",
+        type=Path,
+        help="append every sample to this JSON-lines file; FILE.mcap: write an MCAP "
+        "recording of the Foxglove channels instead (a new file)",
+    )
     mon.add_argument("--replay", type=Path, help="read this recording instead of listening")
     mon.add_argument("--scenario", type=Path, help="with --replay: the scenario YAML flown")
     mon.add_argument("--plot", type=Path, help="with --replay: write the figure to this PNG")
     mon.add_argument("--track", type=Path, help="with --replay: write the track CSV here")
+
+    _add_watch_flags(add_foxglove_parser(subparsers))
 
     rtr = subparsers.add_parser("router", help="run a zenoh router for vehicles and monitors")
     rtr.add_argument(
@@ -156,7 +195,7 @@ def add_telemetry_parsers(subparsers: argparse._SubParsersAction) -> None:  # ty
 
 
 def run_telemetry_command(args: argparse.Namespace) -> int | None:
-    """Run ``monitor`` or ``router``; None if ``args.command`` is neither."""
+    """Run ``monitor``, ``foxglove`` or ``router``; None if ``args.command`` is none."""
     if args.command == "router":
         conf = router_config(
             listen=args.listen or [DEFAULT_ENDPOINT],
@@ -165,6 +204,21 @@ def run_telemetry_command(args: argparse.Namespace) -> int | None:
             multicast_scouting=args.multicast_scouting,
         )
         return run_router(conf, duration_s=args.duration)
+    if args.command == "foxglove":
+        from ezcompanion.telemetry.foxglove_bridge import run_bridge
+
+        stop = threading.Event()
+        with _stop_on_signals(stop):
+            run_bridge(
+                _watch_config(args),
+                host=args.host,
+                port=args.port,
+                origin=args.origin,
+                vehicle=args.vehicle,
+                duration_s=args.duration,
+                stop=stop,
+            )
+        return 0
     if args.command != "monitor":
         return None
     vehicle = None if args.vehicle == "*" else args.vehicle
@@ -177,16 +231,10 @@ def run_telemetry_command(args: argparse.Namespace) -> int | None:
             vehicle=vehicle,
             json_lines=args.json,
         )
-    conf = monitor_config(
-        connect=args.connect or [DEFAULT_ENDPOINT],
-        mode=args.mode,
-        config_file=args.zenoh_config,
-        multicast_scouting=args.multicast_scouting,
-    )
     stop = threading.Event()
     with _stop_on_signals(stop):
         run_monitor(
-            conf,
+            _watch_config(args),
             vehicle=args.vehicle,
             json_lines=args.json,
             record=args.record,

@@ -10,6 +10,11 @@ writes JSON lines (``--json``) and the recording (``--record``). Both are the sa
 Liveliness: a vehicle appears when its ``alive`` token does and is marked gone when the
 token goes; on appearing, its ``status`` is queried once (and recorded: the recording then
 holds the scenario the vehicle flew, if its status provider gives it).
+
+A ``sink`` (``SampleSink``: the Foxglove bridge's channels) gets every decoded sample too,
+and then the status is queried again after each ``scenario`` event (the scene follows the
+new zones). A recording named ``*.mcap`` is such a sink
+(:class:`~ezcompanion.telemetry.mcap_recording.McapRecorder`) instead of JSON lines.
 """
 
 from __future__ import annotations
@@ -22,14 +27,14 @@ import time
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, Protocol, TextIO
 
 import zenoh
 
 from ezcompanion.telemetry.schema import key, vehicle_of
 from ezcompanion.telemetry.settings import open_session, release
 
-__all__ = ["MonitorView", "VehicleView", "run_monitor", "sample_line"]
+__all__ = ["MonitorView", "SampleSink", "VehicleView", "run_monitor", "sample_line"]
 
 _CLEAR = "\x1b[H\x1b[2J"
 _STATUS_TIMEOUT_S = 2.0
@@ -37,6 +42,13 @@ _HEADER = (
     f"{'vehicle':<12} {'live':<4} {'t_s':>8} {'mode':<9} {'range_m':>8} {'h_m':>7} "
     f"{'alpha':>5} {'a_b':>6} {'a_T':>6} {'a_d':>6} {'a_c':>6} {'a':>6} {'sat':<3}  outcome"
 )
+
+
+class SampleSink(Protocol):
+    """What takes the monitor's decoded samples besides its view (``alive``: a bool)."""
+
+    def take(self, key_expr: str, payload: Any, received_unix_s: float) -> None:
+        """One sample; called from the monitor's thread, must not raise."""
 
 
 def sample_line(
@@ -165,13 +177,22 @@ def run_monitor(
     refresh_hz: float = 5.0,
     duration_s: float | None = None,
     stop: threading.Event | None = None,
+    sink: SampleSink | None = None,
+    show: bool = True,
+    ready: threading.Event | None = None,
 ) -> MonitorView:
     """Show ``vehicle`` (``*``: all) until ``stop`` is set or ``duration_s`` has passed.
 
     Returns the final view. ``json_lines`` prints every sample as a JSON line instead of
-    the table; ``record`` appends the same lines to a file.
+    the table; ``record`` appends the same lines to a file (``*.mcap``: writes an MCAP
+    recording of the Foxglove channels instead); ``sink`` takes every sample; ``show``
+    False draws no table; ``ready`` is set once the subscriptions are declared.
     """
+    from ezcompanion.telemetry.mcap_recording import McapRecorder, is_mcap
+
     stop = stop if stop is not None else threading.Event()
+    mcap = McapRecorder(record) if record is not None and is_mcap(record) else None
+    sinks = [s for s in (sink, mcap) if s is not None]
     inbox: queue.SimpleQueue[tuple[str, str, bytes | bool]] = queue.SimpleQueue()
 
     def on_sample(sample: zenoh.Sample) -> None:
@@ -188,8 +209,10 @@ def run_monitor(
     view = MonitorView()
     period_s = 1.0 / refresh_hz
     tty = out.isatty()
-    recording = record.open("a", encoding="utf-8") if record is not None else None
+    recording = None
     try:
+        if record is not None and mcap is None:
+            recording = record.open("a", encoding="utf-8")
         with open_session(conf, what="monitor") as session:
             # from here: opening waits for unreachable endpoints (then retries in background)
             deadline = None if duration_s is None else time.monotonic() + duration_s
@@ -201,11 +224,13 @@ def run_monitor(
                     key(vehicle, "alive"), on_alive, history=True
                 ),
             )
+            if ready is not None:
+                ready.set()
             while not stop.is_set():
                 now = time.monotonic()
                 if deadline is not None and now >= deadline:
                     break
-                wait = min(next_draw - now, 0.1) if not json_lines else 0.1
+                wait = min(next_draw - now, 0.1) if show and not json_lines else 0.1
                 try:
                     key_expr, enc, raw = inbox.get(timeout=max(wait, 0.0))
                 except queue.Empty:
@@ -213,15 +238,21 @@ def run_monitor(
                 if key_expr:
                     payload = raw if isinstance(raw, bool) else _decode(raw)
                     vid, leaf = vehicle_of(key_expr)
-                    if leaf == "alive" and payload and not view.vehicle(vid).alive:
+                    if (leaf == "alive" and payload and not view.vehicle(vid).alive) or (
+                        sinks and leaf == "event" and _is_scenario_event(payload)
+                    ):
                         session.get(key(vid, "status"), on_reply, timeout=_STATUS_TIMEOUT_S)
                     view.update(key_expr, payload)
-                    line = json.dumps(sample_line(key_expr, enc, payload, time.time()))
-                    if recording is not None:
-                        recording.write(line + "\n")
-                    if json_lines:
-                        print(line, file=out, flush=True)
-                if not json_lines and time.monotonic() >= next_draw:
+                    received_unix_s = time.time()
+                    for each in sinks:
+                        each.take(key_expr, payload, received_unix_s)
+                    if recording is not None or json_lines:
+                        line = json.dumps(sample_line(key_expr, enc, payload, received_unix_s))
+                        if recording is not None:
+                            recording.write(line + "\n")
+                        if json_lines:
+                            print(line, file=out, flush=True)
+                if show and not json_lines and time.monotonic() >= next_draw:
                     table = view.render()
                     out.write((_CLEAR if tty else "\n") + table + "\n")
                     out.flush()
@@ -230,7 +261,13 @@ def run_monitor(
     finally:
         if recording is not None:
             recording.close()
+        if mcap is not None:
+            mcap.close()
     return view
+
+
+def _is_scenario_event(payload: Any) -> bool:
+    return isinstance(payload, dict) and payload.get("kind") == "scenario"
 
 
 def _decode(raw: bytes) -> Any:

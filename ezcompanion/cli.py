@@ -122,6 +122,7 @@ def run_service(
     max_time_s: float | None,
     track_csv: Path | None,
     telemetry: dict[str, object] | None = None,
+    lockstep: bool = False,
     **overrides: object,
 ) -> int:
     """Steer a vehicle through one engagement. 0 if intercepted; 1 if it ended otherwise;
@@ -155,6 +156,7 @@ def run_service(
         events=events,
         track_csv=track_csv,
         telemetry=zenoh,
+        lockstep=lockstep,
     )
     signalled: list[int] = []
 
@@ -293,7 +295,17 @@ def _parser() -> argparse.ArgumentParser:
         "--speedup", type=SPEEDUP, help="clock speed-up, to match a loopback vehicle (0, 1000]"
     )
     run.add_argument(
-        "--max-time", type=SECONDS, metavar="SECONDS", help="give up after this many seconds"
+        "--max-time",
+        type=SECONDS,
+        metavar="SECONDS",
+        help="give up this many seconds after the engagement started (or, with none, after "
+        "the start)",
+    )
+    run.add_argument(
+        "--lockstep",
+        action="store_true",
+        help="follow the clock of a loopback `sitl-stub --lockstep` (127.0.0.1 only; never "
+        "with a real autopilot): every budget in the vehicle's simulated time",
     )
     run.add_argument(
         "--zenoh-listen", action="append", help="telemetry endpoint (default tcp/127.0.0.1:7447)"
@@ -373,6 +385,7 @@ def _dispatch(args: argparse.Namespace) -> int:
             signing_key_file=str(args.signing_key_file) if args.signing_key_file else None,
             tlog=str(args.tlog) if args.tlog else None,
             speedup=args.speedup,
+            lockstep=args.lockstep,
             telemetry={
                 "listen": args.zenoh_listen,
                 "connect": args.zenoh_connect,

@@ -36,6 +36,8 @@ __all__ = [
 
 # wall seconds to wait for the companion beyond the scenario's own length
 _GRACE_WALL_S = 20.0
+# in lockstep the wall time depends on the machine: wait this long per simulated second
+_LOCKSTEP_WALL_PER_SIM_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -160,10 +162,15 @@ def run_loopback(
     law: LawName | None = None,
     quiet: bool = False,
     telemetry: str | None = None,
+    lockstep: bool = True,
 ) -> DemoResult:
     """Fly ``config`` with the stub and the companion as two processes; judge the truth.
 
     ``telemetry``: the zenoh endpoint the companion listens on (None: no telemetry).
+    ``lockstep``: both run with ``--lockstep`` (the default): the vehicle's time waits for
+    the companion, so the engagement is the same on a saturated machine as on an idle one,
+    and ``speedup`` is only the most it runs ahead of wall time. Without it both run their
+    clocks ``speedup`` times faster than wall time, and a loaded machine shows.
     """
     scenario = load_scenario(config)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -187,6 +194,7 @@ def run_loopback(
         *_initial_mode(profile),
         "--duration",
         f"{duration + 5.0:g}",
+        *(["--lockstep"] if lockstep else []),
     ]
     companion_cmd = [
         sys.executable,
@@ -198,8 +206,7 @@ def run_loopback(
         "--connect",
         f"udpin:127.0.0.1:{port}",
         "--engage",
-        "--speedup",
-        f"{speedup:g}",
+        *(["--lockstep"] if lockstep else ["--speedup", f"{speedup:g}"]),
         "--tlog",
         str(out_dir / "companion.tlog"),
         "--track",
@@ -219,7 +226,8 @@ def run_loopback(
     forward.start()
     stub = subprocess.Popen(stub_cmd, stdout=subprocess.DEVNULL if quiet else None)
     try:
-        code = companion.wait(timeout=duration / speedup + _GRACE_WALL_S)
+        wall_s = duration * _LOCKSTEP_WALL_PER_SIM_S if lockstep else duration / speedup
+        code = companion.wait(timeout=wall_s + _GRACE_WALL_S)
     except subprocess.TimeoutExpired:
         companion.kill()
         code = companion.wait()

@@ -9,9 +9,10 @@ rate checks, link loss, the engagement's time limit) is measured on one of these
   stale budget at 10x is 25 ms of wall time), so tests and the demo use the next one.
 - :class:`LockstepClock`: the vehicle's own time (``time_boot_ms`` of its messages, and the
   lockstep requests of :mod:`ezcompanion.service.lockstep`), for the loopback vehicle in
-  lockstep only. It does not move while the vehicle is silent, so that a vehicle that stops
-  altogether is still noticed, it runs on wall time once nothing has moved it for
-  ``stall_wall_s`` (then link loss and stale budgets count as usual).
+  lockstep only. It stands at 0 until the vehicle is first heard (however long it takes to
+  start), then follows the vehicle; so that a vehicle that stops altogether is still
+  noticed, it runs on wall time once nothing has moved it for ``stall_wall_s`` (then link
+  loss and stale budgets count as usual).
 """
 
 from __future__ import annotations
@@ -93,8 +94,12 @@ class LockstepClock:
     def observe(self, vehicle_s: float) -> float:
         """Take a vehicle time stamp (s); returns the clock time."""
         last = self._vehicle_s
-        if last is None or vehicle_s < last - _RESTART_BACKSTEP_S:
-            self._base_s = self.now_s()  # a first or new time base: carry on from here
+        if last is None:  # the vehicle's time from now on
+            self._base_s = vehicle_s
+            self._vehicle_s = vehicle_s
+            self._moved_wall_s = time.monotonic()
+        elif vehicle_s < last - _RESTART_BACKSTEP_S:
+            self._base_s = self.now_s()  # a new time base: carry on from here
             self._vehicle_s = vehicle_s
             self._moved_wall_s = time.monotonic()
         elif vehicle_s > last:
@@ -104,7 +109,10 @@ class LockstepClock:
         return self.now_s()
 
     def now_s(self) -> float:
-        """Clock time (s): the vehicle's, plus wall time beyond a stall."""
+        """Clock time (s): the vehicle's, plus wall time beyond a stall (0 before the
+        vehicle is heard)."""
+        if self._vehicle_s is None:
+            return self._base_s
         silent_wall_s = time.monotonic() - self._moved_wall_s
         return self._base_s + max(0.0, silent_wall_s - self.stall_wall_s)
 

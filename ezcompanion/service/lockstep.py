@@ -5,11 +5,13 @@ lockstep the loopback vehicle (``sitl-stub --lockstep``) advances its simulated 
 far as the companion allows, and the companion measures every budget on the vehicle's time
 (:class:`~ezcompanion.service.clock.LockstepClock`). The protocol uses MAVLink's TIMESYNC:
 
-- The vehicle stops after every position sample it sends, and whenever it has reached the
-  time granted to it; stopped at simulated time T, it sends a request
-  ``TIMESYNC(tc1=0, ts1=T ns)`` (again every half wall second until answered).
+- The vehicle stops after every position sample it sends, whenever it has reached the
+  time granted to it, and after replying to what it read while stopped; stopped at
+  simulated time T, it sends a request ``TIMESYNC(tc1=0, ts1=T ns + n)`` (n < 1000 counts
+  the requests, so that an answer is matched to its own), again every half wall second
+  until answered.
 - The companion reads everything the vehicle sent before the request (the sample at T), runs
-  its tick, sends its setpoint, and only then answers ``TIMESYNC(tc1=G ns, ts1=T ns)``: the
+  its tick, sends its setpoint, and only then answers ``TIMESYNC(tc1=G ns, ts1=T ns + n)``: the
   vehicle may run up to G > T, the time of the companion's next deadline (loop, heartbeat,
   a check), and stop early at its next position sample. The setpoint, sent before the
   answer on the same link, takes effect at T.
@@ -80,7 +82,8 @@ class Lockstep:
         if kind == "TIMESYNC":
             if int(msg.tc1) == 0 and int(msg.ts1) >= 0:
                 self._request_ns = int(msg.ts1)
-                stamp_s = int(msg.ts1) / _NS
+                # T in ns plus the request's count (< 1000): the time is T
+                stamp_s = (int(msg.ts1) // 1000 * 1000) / _NS
         elif hasattr(msg, "time_boot_ms"):
             stamp_s = int(msg.time_boot_ms) / 1000.0
         if stamp_s is not None:

@@ -15,7 +15,8 @@ and locks the vehicle, asks for its streams and origin and follows its mode; onc
 GUIDED (OFFBOARD on PX4) and the frame is settled, the origin is latched and the engagement
 ticks: once per new position sample (at most every half loop period), else at each loop
 deadline (:mod:`ezcompanion.service.ticks`). ``run(max_time_s=...)`` counts from the start
-of the engagement (and bounds the wait for one from the start of ``run``).
+of the engagement (and bounds the wait for one from the start of ``run``; in lockstep from
+the vehicle's start, however long the vehicle's process takes to start).
 A tick on a stale or untrusted picture sends no guidance (a ``failsafe``); untrusted input
 lasting ``distrust_give_up_s`` ends guidance (``aborted``). No heartbeat for
 ``link_lost_after_s`` is a lost link. See docs/service.md.

@@ -103,7 +103,8 @@ class CompanionService:
         self._lockstep: Lockstep | None = None
         if lockstep:
             check_loopback_url(settings.connect)
-            clock = LockstepClock(stall_wall_s=settings.link_lost_after_s + 2.0)
+            # a vehicle silent this long (wall s) has stopped: its link loss counts on wall time
+            clock = LockstepClock(stall_wall_s=settings.link_lost_after_s + 7.0)
             self.clock, self._lockstep = clock, Lockstep(clock)
         else:
             self.clock = ScaledClock(settings.speedup)

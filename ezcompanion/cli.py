@@ -124,6 +124,7 @@ def run_service(
     track_csv: Path | None,
     telemetry: dict[str, object] | None = None,
     record: Path | None = None,
+    lockstep: bool = False,
     **overrides: object,
 ) -> int:
     """Steer a vehicle through one engagement. 0 if intercepted; 1 if it ended otherwise;
@@ -159,6 +160,7 @@ def run_service(
         events=events,
         track_csv=track_csv,
         telemetry=zenoh,
+        lockstep=lockstep,
     )
     recorder = None
     if record is not None:  # the monitor's recorder on the service's own telemetry
@@ -255,15 +257,26 @@ def run_scale(
     return ExitCode.OK
 
 
-def run_demo(*, scenarios: Sequence[int], out_dir: Path, speedup: float, profile: str) -> int:
-    """The paper's scenarios flown by the loopback vehicle and the companion, end to end.
+def run_demo(
+    *,
+    scenarios: Sequence[int],
+    out_dir: Path,
+    speedup: float,
+    profile: str,
+    watch: bool = False,
+    zenoh_listen: str | None = None,
+) -> int:
+    """The paper's scenarios flown by the loopback vehicle and the companion, end to end,
+    in lockstep (the same result on a loaded machine as on an idle one; ``speedup`` is the
+    most the vehicle's time runs ahead of wall time; ``watch``: 1x, to follow live).
 
     Returns 1 if any engagement fails to intercept or enters an engagement zone.
     """
-    from ezcompanion.service.demo import run_loopback, telemetry_endpoint
-    from ezcompanion.sim.output import read_track_csv
-    from ezcompanion.sim.plot import plot_result
+    from ezcompanion.service.demo import judge_run, run_loopback, telemetry_endpoint
+    from ezcompanion.sim.demo_plot import plot_demo
 
+    if watch:
+        speedup = 1.0
     failed = False
     for number in scenarios:
         config = CONFIG_DIR / PAPER_SCENARIOS[number]
@@ -271,44 +284,60 @@ def run_demo(*, scenarios: Sequence[int], out_dir: Path, speedup: float, profile
         where = out_dir / f"scenario{number}"
         print(
             f"--- scenario {number}: sitl_stub ({profile}) and the companion over loopback UDP, "
-            f"{speedup:g}x speed-up",
+            f"in lockstep, at most {speedup:g}x",
             flush=True,
         )
-        endpoint = telemetry_endpoint()
+        endpoint = zenoh_listen or telemetry_endpoint()
+        if zenoh_listen is None and not endpoint.endswith(":7447"):
+            print(f"    tcp/127.0.0.1:7447 is taken: telemetry on {endpoint} (choose with "
+                  "--zenoh-listen ENDPOINT)")  # fmt: skip
         print(f"    telemetry on {endpoint}: watch with `ezcompanion monitor --connect {endpoint}`")
+        if watch:
+            print(
+                f"    or in Foxglove: `ezcompanion foxglove --connect {endpoint}`, then open "
+                "the WebSocket connection it prints",
+                flush=True,
+            )
         result = run_loopback(config, where, speedup=speedup, profile=profile, telemetry=endpoint)
         print(result.summary(scenario))
-        view = read_track_csv(where / "companion.csv", scenario, scenario.law)
-        print(f"  wrote {plot_result(view, where / 'engagement.png')}")
+        try:
+            track, view, judgement = judge_run(scenario, where)
+        except (OSError, ValueError) as exc:
+            print(f"  no figure: {exc}")
+        else:
+            print(f"  wrote {plot_demo(track, view, judgement, where / 'engagement.png')}")
         if not (result.intercepted and min(result.min_clearance_m) > 0.0):
             failed = True
     return ExitCode.FAILED if failed else ExitCode.OK
 
 
 def run_reference_demo(*, scenarios: Sequence[int], out_dir: Path) -> int:
-    """The paper's scenarios in the reference simulator, both laws, with figures and CSVs.
+    """The paper's scenarios in the reference simulator, the three laws side by side in one
+    figure per scenario, and a CSV per law.
 
     Returns 1 if the default (backup) law fails to intercept or enters an engagement zone.
     """
     from ezcompanion.guidance import LawName
+    from ezcompanion.sim.compare_plot import plot_comparison
     from ezcompanion.sim.engine import simulate
     from ezcompanion.sim.output import write_result_csv
-    from ezcompanion.sim.plot import plot_result
 
     failed = False
     for number in scenarios:
         scenario = _load(CONFIG_DIR / PAPER_SCENARIOS[number])
+        runs = []
         for law in (LawName.BACKUP, LawName.ROBUST, LawName.PAPER):
             run = simulate(scenario, law)
-            stem = out_dir / f"scenario{number}_{law.value}"
+            runs.append(run)
             print(run.summary())
+            stem = out_dir / f"scenario{number}_{law.value}"
             print(f"  wrote {write_result_csv(run, stem.with_suffix('.csv'))}")
-            print(f"  wrote {plot_result(run, stem.with_suffix('.png'))}")
             outcome = run.outcome
             if law is LawName.BACKUP and not (
                 outcome.intercepted and min(outcome.min_clearance_m) > 0.0
             ):
                 failed = True
+        print(f"  wrote {plot_comparison(runs, out_dir / f'scenario{number}_laws.png')}")
     return ExitCode.FAILED if failed else ExitCode.OK
 
 
@@ -378,7 +407,17 @@ def _parser() -> argparse.ArgumentParser:
         "--speedup", type=SPEEDUP, help="clock speed-up, to match a loopback vehicle (0, 1000]"
     )
     run.add_argument(
-        "--max-time", type=SECONDS, metavar="SECONDS", help="give up after this many seconds"
+        "--max-time",
+        type=SECONDS,
+        metavar="SECONDS",
+        help="give up this many seconds after the engagement started (or, with none, after "
+        "the start)",
+    )
+    run.add_argument(
+        "--lockstep",
+        action="store_true",
+        help="follow the clock of a loopback `sitl-stub --lockstep` (127.0.0.1 only; never "
+        "with a real autopilot): every budget in the vehicle's simulated time",
     )
     run.add_argument(
         "--zenoh-listen", action="append", help="telemetry endpoint (default tcp/127.0.0.1:7447)"
@@ -420,7 +459,22 @@ def _parser() -> argparse.ArgumentParser:
         help="output directory (default demo-out, or demo-out-2, ... if that holds results)",
     )
     demo.add_argument(
-        "--speedup", type=SPEEDUP, default=10.0, help="simulated s per wall s (default 10)"
+        "--speedup",
+        type=SPEEDUP,
+        default=10.0,
+        help="the most simulated s per wall s (default 10; the demo runs in lockstep, so a "
+        "loaded machine only makes it slower, never different)",
+    )
+    demo.add_argument(
+        "--watch",
+        action="store_true",
+        help="run at 1x and print how to attach `ezcompanion monitor` or Foxglove",
+    )
+    demo.add_argument(
+        "--zenoh-listen",
+        metavar="ENDPOINT",
+        help="the companion's telemetry endpoint (default tcp/127.0.0.1:7447, or a free port "
+        "if that is taken)",
     )
     demo.add_argument(
         "--profile",
@@ -432,7 +486,8 @@ def _parser() -> argparse.ArgumentParser:
     demo.add_argument(
         "--reference",
         action="store_true",
-        help="the reference simulator instead, both laws side by side",
+        help="the reference simulator instead: the three laws side by side, one figure per "
+        "scenario",
     )
 
     from ezcompanion.telemetry.cli import add_telemetry_parsers
@@ -479,6 +534,7 @@ def _dispatch(args: argparse.Namespace) -> int:
             signing_key_file=str(args.signing_key_file) if args.signing_key_file else None,
             tlog=str(args.tlog) if args.tlog else None,
             speedup=args.speedup,
+            lockstep=args.lockstep,
             telemetry={
                 "listen": args.zenoh_listen,
                 "connect": args.zenoh_connect,
@@ -499,7 +555,12 @@ def _dispatch(args: argparse.Namespace) -> int:
     if args.reference:
         return run_reference_demo(scenarios=scenarios, out_dir=out_dir)
     return run_demo(
-        scenarios=scenarios, out_dir=out_dir, speedup=args.speedup, profile=args.profile
+        scenarios=scenarios,
+        out_dir=out_dir,
+        speedup=args.speedup,
+        profile=args.profile,
+        watch=args.watch,
+        zenoh_listen=args.zenoh_listen,
     )
 
 

@@ -67,6 +67,13 @@ def _parser() -> argparse.ArgumentParser:
         metavar="SECONDS",
         help="stop after this many simulated seconds (default: run until a signal)",
     )
+    parser.add_argument(
+        "--lockstep",
+        action="store_true",
+        help="advance simulated time only as the companion answers (`ezcompanion run "
+        "--lockstep`): stop after every position sample until answered; --speedup is then "
+        "the most simulated time runs ahead of wall time. For loopback tests and the demo",
+    )
     parser.add_argument("--seed", type=int, help="seed of the fault generator")
     parser.add_argument("--system-id", type=int, help="MAVLink system id, 1 to 255")
     parser.add_argument("--component-id", type=int, help="MAVLink component id, 1 to 255")
@@ -85,7 +92,9 @@ def run(args: argparse.Namespace) -> int:
         component_id=args.component_id,
         initial_mode=args.initial_mode,
     )
-    stub = SitlStub(config, truth_out=args.truth_out, duration_s=args.duration)
+    stub = SitlStub(
+        config, truth_out=args.truth_out, duration_s=args.duration, lockstep=args.lockstep
+    )
     done = threading.Event()
 
     def on_signal(_signum: int, _frame: FrameType | None) -> None:

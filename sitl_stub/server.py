@@ -7,6 +7,11 @@ sleeps in ``select`` on the link until the next thing is due or a message arrive
 messages take effect at the simulated time they are read. ``time_boot_ms`` is the simulated
 time since the stub started.
 
+With ``lockstep=True`` (``sitl-stub --lockstep``) the simulated clock also waits for the
+companion: it stops after every position sample and at the time the companion granted, and
+goes on when the companion answers (:mod:`sitl_stub.lockstep`); ``speedup`` is then the
+most it runs ahead of wall time. The engagement no longer depends on the machine's load.
+
     with SitlStub(load_stub_config("config/paper_scenario1.yaml", speedup=10)) as stub:
         stub.wait_sim_time(5.0)
         print(stub.state)
@@ -16,6 +21,7 @@ from __future__ import annotations
 
 import logging
 import math
+import select
 import socket
 import threading
 import time
@@ -28,6 +34,7 @@ from ezcompanion.wire import Link, Message, open_link
 from sitl_stub.autopilot import Autopilot
 from sitl_stub.config import StubConfig
 from sitl_stub.faults import FaultInjector
+from sitl_stub.lockstep import LockstepGate
 from sitl_stub.telemetry import StreamScheduler, TelemetryEncoder
 from sitl_stub.truth import TruthWriter
 from sitl_stub.vehicle import VehicleParams, VehicleState, step
@@ -39,13 +46,15 @@ _log = logging.getLogger(__name__)
 _HEARTBEAT_PERIOD_S = 1.0
 _MAX_WAIT_WALL_S = 0.1  # wake at least this often (wall time) to publish the clock
 _MAX_STEPS_PER_PASS = 500  # then look at the link again before catching up further
+_POSITIONS = frozenset({"LOCAL_POSITION_NED", "GLOBAL_POSITION_INT"})
 
 
 class SitlStub:
     """A MAVLink vehicle on a pymavlink URL; start/stop or use as a context manager."""
 
     def __init__(self, config: StubConfig, *, truth_out: str | Path | None = None,
-                 record_truth: bool = False, duration_s: float | None = None) -> None:
+                 record_truth: bool = False, duration_s: float | None = None,
+                 lockstep: bool = False) -> None:
         self.config = config
         s = config.settings
         self._wind = Wind(s.wind_north_m_s, s.wind_east_m_s)
@@ -79,6 +88,7 @@ class SitlStub:
         self.faults = FaultInjector(s.faults, s.seed)
         self._stale: VehicleState | None = None
         self._truth: TruthWriter | None = None
+        self.lockstep: LockstepGate | None = LockstepGate() if lockstep else None
 
     # ---- lifecycle ---------------------------------------------------------------------
     def start(self) -> SitlStub:
@@ -182,12 +192,16 @@ class SitlStub:
         link, speedup = self._link, self.config.settings.speedup
         wall0 = time.monotonic()
         self._next_heartbeat_s = 0.0
+        gate = self.lockstep
+        dt = self.config.settings.physics_dt_s
         while not self._stop.is_set():
             now = (time.monotonic() - wall0) * speedup
             if self._duration_s is not None:
                 now = min(now, self._duration_s)
+            if gate is not None:
+                now = min(now, gate.limit_s(self._state.t_s, dt))
             caught_up = self._advance(now)
-            for frame in self.faults.release(now):
+            for frame in self.faults.release(self._state.t_s if gate is not None else now):
                 link.write(frame)
             with self._lock:
                 self._sim_s = self._state.t_s
@@ -195,6 +209,16 @@ class SitlStub:
             if self._duration_s is not None and self._state.t_s >= self._duration_s - 1e-9:
                 return
             wait_s = 0.0 if not caught_up else self._wait_wall_s(now, speedup)
+            if gate is not None and gate.stopped(self._state.t_s):
+                request = gate.request(link.mav, self._state.t_s)
+                if request is not None:
+                    link.send(request)
+                wait_s = gate.wait_wall_s()
+            if gate is not None and not gate.stopped(self._state.t_s):
+                # lockstep, running: the link is read at the next stop, so that whatever the
+                # companion sent takes effect at a simulated time that no wall timing moves
+                select.select([self._wake_r], [], [], wait_s)
+                continue
             readable = link.wait_readable(wait_s, self._wake_r.fileno())
             if self._wake_r.fileno() in readable:
                 self._drain_wake()
@@ -227,25 +251,31 @@ class SitlStub:
         if self._link_down():
             return
         for msg in messages:
+            if self.lockstep is not None and self.lockstep.on_message(msg):
+                continue
             try:
                 self.autopilot.handle(msg, self._state.t_s, self._state)
             except Exception:
                 self.handler_errors += 1
                 _log.exception("handling %s failed", msg.get_type())
-        self._flush()
+        if self._flush() and self.lockstep is not None:
+            self.lockstep.hold(self._state.t_s)  # the companion sees the replies first
 
-    def _flush(self) -> None:
+    def _flush(self) -> int:
+        """Send what the autopilot has to say; how many messages."""
         assert self._link is not None and self.autopilot is not None
         if self._link_down():
             self.autopilot.outbox.clear()
             self.autopilot.requested.clear()
-            return
+            return 0
+        sent = len(self.autopilot.outbox) + len(self.autopilot.requested)
         for msg in self.autopilot.outbox:
             self._link.send(msg)
         self.autopilot.outbox.clear()
         for name in self.autopilot.requested:
             self._emit(name, self._state.t_s)
         self.autopilot.requested.clear()
+        return sent
 
     def _advance(self, now: float) -> bool:
         """Step the physics up to ``now``; False if it stopped early to look at the link."""
@@ -266,6 +296,8 @@ class SitlStub:
                 self._truth.write(new, ap.mode.name, ap.armed)
             self._periodic(new.t_s)
             self._flush()
+            if self.lockstep is not None and self.lockstep.stopped(new.t_s):
+                return True  # wait for the companion's answer
         return False
 
     def _periodic(self, t_s: float) -> None:
@@ -301,3 +333,5 @@ class SitlStub:
                 self._link.write(ready)
         else:
             self._link.write(frame)
+        if self.lockstep is not None and name in _POSITIONS:
+            self.lockstep.hold(self._state.t_s)

@@ -129,12 +129,17 @@ def fly(
     port: int | None = None,
     stub_port: int | None = None,
     stub_config: Path | None = None,
+    lockstep: bool = False,
     **companion: Any,
 ) -> Flight:
     """The companion in a thread, the vehicle in a process, until the engagement ends.
 
     The companion listens on ``port`` (default: a free one); the vehicle sends to
-    ``stub_port`` (default: the companion's; a relay's, to sit in between)."""
+    ``stub_port`` (default: the companion's; a relay's, to sit in between). With
+    ``lockstep`` both run in lockstep (``--lockstep``): the vehicle's time waits for the
+    companion and every budget is in vehicle time, whatever the load of the machine; for
+    every test that does not test timing or time stamps itself (hostile input may forge
+    those, and a relay would then move the companion's clock)."""
     scenario = load_scenario(config)
     port = free_udp_port() if port is None else port
     # 20 Hz telemetry and ticks unless a test asks otherwise: at 5x that is still 100
@@ -145,14 +150,16 @@ def fly(
         scenario,
         connect=f"udpin:127.0.0.1:{port}",
         engage=True,
-        speedup=SPEEDUP,
+        speedup=None if lockstep else SPEEDUP,
         tlog=str(tmp_path / "companion.tlog"),
         **companion,
     )
     events = EventLog(lambda e: print(e.line()))  # shown when a test fails
     listening = threading.Event()
     events.add_sink(lambda e: listening.set() if e.kind is EventKind.LISTENING else None)
-    service = CompanionService(scenario, settings, events=events, telemetry=telemetry)
+    service = CompanionService(
+        scenario, settings, events=events, telemetry=telemetry, lockstep=lockstep
+    )
     result: list[EngagementOutcome] = []
     thread = threading.Thread(target=lambda: result.append(service.run(max_time_s=max_time_s)))
     thread.start()
@@ -160,12 +167,14 @@ def fly(
     try:
         assert listening.wait(30.0), "the companion never opened its link"
         mode = ["--initial-mode", start_mode] if start_mode else []
+        mode += ["--lockstep"] if lockstep else []
         to = port if stub_port is None else stub_port
         vehicle = config if stub_config is None else stub_config  # the vehicle's own file
         with stub_process(vehicle, to, truth, "--profile", profile, *mode) as stub:
             if during is not None:
                 during(service, stub, port, truth)
-            thread.join(timeout=max_time_s / SPEEDUP + 30.0)
+            # in lockstep the wall time is the machine's: as long as it takes, within reason
+            thread.join(timeout=max_time_s * (10.0 if lockstep else 1.0 / SPEEDUP) + 30.0)
     finally:
         service.stop()
         thread.join(timeout=10.0)
@@ -202,7 +211,7 @@ def test_each_setpoint_profile_flies_the_stub(
     # The copter holds in LOITER and the companion asks for GUIDED; PX4 holds in AUTO.LOITER
     # and refuses OFFBOARD until setpoints stream, so the companion streams first.
     config = CONFIG / "paper_scenario1.yaml"
-    flight = fly(config, tmp_path, profile=profile, start_mode=start_mode)
+    flight = fly(config, tmp_path, profile=profile, start_mode=start_mode, lockstep=True)
     found = flight.events.of_kind(EventKind.VEHICLE_FOUND)
     assert found and f"setpoints {kind}" in found[0].message
     engaged = flight.events.of_kind(EventKind.ENGAGED)
@@ -316,7 +325,7 @@ def test_signing_mismatch_is_refused_and_a_match_flies(tmp_path: Path) -> None:
 def test_the_tlog_reads_back_with_pymavlink(tmp_path: Path) -> None:
     from pymavlink import mavutil
 
-    flight = fly(CONFIG / "paper_scenario1.yaml", tmp_path)
+    flight = fly(CONFIG / "paper_scenario1.yaml", tmp_path, lockstep=True)
     log = mavutil.mavlink_connection(str(tmp_path / "companion.tlog"))
     seen: dict[str, int] = {}
     while (msg := log.recv_match()) is not None:

@@ -15,6 +15,7 @@ import pytest
 from conftest_sitl import Gcs, M, gcs_link, running_stub
 
 from ezcompanion import wire
+from sitl_stub.config import StreamRates
 
 _BAD_FLOATS = (math.nan, math.inf, -math.inf, 1e30, -1e30, 3.4e38)
 _IMPLEMENTED = {176, 400, 510, 511, 512, 43002}
@@ -83,7 +84,11 @@ def _mutate(frame: bytes, rng: random.Random) -> bytes:
 
 def test_hostile_input_never_moves_the_vehicle(gcs: Gcs) -> None:
     rng = random.Random(20240531)
-    with running_stub(gcs, speedup=10.0) as stub:
+    # 2x and the telemetry at 2 Hz: what is tested is the commands, and a stream at 10x
+    # fills the test's socket buffer whenever a loaded machine leaves it unread for a moment
+    quiet = StreamRates(global_position_int_hz=2.0, local_position_ned_hz=2.0,
+                        attitude_hz=2.0, vfr_hud_hz=0.0)
+    with running_stub(gcs, speedup=2.0, streams=quiet) as stub:
         ack = gcs.set_mode(4)
         assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
         stub.wait_sim_time(stub.sim_time_s + 1.5)  # braked to a hover
@@ -111,16 +116,20 @@ def test_hostile_input_never_moves_the_vehicle(gcs: Gcs) -> None:
             if gcs.recv("COMMAND_ACK", 0.5, where=lambda m: m.command == probe.command):
                 break
         gcs.drain()
-        acks = 0
+        unanswered = []
         for msg in commands:
-            gcs.conn.write(bytes(msg.pack(encoder)))  # type: ignore[attr-defined]
-            # matched by command id, with room for a loaded machine: a late ack must not be
-            # counted for the next command
             wanted = msg.command  # type: ignore[attr-defined]
-            if gcs.recv("COMMAND_ACK", 5.0, where=lambda m, c=wanted: m.command == c):
-                acks += 1
+            # Over UDP a datagram can be lost when a loaded machine leaves a socket unread
+            # (issue 12: 99 of 100 ACKs): a command is sent again until answered, three times
+            # at most. A command the stub ignores is ignored every time, so this still fails.
+            for _attempt in range(3):
+                gcs.conn.write(bytes(msg.pack(encoder)))  # type: ignore[attr-defined]
+                if gcs.recv("COMMAND_ACK", 3.0, where=lambda m, c=wanted: m.command == c):
+                    break
+            else:
+                unanswered.append(wanted)
         stub.wait_sim_time(stub.sim_time_s + 1.0)
-        assert acks == len(commands)  # every command answered, none ignored
+        assert unanswered == []  # every command answered, none ignored
         assert gcs.recv("HEARTBEAT", 2.0) is not None
         now = stub.state
         assert stub.mode_name == "GUIDED" and stub.autopilot is not None and stub.autopilot.armed

@@ -187,7 +187,8 @@ def test_monitor_through_a_router_and_replay_with_a_plot(tmp_path: Path) -> None
                               kwargs={"stop": stop})  # fmt: skip
     router.start()
     host, port = endpoint.removeprefix("tcp/").split(":")
-    assert wait_for(lambda: _accepts(host, int(port)))  # clients cannot wait for a router
+    # clients cannot wait for a router
+    assert wait_for(lambda: _accepts(host, int(port)), timeout_s=30.0)
     record = tmp_path / "rec.jsonl"
     try:
         with publisher(
@@ -195,10 +196,12 @@ def test_monitor_through_a_router_and_replay_with_a_plot(tmp_path: Path) -> None
             status=lambda: {"scenario": SCENARIO_RAW}, publish_rate_hz=1000.0,
         ) as pub:  # fmt: skip
             monitor = Monitor(endpoint, record=record, conf={"mode": "client"})
-            assert wait_for(lambda: pub.has_subscribers("guidance"))
-            assert wait_for(lambda: "alpha" in monitor.text())
+            # three sessions meet through the router: on a loaded machine that can take more
+            # than the usual 5 s (each wait returns as soon as it holds)
+            assert wait_for(lambda: pub.has_subscribers("guidance"), timeout_s=30.0)
+            assert wait_for(lambda: "alpha" in monitor.text(), timeout_s=30.0)
             fly(pub, ticks=30)
-            assert wait_for(lambda: "intercepted" in monitor.text())
+            assert wait_for(lambda: "intercepted" in monitor.text(), timeout_s=30.0)
             view = monitor.close()
     finally:
         stop.set()

@@ -10,7 +10,6 @@ columns of ``ezcompanion simulate``), ``companion.tlog`` and ``engagement.png``.
 
 from __future__ import annotations
 
-import csv
 import socket
 import subprocess
 import sys
@@ -19,15 +18,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
-import numpy as np
-
 from ezcompanion.config import Scenario, load_scenario
-from ezcompanion.guidance import LawName, evaluate_law
-from ezcompanion.sim.engine import TRACK_SERIES
+from ezcompanion.guidance import LawName
+from ezcompanion.sim.engine import SimResult
+from ezcompanion.sim.judge import Judgement, TruthTrack, engagement_start_s, judge, read_truth
+from ezcompanion.sim.output import read_track_csv
 
 __all__ = [
     "DemoResult",
     "free_udp_port",
+    "judge_run",
     "judge_truth",
     "run_loopback",
     "telemetry_endpoint",
@@ -36,6 +36,8 @@ __all__ = [
 
 # wall seconds to wait for the companion beyond the scenario's own length
 _GRACE_WALL_S = 20.0
+# in lockstep the wall time depends on the machine: wait this long per simulated second
+_LOCKSTEP_WALL_PER_SIM_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -43,32 +45,51 @@ class DemoResult:
     """A loopback engagement judged by the vehicle's own track."""
 
     companion_exit: int
-    intercepted: bool  # the vehicle came within the intercept radius (truth)
-    time_s: float  # truth time of interception (or of the last row)
-    miss_distance_m: float
-    min_clearance_m: tuple[float, ...]  # per zone, from the truth
-    max_accel_ratio: float
+    judgement: Judgement
     out_dir: Path
 
+    @property
+    def intercepted(self) -> bool:
+        """The vehicle came within the intercept radius (truth)."""
+        return self.judgement.intercepted
+
+    @property
+    def time_s(self) -> float:
+        """Truth time of interception (or of the last row)."""
+        return self.judgement.time_s
+
+    @property
+    def miss_distance_m(self) -> float:
+        return self.judgement.miss_distance_m
+
+    @property
+    def min_clearance_m(self) -> tuple[float, ...]:
+        """Per zone, from the truth."""
+        return self.judgement.min_clearance_m
+
+    @property
+    def max_accel_ratio(self) -> float:
+        return self.judgement.max_accel_ratio
+
+    def headline(self, scenario: Scenario) -> str:
+        """The verdict in one line: the summary's first line and the figure's title."""
+        return self.judgement.headline(scenario.name)
+
     def summary(self, scenario: Scenario) -> str:
-        """A few readable lines."""
+        """A few readable lines, every number from the one judgement of the truth."""
+        j = self.judgement
         names = [d.name or f"D{i + 1}" for i, d in enumerate(scenario.defenders)]
-        clear = ", ".join(
-            f"{n} {c:+.3f} m" for n, c in zip(names, self.min_clearance_m, strict=True)
-        )
-        verdict = (
-            f"intercepted at t = {self.time_s:.2f} s"
-            if self.intercepted
-            else f"NOT intercepted (closest {self.miss_distance_m:.2f} m)"
-        )
-        safe = "yes" if min(self.min_clearance_m) > 0.0 else "NO: entered an engagement zone"
+        clear = ", ".join(f"{n} {c:+.3f} m" for n, c in zip(names, j.min_clearance_m, strict=True))
+        safe = "yes" if j.safe else "NO: entered an engagement zone"
+        end = "intercepted" if j.intercepted else "ended"
         return "\n".join(
             [
-                f"loopback {scenario.name} (judged by the vehicle's own track): {verdict}",
-                f"  miss distance        {self.miss_distance_m:.3f} m",
+                f"loopback (judged by the vehicle's own track) {self.headline(scenario)}",
+                f"  engaged / {end:<11}  t = {j.engaged_s:.2f} s / {j.time_s:.2f} s (vehicle time)",
+                f"  miss distance        {j.miss_distance_m:.3f} m",
                 f"  min true clearance   {clear}",
                 f"  stayed outside EZs   {safe}",
-                f"  max |a| / a_max      {self.max_accel_ratio:.3f}",
+                f"  max |a| / a_max      {j.max_accel_ratio:.3f}",
                 f"  files in             {self.out_dir}",
             ]
         )
@@ -120,35 +141,18 @@ def judge_truth(
     scenario: Scenario, truth_csv: Path
 ) -> tuple[bool, float, float, tuple[float, ...], float]:
     """(intercepted, time, miss distance, min clearance per zone, max |a|/a_max) of a truth
-    track, with clearances from the law's own EZ geometry (course = the truth heading,
-    correct without wind)."""
-    with truth_csv.open(newline="", encoding="utf-8") as handle:
-        rows = list(csv.DictReader(handle))
-    if not rows:
-        raise ValueError(f"{truth_csv}: no rows")
-    t, north, east, heading, accel = (np.array([float(r[c]) for r in rows]) for c in TRACK_SERIES)
-    out = evaluate_law(
-        LawName.ROBUST,
-        scenario.guidance,
-        scenario.zones(),
-        target_north_m=scenario.target.north_m,
-        target_east_m=scenario.target.east_m,
-        north_m=north,
-        east_m=east,
-        course_rad=heading,
-        speed_m_s=scenario.start.speed_m_s,
-        accel_m_s2=np.zeros_like(north),
-    )
-    ranges = out.range_to_target_m
-    inside = np.flatnonzero(ranges <= scenario.guidance.intercept_radius_m)
-    end = int(inside[0]) if inside.size else len(rows) - 1
-    return (
-        bool(inside.size),
-        float(t[end]),
-        float(ranges[: end + 1].min()),
-        tuple(float(c) for c in out.clearance_m[: end + 1].min(axis=0)),
-        float(np.abs(accel[: end + 1]).max() / scenario.guidance.accel_max_m_s2),
-    )
+    track (:func:`ezcompanion.sim.judge.judge`)."""
+    j = judge(read_truth(scenario, truth_csv))
+    return j.intercepted, j.time_s, j.miss_distance_m, j.min_clearance_m, j.max_accel_ratio
+
+
+def judge_run(scenario: Scenario, out_dir: Path) -> tuple[TruthTrack, SimResult, Judgement]:
+    """The truth, the companion's view and the verdict of a loopback run in ``out_dir``; the
+    engagement starts where the companion's first tick saw the vehicle."""
+    track = read_truth(scenario, out_dir / "truth.csv")
+    view = read_track_csv(out_dir / "companion.csv", scenario, scenario.law)
+    engaged = engagement_start_s(track, float(view.north_m[0]), float(view.east_m[0]))
+    return track, view, judge(track, engaged)
 
 
 def run_loopback(
@@ -160,10 +164,15 @@ def run_loopback(
     law: LawName | None = None,
     quiet: bool = False,
     telemetry: str | None = None,
+    lockstep: bool = True,
 ) -> DemoResult:
     """Fly ``config`` with the stub and the companion as two processes; judge the truth.
 
     ``telemetry``: the zenoh endpoint the companion listens on (None: no telemetry).
+    ``lockstep``: both run with ``--lockstep`` (the default): the vehicle's time waits for
+    the companion, so the engagement is the same on a saturated machine as on an idle one,
+    and ``speedup`` is only the most it runs ahead of wall time. Without it both run their
+    clocks ``speedup`` times faster than wall time, and a loaded machine shows.
     """
     scenario = load_scenario(config)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -187,6 +196,7 @@ def run_loopback(
         *_initial_mode(profile),
         "--duration",
         f"{duration + 5.0:g}",
+        *(["--lockstep"] if lockstep else []),
     ]
     companion_cmd = [
         sys.executable,
@@ -198,8 +208,7 @@ def run_loopback(
         "--connect",
         f"udpin:127.0.0.1:{port}",
         "--engage",
-        "--speedup",
-        f"{speedup:g}",
+        *(["--lockstep"] if lockstep else ["--speedup", f"{speedup:g}"]),
         "--tlog",
         str(out_dir / "companion.tlog"),
         "--track",
@@ -219,7 +228,8 @@ def run_loopback(
     forward.start()
     stub = subprocess.Popen(stub_cmd, stdout=subprocess.DEVNULL if quiet else None)
     try:
-        code = companion.wait(timeout=duration / speedup + _GRACE_WALL_S)
+        wall_s = duration * _LOCKSTEP_WALL_PER_SIM_S if lockstep else duration / speedup
+        code = companion.wait(timeout=wall_s + _GRACE_WALL_S)
     except subprocess.TimeoutExpired:
         companion.kill()
         code = companion.wait()
@@ -231,5 +241,8 @@ def run_loopback(
             stub.kill()
             stub.wait()
         forward.join(timeout=5.0)
-    intercepted, time_s, miss, clearance, accel = judge_truth(scenario, truth)
-    return DemoResult(code, intercepted, time_s, miss, clearance, accel, out_dir)
+    try:
+        judgement = judge_run(scenario, out_dir)[2]
+    except (OSError, ValueError):  # the companion never guided: no view, judge the truth
+        judgement = judge(read_truth(scenario, truth))
+    return DemoResult(code, judgement, out_dir)

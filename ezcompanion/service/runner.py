@@ -6,12 +6,17 @@ discovery, streams, modes, link health, trust) and the engagement
 
 One thread owns the link. It waits in ``select`` until a frame arrives or the next thing
 is due (heartbeat, a loop deadline, a check), so it never busy-waits, and all its periods are
-on the (optionally sped-up) monotonic clock of :mod:`ezcompanion.service.clock`.
+on one clock (:mod:`ezcompanion.service.clock`): the (optionally sped-up) monotonic clock, or
+in lockstep with the loopback vehicle the vehicle's own time
+(:mod:`ezcompanion.service.lockstep`).
 
 Life cycle: heartbeat at 1 Hz as MAV_TYPE_ONBOARD_CONTROLLER throughout; the session finds
 and locks the vehicle, asks for its streams and origin and follows its mode; once it is in
 GUIDED (OFFBOARD on PX4) and the frame is settled, the origin is latched and the engagement
-ticks: when a new position arrives (at most at the loop rate), else at each loop deadline.
+ticks: once per new position sample (at most every half loop period), else at each loop
+deadline (:mod:`ezcompanion.service.ticks`). ``run(max_time_s=...)`` counts from the start
+of the engagement (and bounds the wait for one from the start of ``run``; in lockstep from
+the vehicle's start, however long the vehicle's process takes to start).
 A tick on a stale or untrusted picture sends no guidance (a ``failsafe``); untrusted input
 lasting ``distrust_give_up_s`` ends guidance (``aborted``). No heartbeat for
 ``link_lost_after_s`` is a lost link. See docs/service.md.
@@ -34,16 +39,18 @@ from ezcompanion.field import VehiclePlacement, placement_warnings
 from ezcompanion.guidance import LawName
 from ezcompanion.records import EventKind, TickCommand
 from ezcompanion.service.autopilots import autopilot_profile
-from ezcompanion.service.clock import ScaledClock
+from ezcompanion.service.clock import Clock, LockstepClock, ScaledClock
 from ezcompanion.service.ending import ExitReport, leave_vehicle
 from ezcompanion.service.engagement import Engagement, EngagementOutcome
 from ezcompanion.service.events import EventLog
 from ezcompanion.service.inbox import ScenarioInbox
+from ezcompanion.service.lockstep import Lockstep, check_loopback_url
 from ezcompanion.service.loop import GuidanceLoop
 from ezcompanion.service.session import POSITIONS, VehicleSession
 from ezcompanion.service.setpoints import Setpoints, make_setpoints
 from ezcompanion.service.settings import CompanionSettings, signing_key
 from ezcompanion.service.state import TelemetryState
+from ezcompanion.service.ticks import EPSILON_S, TickSchedule
 from ezcompanion.service.tlog import TlogWriter
 from ezcompanion.sim.output import TrackWriter
 from ezcompanion.wire import (
@@ -61,6 +68,7 @@ if TYPE_CHECKING:
 __all__ = ["CompanionService", "EngagementOutcome", "Phase"]
 
 _HEARTBEAT_PERIOD_S = 1.0
+_WAKE_S = 0.1  # clock seconds: the session's checks run at least this often
 
 
 class Phase(StrEnum):
@@ -84,13 +92,24 @@ class CompanionService:
         events: EventLog | None = None,
         track_csv: str | Path | None = None,
         telemetry: TelemetrySettings | None = None,
+        lockstep: bool = False,
     ) -> None:
         """``telemetry``: publish over zenoh (``ezcompanion.telemetry``) when given and
-        enabled."""
+        enabled. ``lockstep``: follow the loopback vehicle's clock (``sitl-stub --lockstep``
+        only; refused on anything but a loopback address, see
+        :mod:`ezcompanion.service.lockstep`)."""
         self.scenario = scenario
         self.settings = settings
         self.events = events if events is not None else EventLog()
-        self.clock = ScaledClock(settings.speedup)
+        self.clock: Clock
+        self._lockstep: Lockstep | None = None
+        if lockstep:
+            check_loopback_url(settings.connect)
+            # a vehicle silent this long (wall s) has stopped: its link loss counts on wall time
+            clock = LockstepClock(stall_wall_s=settings.link_lost_after_s + 7.0)
+            self.clock, self._lockstep = clock, Lockstep(clock)
+        else:
+            self.clock = ScaledClock(settings.speedup)
         self.loop = GuidanceLoop(
             scenario,
             law=law,
@@ -113,9 +132,9 @@ class CompanionService:
         self._tlog: TlogWriter | None = None
         self._session: VehicleSession | None = None
         self._next_heartbeat_s = 0.0
-        self._next_deadline_s = 0.0
+        self.schedule = TickSchedule(self.loop.period_s)
+        self._engaged_at_s: float | None = None  # clock time the engagement first started
         self._abandon_said = False
-        self._last_tick_s = -math.inf
         self.exit_report: ExitReport | None = None  # where the vehicle was left (on_exit)
         self.placement: VehiclePlacement | None = None  # frame: vehicle, latched at engage
 
@@ -207,7 +226,8 @@ class CompanionService:
         }
 
     def run(self, *, max_time_s: float | None = None) -> EngagementOutcome:
-        """Guide until interception, ``stop()`` or ``max_time_s`` of clock time."""
+        """Guide until interception, ``stop()`` or ``max_time_s`` of clock time after the
+        engagement started (or, with no engagement yet, after ``run`` started)."""
         s = self.settings
         link = open_link(s.connect, system_id=s.system_id, component_id=s.component_id)
         with contextlib.ExitStack() as stack:
@@ -245,34 +265,23 @@ class CompanionService:
     # --- the loop -------------------------------------------------------------------------
 
     def _serve(self, max_time_s: float | None) -> None:
-        clock, link, session = self.clock, self._link, self.session
+        clock, link = self.clock, self._link
         assert link is not None
+        started_s = clock.now_s()
         while not self._stop.is_set() and self.phase is not Phase.DONE:
             now = clock.now_s()
-            if max_time_s is not None and now >= max_time_s:
+            if self._time_up(now, started_s, max_time_s):
                 break
-            due = min(
-                self._next_heartbeat_s,
-                self._next_deadline_s if self._ticking() else math.inf,
-                now + 0.1 * clock.speedup,
-            )
-            link.wait_readable(clock.wall_s(due - now))
+            link.wait_readable(clock.wait_wall_s(self._due_s(now) - now))
             self._take_pending_scenario(clock.now_s())
-            for frame in link.recv():
-                self._on_frame(frame, clock.now_s())
-            now = clock.now_s()
-            if now >= self._next_heartbeat_s:
-                self._send_heartbeat(now)
-            session.periodic(now, waiting=self.phase is Phase.WAITING)
-            self._follow_session(now)
-            self._check_distrust(now)
-            if self._ticking() and now >= self._next_deadline_s:
-                self._tick(now)
+            if not self._take_frames(link, started_s, max_time_s):
+                break
+            self._due_work(clock.now_s())
         self.phase = Phase.DONE
         self.engagement.finish(clock.now_s())
         commanded = self.engagement.setpoints_sent + self.engagement.brakes_sent > 0
         self.exit_report = leave_vehicle(  # a defined end: the mode of on_exit (ending.py)
-            self.settings.on_exit, session, self.events, commanded=commanded,
+            self.settings.on_exit, self.session, self.events, commanded=commanded,
             now=clock.now_s, pump=self._pump,
         )  # fmt: skip
 
@@ -282,21 +291,84 @@ class CompanionService:
         clock, link = self.clock, self._link
         assert link is not None
         now = clock.now_s()
-        link.wait_readable(clock.wall_s(max(0.0, min(timeout_s, self._next_heartbeat_s - now))))
+        link.wait_readable(
+            clock.wait_wall_s(max(0.0, min(timeout_s, self._next_heartbeat_s - now))))
         for frame in link.recv():
-            self._on_frame(frame, clock.now_s())
+            self._on_frame(frame)
         if clock.now_s() >= self._next_heartbeat_s:
             self._send_heartbeat(clock.now_s())
+        self._answer_lockstep(clock.now_s())  # in lockstep the vehicle's time goes on
 
-    def _on_frame(self, frame: Frame, now: float) -> None:
+    def _take_frames(self, link: Link, started_s: float, max_time_s: float | None) -> bool:
+        """Every frame the link holds, and after each whatever fell due, at that frame's
+        time (in lockstep the engagement is then a function of the frames alone). False
+        when the time is up or the service is done."""
+        for frame in link.recv():
+            now = self._on_frame(frame)
+            if self._time_up(now, started_s, max_time_s):
+                return False
+            self._due_work(now)
+            if self._done:
+                return False
+        return True
+
+    @property
+    def _done(self) -> bool:
+        return self.phase is Phase.DONE
+
+    def _due_work(self, now: float) -> None:
+        """Heartbeat, the session's checks, the phase, distrust, a due tick; then (lockstep)
+        the answer to the vehicle."""
+        if self.phase is Phase.DONE:
+            return
+        if now + EPSILON_S >= self._next_heartbeat_s:
+            self._send_heartbeat(now)
+        self.session.periodic(now, waiting=self.phase is Phase.WAITING)
+        self._follow_session(now)
+        self._check_distrust(now)
+        if self._ticking() and self.schedule.is_due(now):
+            self._tick(now)
+        self._answer_lockstep(now)
+
+    def _due_s(self, now: float) -> float:
+        """Clock time of the next thing due (heartbeat, tick, the session's checks)."""
+        tick = self.schedule.due_s() if self._ticking() else math.inf
+        return min(self._next_heartbeat_s, tick, now + _WAKE_S)
+
+    def _time_up(self, now: float, started_s: float, max_time_s: float | None) -> bool:
+        if max_time_s is None:
+            return False
+        since = self._engaged_at_s if self._engaged_at_s is not None else started_s
+        return now - since >= max_time_s - EPSILON_S
+
+    def _answer_lockstep(self, now: float) -> None:
+        """In lockstep, let the vehicle run on to the next deadline, now that everything it
+        sent has been handled (and the tick's setpoint has left before the answer)."""
+        lockstep = self._lockstep
+        if lockstep is None or self._link is None:
+            return
+        answer = lockstep.answer(self._link.mav, self._due_s(now))
+        if answer is not None:
+            self._send(answer)
+
+    def _on_frame(self, frame: Frame) -> float:
+        """Take one frame; the clock time it was taken at."""
+        lockstep = self._lockstep
+        now = lockstep.observe(frame.message) if lockstep is not None else self.clock.now_s()
+        if lockstep is not None and lockstep.overrun is not None and self.phase is not Phase.DONE:
+            self.events.emit(EventKind.VEHICLE_REFUSED, now, f"lockstep: {lockstep.overrun}")
+            self.phase = Phase.DONE
+            return now
         if self._tlog is not None:
             self._tlog.write(bytes(frame.message.get_msgbuf()))
         used = self.session.on_frame(frame, now)
         self._follow_session(now)
-        # A new position drives a tick at once, at most at the loop rate.
-        fresh = used in POSITIONS and self._ticking()
-        if fresh and now - self._last_tick_s >= 0.5 * self.loop.period_s:
-            self._tick(now)
+        # A new position drives a tick at once (at most every half period; one per sample).
+        if used in POSITIONS and self._ticking():
+            self.schedule.sample(int(frame.message.time_boot_ms) / 1000.0)
+            if self.schedule.is_due(now):
+                self._tick(now)
+        return now
 
     def _follow_session(self, now: float) -> None:
         """Move the phase along with what the session knows of the vehicle."""
@@ -306,6 +378,7 @@ class CompanionService:
             return
         if self.phase in (Phase.WAITING, Phase.GUIDING) and not session.connected:
             self.engagement.pause(now, brake=self.phase is Phase.GUIDING)
+            self.schedule.reset()
             self.phase = Phase.SEARCHING
             self.events.emit(
                 EventKind.LINK_LOST,
@@ -327,13 +400,16 @@ class CompanionService:
             and self._placed(now)
         ):
             self.phase = Phase.GUIDING
-            self._next_deadline_s = now
+            self.schedule.reset()  # the first tick at once
+            if self._engaged_at_s is None:
+                self._engaged_at_s = now
             session.telemetry.latch_origin()  # the frame is fixed for the engagement
             session.engaged(now)
             self._assume_abandon(now)
             self.engagement.start(now, session.mode)
         elif self.phase is Phase.GUIDING and not session.in_guided:
             self.engagement.pause(now, brake=True)
+            self.schedule.reset()
             self.phase = Phase.WAITING
 
     def _assume_abandon(self, now: float) -> None:
@@ -367,6 +443,7 @@ class CompanionService:
             turn_s=guidance.abandon_turn_s, hold_s=guidance.abandon_hold_s,
             brake_m_s2=guidance.abandon_brake_m_s2,
         )  # fmt: skip
+
     def _placed(self, now: float) -> bool:
         """``frame: vehicle``: the scenario is put on the vehicle as guidance engages, once
         (then latched, as the origin is); False while no fresh position says where it is."""
@@ -447,8 +524,7 @@ class CompanionService:
         )
 
     def _tick(self, now: float) -> None:
-        self._last_tick_s = now
-        self._next_deadline_s = max(self._next_deadline_s + self.loop.period_s, now)
+        self.schedule.ticked(now)
         session = self.session
         distrust = session.distrust(now)
         lasted_s = session.distrusted_for_s(now)

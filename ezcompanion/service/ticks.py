@@ -1,0 +1,78 @@
+"""When the engagement ticks: once per new position sample, else at each loop deadline.
+
+A position sample is new when its own time stamp (the vehicle's ``time_boot_ms``) is newer
+than that of the last sample a tick used: LOCAL_POSITION_NED and GLOBAL_POSITION_INT of the
+same instant are one sample, and a sample never drives two ticks (issue 13: two ticks 3.3 ms
+apart on one position, when a late deadline fell right after a sample's tick). Rules:
+
+- a new sample ticks at once, unless the last tick was less than half a period ago; then
+  at half a period after it (a faster stream than the loop is thinned, never queued);
+- with no new sample, a tick falls due one period after the last tick (a deadline: the
+  loop notices a stream that stopped, and fails closed once the position is stale);
+- ticks are therefore at least half a period apart, and each is driven by one new sample
+  or one deadline.
+
+Pure bookkeeping on clock times; no clock of its own.
+"""
+
+from __future__ import annotations
+
+import math
+
+from ezcompanion.errors import ConfigError
+
+__all__ = ["TickSchedule"]
+
+# a clock time this close to a due time has reached it (float sums of periods, ms stamps)
+EPSILON_S = 1e-6
+# a sample stamp this far behind the last ticked one is a restarted vehicle: new again
+_RESTART_BACKSTEP_S = 1.0
+
+
+class TickSchedule:
+    """Due times of the guidance ticks for one loop period."""
+
+    def __init__(self, period_s: float) -> None:
+        if not (math.isfinite(period_s) and period_s > 0.0):
+            raise ConfigError("period_s", period_s, "must be a finite number > 0")
+        self.period_s = period_s
+        self._last_tick_s = -math.inf
+        self._ticked_stamp_s: float | None = None  # stamp of the last sample a tick used
+        self._pending_stamp_s: float | None = None  # a new sample no tick has used yet
+
+    def reset(self) -> None:
+        """Forget everything (guidance stopped or restarts): the next tick is due at once."""
+        self._last_tick_s = -math.inf
+        self._ticked_stamp_s = None
+        self._pending_stamp_s = None
+
+    @property
+    def sample_pending(self) -> bool:
+        """A new sample waits for its tick."""
+        return self._pending_stamp_s is not None
+
+    def sample(self, stamp_s: float) -> bool:
+        """A position sample stamped ``stamp_s`` (vehicle time) was accepted; True if new."""
+        last = self._pending_stamp_s
+        if last is None:
+            last = self._ticked_stamp_s
+        new = last is None or stamp_s > last or stamp_s < last - _RESTART_BACKSTEP_S
+        if new:
+            self._pending_stamp_s = stamp_s
+        return new
+
+    def due_s(self) -> float:
+        """Clock time of the next tick."""
+        wait = 0.5 * self.period_s if self.sample_pending else self.period_s
+        return self._last_tick_s + wait
+
+    def is_due(self, now_s: float) -> bool:
+        """A tick is due at clock time ``now_s``."""
+        return now_s + EPSILON_S >= self.due_s()
+
+    def ticked(self, now_s: float) -> None:
+        """A tick ran at ``now_s`` on the freshest state (which holds any pending sample)."""
+        self._last_tick_s = now_s
+        if self._pending_stamp_s is not None:
+            self._ticked_stamp_s = self._pending_stamp_s
+            self._pending_stamp_s = None

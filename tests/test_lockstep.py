@@ -1,0 +1,196 @@
+"""Lockstep: the loopback vehicle's time waits for the companion; ticks, one per sample.
+
+The protocol is driven from a plain-pymavlink ground station (not the companion's code), the
+companion's clock and tick schedule are checked on their own, and two lockstep engagements
+over real UDP must leave the same tracks, byte for byte, however differently the machine
+scheduled them.
+"""
+
+from __future__ import annotations
+
+import itertools
+import threading
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+from conftest_sitl import gcs_link, make_config
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from ezcompanion.config import load_scenario
+from ezcompanion.errors import ConfigError
+from ezcompanion.service.clock import LockstepClock
+from ezcompanion.service.demo import free_udp_port, run_loopback
+from ezcompanion.service.events import EventKind, EventLog
+from ezcompanion.service.lockstep import check_loopback_url
+from ezcompanion.service.runner import CompanionService
+from ezcompanion.service.settings import companion_settings
+from ezcompanion.service.ticks import TickSchedule
+from sitl_stub import SitlStub
+
+CONFIG = Path(__file__).resolve().parents[1] / "config"
+NS = 1_000_000_000
+
+
+# --- the tick schedule ----------------------------------------------------------------------
+
+
+def test_a_sample_ticks_once_and_a_late_deadline_does_not_tick_it_again() -> None:
+    # issue 13: companion.csv had two ticks 3.3 ms apart on the same position sample
+    schedule = TickSchedule(0.02)
+    assert schedule.is_due(0.0)  # the first tick at once
+    schedule.ticked(0.0)
+    assert not schedule.is_due(0.0033)
+    assert schedule.sample(0.040) and schedule.is_due(0.0400)
+    schedule.ticked(0.0400)
+    assert not schedule.sample(0.040)  # GLOBAL_POSITION_INT of the same instant
+    assert not schedule.is_due(0.0433)  # the old grid's late deadline: no second tick
+    assert schedule.is_due(0.0600)  # a period without a sample: a deadline
+    schedule.ticked(0.0600)
+    assert schedule.sample(0.065) and not schedule.is_due(0.065)  # within half a period
+    assert schedule.is_due(0.0700)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.lists(
+        st.tuples(st.floats(0.0005, 0.05), st.booleans(), st.floats(0.0, 0.03)),
+        min_size=1,
+        max_size=80,
+    )
+)
+def test_ticks_are_half_a_period_apart_and_each_has_a_new_sample_or_a_deadline(
+    events: list[tuple[float, bool, float]],
+) -> None:
+    period = 0.02
+    schedule = TickSchedule(period)
+    now, stamp, sampled = 0.0, 0.0, False
+    ticks: list[tuple[float, bool]] = []  # (time, driven by a new sample)
+    for advance, has_sample, stamp_step in events:
+        now += advance
+        new = False
+        if has_sample:
+            stamp += stamp_step  # 0: the same sample again (the other source, a duplicate)
+            new = schedule.sample(stamp)
+            assert new or sampled, "the first sample is new"
+            assert not (new and sampled and stamp_step == 0.0), "the same stamp is not new"
+            sampled = True
+        pending = schedule.sample_pending
+        if schedule.is_due(now):
+            schedule.ticked(now)
+            ticks.append((now, pending))
+    for (t0, _), (t1, by_sample) in itertools.pairwise(ticks):
+        assert t1 - t0 >= 0.5 * period - 1e-6
+        assert by_sample or t1 - t0 >= period - 1e-6  # no sample: only at a deadline
+
+
+# --- the companion's clock and guard ----------------------------------------------------------
+
+
+def test_the_lockstep_clock_follows_the_vehicle_never_back_and_runs_on_after_a_stall() -> None:
+    clock = LockstepClock(stall_wall_s=60.0)
+    assert clock.observe(0.0) == 0.0
+    assert clock.observe(0.5) == pytest.approx(0.5)
+    assert clock.observe(0.3) == pytest.approx(0.5)  # reordered: the clock stays
+    assert clock.observe(12.0) == pytest.approx(12.0)
+    assert clock.observe(0.0) == pytest.approx(12.0)  # a restarted vehicle: a new base
+    assert clock.observe(0.25) == pytest.approx(12.25)
+    stalled = LockstepClock(stall_wall_s=0.01)
+    time.sleep(0.05)
+    assert stalled.now_s() == 0.0  # nothing heard yet: it waits, however long
+    stalled.observe(3.0)
+    time.sleep(0.05)  # at least this long: the vehicle is silent beyond the stall
+    assert stalled.now_s() > 3.0  # link loss and stale budgets count again
+
+
+@pytest.mark.parametrize(
+    "url", ["udpin:127.0.0.1:14550", "udpout:localhost:14550", "tcp:127.0.0.1:5760"]
+)
+def test_lockstep_is_accepted_on_loopback(url: str) -> None:
+    check_loopback_url(url)
+
+
+@pytest.mark.parametrize(
+    "url", ["udpin:0.0.0.0:14550", "udpout:10.0.0.2:14550", "/dev/ttyACM0,57600", "tcp:fc:5760"]
+)
+def test_lockstep_is_refused_anywhere_but_loopback(url: str) -> None:
+    with pytest.raises(ConfigError, match="--lockstep"):
+        check_loopback_url(url)
+
+
+# --- the stub's side, from a plain ground station ---------------------------------------------
+
+
+def test_the_stub_waits_for_answers_and_stops_at_each_position_sample() -> None:
+    with gcs_link() as gcs:
+        stub = SitlStub(make_config(gcs.port, speedup=1000.0), lockstep=True)
+        with stub:
+            request = gcs.recv("TIMESYNC", 5.0, where=lambda m: m.tc1 == 0)
+            assert request is not None and request.ts1 < 1000  # asks at t = 0
+            time.sleep(0.2)
+            assert stub.sim_time_s == 0.0  # unanswered, it does not move
+            gcs.mav.timesync_send(NS // 2, request.ts1)  # run on up to 0.5 s
+            # ... but it stops at its first position sample (10 Hz) and asks again there
+            again = gcs.recv("TIMESYNC", 5.0, where=lambda m: m.tc1 == 0 and m.ts1 > NS // 20)
+            assert again is not None and abs(again.ts1 / NS - 0.1) < 0.011
+            time.sleep(0.2)
+            assert stub.sim_time_s == pytest.approx(again.ts1 / NS, abs=1e-6)
+            gcs.mav.timesync_send(NS, again.ts1 - 1)  # an answer to another request
+            time.sleep(0.2)
+            assert stub.sim_time_s == pytest.approx(again.ts1 / NS, abs=1e-6)
+        assert stub.error is None
+
+
+# --- the companion with the stub --------------------------------------------------------------
+
+
+def _short(tmp_path: Path, duration_s: float) -> Path:
+    data = yaml.safe_load((CONFIG / "paper_scenario1.yaml").read_text())
+    data["simulation"]["duration_s"] = duration_s
+    path = tmp_path / "short.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_two_lockstep_engagements_leave_the_same_tracks_byte_for_byte(tmp_path: Path) -> None:
+    config = _short(tmp_path, 2.0)  # the companion stops 2 s (vehicle time) after engaging
+    runs = [run_loopback(config, tmp_path / name, speedup=1000.0, quiet=True) for name in "ab"]
+    for name in ("truth.csv", "companion.csv"):
+        a, b = ((tmp_path / run / name).read_bytes() for run in "ab")
+        assert a == b, name
+    rows = (tmp_path / "a" / "companion.csv").read_text().splitlines()[1:]
+    times = [float(row.split(",")[0]) for row in rows]
+    assert len(times) > 90  # 50 Hz for 2 s
+    assert all(t1 - t0 >= 0.01 - 1e-9 for t0, t1 in itertools.pairwise(times))
+    assert times[-1] - times[0] == pytest.approx(2.0, abs=0.03)  # from the engagement on
+    assert all(r.companion_exit == 1 and not r.intercepted for r in runs)
+
+
+def test_a_lockstep_companion_refuses_a_vehicle_that_runs_its_own_clock() -> None:
+    port = free_udp_port()
+    scenario = load_scenario(CONFIG / "paper_scenario1.yaml")
+    settings_ = companion_settings(scenario, connect=f"udpin:127.0.0.1:{port}", engage=True)
+    events = EventLog()
+    service = CompanionService(scenario, settings_, events=events, lockstep=True)
+    outcome: list[object] = []
+    thread = threading.Thread(target=lambda: outcome.append(service.run(max_time_s=60.0)))
+    thread.start()
+    try:
+        time.sleep(0.5)
+        with SitlStub(make_config(port, speedup=10.0)):  # not in lockstep
+            thread.join(timeout=30.0)
+    finally:
+        service.stop()
+        thread.join(timeout=10.0)
+    refused = events.of_kind(EventKind.VEHICLE_REFUSED)
+    assert refused and "not a lockstep vehicle" in refused[0].message
+    assert service.setpoints_sent == 0 and outcome
+
+
+def test_a_lockstep_companion_refuses_a_non_loopback_address() -> None:
+    scenario = load_scenario(CONFIG / "paper_scenario1.yaml")
+    settings_ = companion_settings(scenario, connect="udpin:0.0.0.0:14550")
+    with pytest.raises(ConfigError, match="--lockstep"):
+        CompanionService(scenario, settings_, lockstep=True)

@@ -26,7 +26,7 @@ from typing import Any, TextIO
 
 import zenoh
 
-from ezcompanion.telemetry.schema import key, vehicle_of
+from ezcompanion.telemetry.schema import decode, key, vehicle_of
 from ezcompanion.telemetry.settings import open_session, release
 
 __all__ = ["MonitorView", "VehicleView", "run_monitor", "sample_line"]
@@ -211,7 +211,7 @@ def run_monitor(
                 except queue.Empty:
                     key_expr = ""
                 if key_expr:
-                    payload = raw if isinstance(raw, bool) else _decode(raw)
+                    payload = raw if isinstance(raw, bool) else _decode(raw, enc)
                     vid, leaf = vehicle_of(key_expr)
                     if leaf == "alive" and payload and not view.vehicle(vid).alive:
                         session.get(key(vid, "status"), on_reply, timeout=_STATUS_TIMEOUT_S)
@@ -233,8 +233,8 @@ def run_monitor(
     return view
 
 
-def _decode(raw: bytes) -> Any:
+def _decode(raw: bytes, enc: str) -> Any:
     try:
-        return json.loads(raw)
+        return decode(raw, enc)
     except ValueError:
         return {"undecodable": raw.decode("utf-8", "replace")}

@@ -37,11 +37,20 @@ Refused, and counted (a refused sample changes nothing):
   enough"); only samples back on the prediction are taken again.
 - local and global disagreeing (``Hold.DISAGREE``): when both are fresh, each new sample is
   compared with the other source propagated to its time stamp.
+
+Converted only when needed (issue 13: 5.5% of a tick went to pymap3d while the local
+position was fresh): while local positions are fresh (within ``stale_after_s``), a
+GLOBAL_POSITION_INT is converted and judged at most every ``cross_check_period_s`` of
+vehicle time (the session also asks for it at that rate then); the others are skipped
+(counted in ``skipped``, neither used nor refused). The cross-check still runs on every
+local sample, against the last global one propagated to its time; once the local position
+is stale, every global sample is converted again.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from ezcompanion.config import GeoOrigin
@@ -57,7 +66,12 @@ from ezcompanion.wire import (
     ms_to_s,
 )
 
-__all__ = ["TelemetryState", "VehicleState"]
+__all__ = ["CROSS_CHECK_PERIOD_S", "TelemetryState", "VehicleState"]
+
+# While the local position is fresh, global positions are taken this often (vehicle time):
+# the cross-check's rate. 10 Hz: a local sample is compared with a global one at most
+# 0.1 s (plus jitter) old, well within _CROSS_MAX_AGE_S.
+CROSS_CHECK_PERIOD_S = 0.1
 
 # time_boot_ms going back by more than this is a reboot (or a forgery), not reordering
 _REBOOT_BACKSTEP_S = 10.0
@@ -126,7 +140,10 @@ class TelemetryState:
     origin: GeoOrigin
     accel_bound_m_s2: float = 2.0
     gate_position_m: float = 0.5
+    stale_after_s: float = 0.25  # local positions older than this: every global one counts
+    cross_check_period_s: float = CROSS_CHECK_PERIOD_S
     refused: dict[str, int] = field(default_factory=dict)
+    skipped: int = 0  # global positions not converted while the local one was fresh
     alarm: Hold | None = None  # a refusal that lasts: the origin changed after the latch
     _tracks: dict[str, _Track] = field(default_factory=dict)
     _yaw_rad: float = 0.0
@@ -136,16 +153,26 @@ class TelemetryState:
     _latched: bool = False
     _refusal: tuple[Hold, str] | None = None
 
-    def update(self, msg: Message, now_s: float) -> str | None:
-        """Take one message; returns its type if it was used, None if not ours or refused."""
-        kind = msg.get_type()
+    def update(self, msg: Message, now_s: float, kind: str | None = None) -> str | None:
+        """Take one message (``kind``: its type, if the caller has it already); returns its
+        type if it was used, None if not ours, skipped or refused."""
+        if kind is None:
+            kind = str(msg.get_type())
         handler = _HANDLERS.get(kind)
         if handler is None:
             return None
-        if not handler(self, msg, now_s):
+        used = handler(self, msg, now_s)
+        if used is None:
+            return None
+        if not used:
             self.refused[kind] = self.refused.get(kind, 0) + 1
             return None
-        return str(kind)
+        return kind
+
+    def local_fresh(self, now_s: float) -> bool:
+        """A local position arrived (and moved) within ``stale_after_s``."""
+        track = self._tracks.get("local")
+        return track is not None and now_s - track.moved.arrived_s <= self.stale_after_s
 
     def take_refusal(self) -> tuple[Hold, str] | None:
         """The trust refusal of the last :meth:`update` (cause, why), once."""
@@ -209,7 +236,16 @@ class TelemetryState:
         )
         return self._accept("local", sample)
 
-    def _on_global(self, msg: Message, now_s: float) -> bool:
+    def _on_global(self, msg: Message, now_s: float) -> bool | None:
+        boot_s = ms_to_s(msg.time_boot_ms)
+        track = self._tracks.get("global")
+        if (
+            track is not None
+            and 0.0 < boot_s - track.pred_boot_s < self.cross_check_period_s
+            and self.local_fresh(now_s)
+        ):
+            self.skipped += 1
+            return None  # the local position is fresh: this one is not needed
         lat, lon = e7_to_deg(msg.lat), e7_to_deg(msg.lon)
         if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0) or (msg.lat, msg.lon) == (0, 0):
             return False
@@ -229,7 +265,7 @@ class TelemetryState:
             down,
             cm_s_to_m_s(msg.vx),
             cm_s_to_m_s(msg.vy),
-            ms_to_s(msg.time_boot_ms),
+            boot_s,
             now_s,
         )
         return self._accept("global", sample)
@@ -400,7 +436,8 @@ def _advances(last_boot_s: float, boot_s: float) -> bool:
     return boot_s > last_boot_s or boot_s < last_boot_s - _REBOOT_BACKSTEP_S
 
 
-_HANDLERS = {
+# each returns True (used), False (refused) or None (skipped)
+_HANDLERS: dict[str, Callable[[TelemetryState, Message, float], bool | None]] = {
     "LOCAL_POSITION_NED": TelemetryState._on_local,
     "GLOBAL_POSITION_INT": TelemetryState._on_global,
     "ATTITUDE": TelemetryState._on_attitude,

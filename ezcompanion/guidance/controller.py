@@ -134,6 +134,7 @@ class GuidanceController:
         self._flown = np.zeros(1)  # the model's flown lateral acceleration (backup law)
         self._backup = np.full(1, BACKUP_NONE, dtype=np.int8)
         self._shield = pack_shield(self.params)
+        self._no_shield: tuple[npt.NDArray[np.int8], FloatArray] | None = None
 
     @property
     def accel_m_s2(self) -> FloatArray:
@@ -180,11 +181,10 @@ class GuidanceController:
         accel_next = np.empty_like(accel)
         mode = np.empty(accel.shape, dtype=np.int8)
         _advance_batch(self._packed, out, accel, dt_s, accel_next, mode)
-        size = accel.shape[0]
-        backup = np.full(size, BACKUP_NONE, dtype=np.int8)
-        shield = np.full((size, 6), math.nan)
         if self.law is LawName.BACKUP:
             backup, shield = self._shield_step(state, rows, out, dt_s, accel_next, mode)
+        else:
+            backup, shield = self._unshielded(accel.shape[0])
         self._accel = accel_next
         shape = self._shape
         mode = mode.reshape(shape)
@@ -199,6 +199,16 @@ class GuidanceController:
             certificate_m=shield[:, 4].reshape(shape),
             certificate_ahead_m=shield[:, 5].reshape(shape),
         )
+
+    def _unshielded(self, size: int) -> tuple[npt.NDArray[np.int8], FloatArray]:
+        """No backup and NaN shield outputs for ``size`` vehicles: read-only, made once."""
+        cached = self._no_shield
+        if cached is None or cached[0].shape[0] != size:
+            backup = np.full(size, BACKUP_NONE, dtype=np.int8)
+            shield = np.full((size, 6), math.nan)
+            backup.flags.writeable = shield.flags.writeable = False
+            cached = self._no_shield = (backup, shield)
+        return cached
 
     def _shield_step(
         self,
@@ -253,6 +263,13 @@ class GuidanceController:
         self, state: KinematicState
     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         """The state as four contiguous rows of the batch's size, checked finite."""
+        if not self._shape:  # one vehicle (the service): four numbers, checked as floats
+            values = (state.north_m, state.east_m, state.course_rad, state.speed_m_s)
+            if all(type(v) is float for v in values):
+                finite = all(map(math.isfinite, values))  # type: ignore[arg-type]
+                if finite and values[3] > 0.0:  # else the checks below name the field
+                    rows = np.array(values).reshape(4, 1)
+                    return rows[0], rows[1], rows[2], rows[3]
         rows = np.empty((4, self._accel.shape[0]))
         shaped = rows.reshape((4, *self._shape))
         for index, name in enumerate(_STATE_FIELDS):

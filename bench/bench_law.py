@@ -13,7 +13,10 @@ work depends on where the vehicle is: median and 99th percentile, with the backu
 ratio to the robust law's (issue targets: backup <= 100 us at 3 zones, <= 1 ms at 30, and
 <= 5x robust).
 
-    python bench/bench_law.py [--repeat N]
+Last, each law's tick as the service calls it (``GuidanceLoop.tick``, 3 and 300 zones)
+beside the sum of its compiled parts timed alone in the same run (``--service``: only that).
+
+    python bench/bench_law.py [--repeat N] [--service]
 """
 
 from __future__ import annotations
@@ -73,7 +76,13 @@ def per_call_s(function: Callable[[], object], repeat: int, number: int) -> floa
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=7)
+    parser.add_argument(
+        "--service", action="store_true", help="only the law as the service calls it"
+    )
     args = parser.parse_args()
+    if args.service:
+        service_tick(args.repeat)
+        return
     target = Target(north_m=2.0, east_m=0.0)
 
     print(f"{'case':32s} {'kernel':>10s} {'evaluate':>10s} {'step':>10s}   target")

@@ -126,3 +126,23 @@ def test_ardupilot_stream_groups_only_when_asked_again() -> None:
     kinds = [m.get_type() for m in got]
     assert kinds.index("COMMAND_LONG") > max(i for i, k in enumerate(kinds)
                                              if k == "REQUEST_DATA_STREAM")
+
+
+def test_a_freeze_right_after_a_skipped_global_position_is_still_frozen() -> None:
+    # Both streams moving, then frozen (the same positions re-sent with fresh stamps, as
+    # sitl_stub's freeze does): the global sample judged after the freeze must not pass
+    # for progress just because the last moving one was skipped, not converted.
+    t = known_origin(stale_after_s=0.25)
+    fly_both(t, 53)  # the last moving pair at k = 52 (a skipped global, 0.04 s after one)
+    north = 0.02 * 52
+    last_moving_s = (1000 + DT_MS * 52) / 1000.0
+    for k in range(53, 120):
+        boot = 1000 + DT_MS * k
+        t.update(local(boot, north, 0.0), boot / 1000.0)
+        t.update(global_at(boot, north, 0.0), boot / 1000.0)
+    now = (1000 + DT_MS * 119) / 1000.0
+    state = t.snapshot(0.25, now)
+    assert state is not None
+    # the position's time is that of the last sample that moved: stale, whichever source
+    assert state.position_time_s <= last_moving_s + 1e-9
+    assert state.age_s(now) > 0.25

@@ -152,6 +152,8 @@ class TelemetryState:
     _local_offset: tuple[float, float, float] | None = None  # vehicle origin in ours
     _latched: bool = False
     _refusal: tuple[Hold, str] | None = None
+    # the newest skipped global position: (lat, lon, alt as sent, boot_s, speed_m_s)
+    _skipped_global: tuple[tuple[int, int, int], float, float] | None = None
 
     def update(self, msg: Message, now_s: float, kind: str | None = None) -> str | None:
         """Take one message (``kind``: its type, if the caller has it already); returns its
@@ -239,13 +241,27 @@ class TelemetryState:
     def _on_global(self, msg: Message, now_s: float) -> bool | None:
         boot_s = ms_to_s(msg.time_boot_ms)
         track = self._tracks.get("global")
+        raw = (msg.lat, msg.lon, msg.alt)
+        speed_m_s = math.hypot(cm_s_to_m_s(msg.vx), cm_s_to_m_s(msg.vy))
         if (
             track is not None
             and 0.0 < boot_s - track.pred_boot_s < self.cross_check_period_s
             and self.local_fresh(now_s)
         ):
             self.skipped += 1
+            if self._skipped_global is None or self._skipped_global[0] != raw:
+                self._skipped_global = (raw, boot_s, speed_m_s)
             return None  # the local position is fresh: this one is not needed
+        anchor = self._skipped_global
+        if anchor is not None and anchor[0] == raw:
+            # Not moved since a skipped sample (the frozen rule, with that sample as its
+            # anchor: the last converted one may lie a skipped step behind).
+            if boot_s > anchor[1] and (boot_s - anchor[1]) * min(anchor[2], speed_m_s) > (
+                2.0 * _STILL_M
+            ):
+                return False
+        else:
+            self._skipped_global = None
         lat, lon = e7_to_deg(msg.lat), e7_to_deg(msg.lon)
         if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0) or (msg.lat, msg.lon) == (0, 0):
             return False

@@ -66,6 +66,7 @@ def main() -> None:
     )
     service = TimedService(scenario, settings, events=events, telemetry=telemetry)
     service.run(max_time_s=seconds)
+    print(f"TICKS {service.ticks} {service.setpoints_sent}", flush=True)
     print("LATENCIES " + json.dumps(service.latencies_s), flush=True)
 
 

@@ -114,7 +114,9 @@ def run_mode(mode: str, rate_hz: float, seconds: float) -> dict[str, float]:
             with Subscriber(endpoint) as subscriber:
                 result = _fly(port, rate_hz, seconds, companion.pid, launched)
                 result["samples_received"] = subscriber.samples
-            inside = _internal_latencies(companion.stdout.read())
+            output = companion.stdout.read()
+            inside = _internal_latencies(output)
+            result["ticks_per_setpoint"] = _ticks_per_setpoint(output)
         finally:
             companion.terminate()
             companion.wait(timeout=10)
@@ -155,6 +157,15 @@ class Subscriber:
     def __exit__(self, *_exc: object) -> None:
         if self._session is not None:
             self._session.close()
+
+
+def _ticks_per_setpoint(output: str) -> float:
+    """The service's law ticks per setpoint sent, over the whole run (echo: 1)."""
+    for line in output.splitlines():
+        if line.startswith("TICKS "):
+            ticks, sent = (int(v) for v in line.split()[1:])
+            return ticks / max(sent, 1)
+    return 1.0
 
 
 def _internal_latencies(output: str) -> list[float]:
@@ -348,7 +359,8 @@ def main() -> None:
     print(f"vehicle at {rate:g} Hz, {args.seconds:g} s per companion, on loopback UDP")
     header = (
         f"{'companion':10s} {'setpts/s':>9s} {'in p50':>8s} {'in p99':>8s} {'rt p50':>8s} "
-        f"{'rt p99':>8s} {'cpu':>7s} {'cpu/tick':>9s} {'peak rss':>9s} {'start-up':>9s}"
+        f"{'rt p99':>8s} {'cpu':>7s} {'cpu/tick':>9s} {'peak rss':>9s} {'start-up':>9s} "
+        f"{'ticks/setpt':>11s}"
     )
     print(header)
     rows = {}
@@ -359,7 +371,7 @@ def main() -> None:
             f"{mode:10s} {r['setpoint_rate_hz']:9.1f} {r['in_p50_ms']:6.3f}ms "
             f"{r['in_p99_ms']:6.3f}ms {r['rt_p50_ms']:6.3f}ms {r['rt_p99_ms']:6.3f}ms "
             f"{r['cpu_core_pct']:6.1f}% {r['cpu_per_tick_us']:7.0f}us {r['peak_rss_mb']:7.1f}MB "
-            f"{r['startup_s']:8.2f}s{extra}",
+            f"{r['startup_s']:8.2f}s {r['ticks_per_setpoint']:11.2f}{extra}",
             flush=True,
         )
     costs = parts(rate)

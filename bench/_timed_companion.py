@@ -4,7 +4,10 @@ Measures, inside the companion, the time from reading a datagram that carries a 
 (the start of the receive call that returned it) to the setpoint it caused leaving the
 socket, and prints percentiles on exit. The product code carries no instrumentation.
 
-    python bench/_timed_companion.py CONFIG URL SECONDS
+    python bench/_timed_companion.py CONFIG URL SECONDS [ZENOH_ENDPOINT]
+
+With ``ZENOH_ENDPOINT`` (``tcp/127.0.0.1:PORT``) the telemetry is on, listening there, as
+``ezcompanion run`` with a ``telemetry:`` section runs it (vehicle id ``bench``).
 """
 
 from __future__ import annotations
@@ -34,29 +37,36 @@ class TimedService(CompanionService):
         def timed_receive(max_reads: int = 64) -> list[Any]:
             started = time.perf_counter()
             frames = receive(max_reads)
-            if any(f.message.get_type() == "LOCAL_POSITION_NED" for f in frames):
+            if any(f.kind == "LOCAL_POSITION_NED" for f in frames):
                 self._read_at = started
             return frames
 
         link.recv = timed_receive  # type: ignore[method-assign]
         super()._serve(max_time_s)
 
-    def _send(self, msg: Any) -> None:
-        super()._send(msg)
+    def _send(self, msg: Any) -> bool:
+        sent = super()._send(msg)
         if self._read_at is not None and msg.get_type() == "SET_POSITION_TARGET_LOCAL_NED":
             self.latencies_s.append(time.perf_counter() - self._read_at)
             self._read_at = None
+        return sent
 
 
 def main() -> None:
     config, url, seconds = sys.argv[1], sys.argv[2], float(sys.argv[3])
+    telemetry = None
+    if len(sys.argv) > 4:
+        from ezcompanion.telemetry import TelemetrySettings
+
+        telemetry = TelemetrySettings(listen=(sys.argv[4],), vehicle_id="bench")
     scenario = load_scenario(config)
     settings = companion_settings(scenario, connect=url)
     events = EventLog(
         lambda e: print(e.line(), flush=True) if e.kind.value == "listening" else None
     )
-    service = TimedService(scenario, settings, events=events)
+    service = TimedService(scenario, settings, events=events, telemetry=telemetry)
     service.run(max_time_s=seconds)
+    print(f"TICKS {service.ticks} {service.setpoints_sent}", flush=True)
     print("LATENCIES " + json.dumps(service.latencies_s), flush=True)
 
 

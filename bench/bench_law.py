@@ -13,7 +13,10 @@ work depends on where the vehicle is: median and 99th percentile, with the backu
 ratio to the robust law's (issue targets: backup <= 100 us at 3 zones, <= 1 ms at 30, and
 <= 5x robust).
 
-    python bench/bench_law.py [--repeat N]
+Last, each law's tick as the service calls it (``GuidanceLoop.tick``, 3 and 300 zones)
+beside the sum of its compiled parts timed alone in the same run (``--service``: only that).
+
+    python bench/bench_law.py [--repeat N] [--service]
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ import statistics
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -35,7 +39,7 @@ from ezcompanion.guidance import (
     Target,
     ZoneSet,
 )
-from ezcompanion.guidance.law import O_SIZE, Z_SIZE, evaluate_batch
+from ezcompanion.guidance.law import O_AC, O_SIZE, Z_SIZE, evaluate_batch
 from ezcompanion.sim.engine import simulate
 
 
@@ -72,7 +76,13 @@ def per_call_s(function: Callable[[], object], repeat: int, number: int) -> floa
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=7)
+    parser.add_argument(
+        "--service", action="store_true", help="only the law as the service calls it"
+    )
     args = parser.parse_args()
+    if args.service:
+        service_tick(args.repeat)
+        return
     target = Target(north_m=2.0, east_m=0.0)
 
     print(f"{'case':32s} {'kernel':>10s} {'evaluate':>10s} {'step':>10s}   target")
@@ -114,6 +124,8 @@ def main() -> None:
     )
     print()
     service_path(args.repeat)
+    print()
+    service_tick(args.repeat)
 
 
 def service_path(repeat: int) -> None:
@@ -159,6 +171,85 @@ def _laws(
             f"{label + ', ' + law.value:32s} {medians[law] * 1e6:8.1f}us "
             f"{np.percentile(times, 99) * 1e6:8.1f}us   {ratio:.1f}x"
         )
+
+
+def service_tick(repeat: int) -> None:
+    """Each law's step as the service calls it (``GuidanceLoop.tick`` on a measured state),
+    next to the sum of its compiled parts timed alone in the same run: the law's kernel,
+    the actuator update and, for the backup law, the shield."""
+    from ezcompanion.guidance.backup import BACKUP_NONE, shield_batch
+    from ezcompanion.guidance.controller import _advance_batch
+    from ezcompanion.records import VehicleState
+    from ezcompanion.service.loop import GuidanceLoop
+
+    scenario = load_scenario(CONFIG / "paper_scenario1.yaml")
+    print(
+        f"{'the law as the service calls it':32s} {'tick':>10s} {'parts':>10s} {'ratio':>7s}   "
+        "kernel + actuator + shield (targets: paper, robust <= 20 us at 3 zones, <= 200 at 300)"
+    )
+    steps: dict[tuple[int, LawName], float] = {}
+    for count in (3, 300):
+        zones = scenario.zones() if count == 3 else zones_ring(count)
+        target = Target(north_m=-5000.0, east_m=3000.0)  # far: never captured here
+        for law in (LawName.PAPER, LawName.ROBUST, LawName.BACKUP):
+            loop = GuidanceLoop(scenario, law=law, loop_rate_hz=50.0, stale_after_s=1.0)
+            loop.controller = GuidanceController(
+                zones=zones, target=target, params=scenario.guidance, law=law
+            )
+            clock = iter(range(10**9))
+
+            def tick(loop: GuidanceLoop = loop, clock: Any = clock) -> None:
+                t = 0.02 * next(clock)
+                loop.tick(
+                    VehicleState(
+                        north_m=8.0 - 0.832 * t, east_m=-4.0 + 0.555 * t, down_m=-20.0,
+                        velocity_north_m_s=-0.832, velocity_east_m_s=0.555, yaw_rad=2.55,
+                        position_time_s=t, attitude_time_s=t, position_source="local",
+                        course_rate_rad_s=0.0,
+                    ),
+                    t,
+                )  # fmt: skip
+
+            number = 1000 if count < 300 else 200
+            ticked = per_call_s(tick, repeat, number)
+            c = loop.controller
+            p = c._packed
+            one = (np.array([8.0]), np.array([-4.0]), np.array([2.55]), np.array([1.0]))
+            accel = np.array([0.1])
+            out = np.empty((1, O_SIZE))
+            out_zone = np.empty((1, Z_SIZE, count))
+            kargs = (
+                p, zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_term,
+                np.array([target.north_m]), np.array([target.east_m]), *one, accel, out,
+                out_zone,
+            )  # fmt: skip
+            kernel = per_call_s(lambda a=kargs: evaluate_batch(*a), repeat, number)
+            a_next = np.empty(1)
+            mode = np.empty(1, dtype=np.int8)
+            actuator = per_call_s(
+                lambda a=(p, out, accel, 0.02, a_next, mode): _advance_batch(*a),
+                repeat,
+                number,
+            )
+            shield = 0.0
+            if law is LawName.BACKUP:
+                held = np.full(1, BACKUP_NONE, dtype=np.int8)
+                sout = np.full((1, 6), np.nan)
+                sargs = (
+                    c._shield, zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m,
+                    *one[:3], accel, accel.copy(), one[3], out[:, O_AC].copy(),
+                    np.ones(1, dtype=np.bool_), 0.02, held, sout,
+                )  # fmt: skip
+                shield = per_call_s(lambda a=sargs: shield_batch(*a), repeat, number)
+            total = kernel + actuator + shield
+            steps[(count, law)] = ticked
+            ratio = ticked / steps[(count, LawName.ROBUST)] if law is LawName.BACKUP else None
+            vs = f"   backup / robust {ratio:.1f}x (<= 5x)" if ratio is not None else ""
+            print(
+                f"{f'{count} zones, {law.value}':32s} {ticked * 1e6:8.1f}us {total * 1e6:8.1f}us "
+                f"{ticked / total:6.2f}x   {kernel * 1e6:.1f} + {actuator * 1e6:.1f} + "
+                f"{shield * 1e6:.1f} us{vs}"
+            )
 
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"

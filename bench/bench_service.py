@@ -1,37 +1,60 @@
-"""Latency, CPU and memory of the companion service at its loop rate.
+"""The companion service's tick at the cost of its parts, on the path the service runs.
 
-The companion runs as its own process (``ezcompanion run``); this program plays the vehicle
-on loopback UDP: a copter in GUIDED streaming LOCAL_POSITION_NED at the rate under test.
-For each setpoint that comes back it takes the time since the position that caused it was
-sent: telemetry frame leaving the vehicle to setpoint arriving at the vehicle, so two UDP
-hops on loopback are included and the companion's own share is smaller. Also prints the
-companion's CPU time per tick (from /proc) and its resident memory.
+The companion runs as its own process (``ezcompanion run``'s service, through
+``_timed_companion.py``); this program plays the vehicle on loopback UDP: a copter in GUIDED
+that has told its origin, streaming LOCAL_POSITION_NED at the rate under test. Side by side
+in the same run, three companions fly the same vehicle:
 
-Targets on the 2-core reference machine: p99 <= 1 ms at 50 Hz, a sustained loop of >= 500 Hz,
-<= 10% of one core at 50 Hz, <= 120 MB resident.
+- ``echo``: a bare pymavlink echo loop (``_echo.py``: receive, decode, encode a setpoint,
+  send): the floor of the round trip;
+- ``service``: the service, telemetry off;
+- ``telemetry``: the service publishing over zenoh (tcp loopback), a subscriber in this
+  process decoding every state and guidance sample.
 
-    python bench/bench_service.py [--seconds S] [--rates 50,100,200,500,1000]
+For each it prints: setpoints a second, the latency inside the companion (datagram read to
+setpoint written) and the round trip (position sent by the vehicle to setpoint received by
+it, two UDP hops), the companion's CPU per tick (all its threads, from /proc), its peak
+resident memory, and the launch-to-first-setpoint time (numba's cache warm). Then the parts
+of one tick, each timed warm and alone in this process, their sum, and the ratios the issue
+sets targets for (issue 13): service tick CPU <= 2x the sum of its parts, telemetry on <=
+1.2x off, round trip p99 <= 2x the echo loop's, start-up <= 1 s, memory <= 200 MB.
+
+    python bench/bench_service.py [--seconds S] [--rate 50] [--rates 50,200,1000]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
+import select
+import socket
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import yaml
 
+from ezcompanion.config import load_scenario, scenario_from_dict
+from ezcompanion.records import TickCommand, VehicleState
 from ezcompanion.service.demo import free_udp_port, wait_for_line
-from ezcompanion.wire import mavlink, open_link
+from ezcompanion.service.loop import GuidanceLoop
+from ezcompanion.service.setpoints import make_setpoints
+from ezcompanion.service.settings import SetpointKind
+from ezcompanion.service.state import TelemetryState
+from ezcompanion.wire import Frame, deg_to_e7, m_to_mm, mavlink, open_link
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "paper_scenario1.yaml"
+TIMED = Path(__file__).with_name("_timed_companion.py")
+ECHO = Path(__file__).with_name("_echo.py")
 _TICKS_PER_S = os.sysconf("SC_CLK_TCK")
+MODES = ("echo", "service", "telemetry")
 
 
 def proc_cpu_s(pid: int) -> float:
@@ -46,8 +69,12 @@ def proc_rss_mb(pid: int) -> tuple[float, float]:
     return int(status["VmRSS"].split()[0]) / 1024, int(status["VmHWM"].split()[0]) / 1024
 
 
-def run_rate(rate_hz: float, seconds: float) -> dict[str, float]:
-    port = free_udp_port()
+def percentile(values: list[float], q: float) -> float:
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(q * len(ordered)))] if ordered else math.nan
+
+
+def bench_scenario(rate_hz: float) -> dict[str, Any]:
     data = yaml.safe_load(CONFIG.read_text())
     data["companion"] = {
         "loop_rate_hz": rate_hz,
@@ -57,33 +84,88 @@ def run_rate(rate_hz: float, seconds: float) -> dict[str, float]:
     data["simulation"] = {"duration_s": 1000.0}
     # a target far ahead, so the engagement does not end during the measurement
     data["target"] = {"north_m": -5000.0, "east_m": 3000.0}
+    return dict(data)
+
+
+# --- the companions -----------------------------------------------------------------------
+
+
+def run_mode(mode: str, rate_hz: float, seconds: float) -> dict[str, float]:
+    port = free_udp_port()
+    url = f"udpin:127.0.0.1:{port}"
     with tempfile.TemporaryDirectory() as tmp:
         config = Path(tmp) / "bench.yaml"
-        config.write_text(yaml.safe_dump(data))
-        companion = subprocess.Popen(
-            [
-                sys.executable,
-                str(Path(__file__).with_name("_timed_companion.py")),
-                str(config),
-                f"udpin:127.0.0.1:{port}",
-                f"{seconds + 3.0:g}",
-            ],
-            stdout=subprocess.PIPE,
-            text=True,
-        )
+        config.write_text(yaml.safe_dump(bench_scenario(rate_hz)))
+        endpoint = None
+        if mode == "echo":
+            command = [sys.executable, str(ECHO), url, f"{seconds + 3.0:g}"]
+        else:
+            command = [sys.executable, str(TIMED), str(config), url, f"{seconds + 3.0:g}"]
+            if mode == "telemetry":
+                with socket.socket() as sock:
+                    sock.bind(("127.0.0.1", 0))
+                    endpoint = f"tcp/127.0.0.1:{sock.getsockname()[1]}"
+                command.append(endpoint)
+        launched = time.perf_counter()
+        companion = subprocess.Popen(command, stdout=subprocess.PIPE, text=True)
         assert companion.stdout is not None
-        wait_for_line(companion.stdout, "listening:")
         try:
-            result = _fly(port, rate_hz, seconds, companion.pid)
-            inside = _internal_latencies(companion.stdout.read())
+            wait_for_line(companion.stdout, "listening:")
+            with Subscriber(endpoint) as subscriber:
+                result = _fly(port, rate_hz, seconds, companion.pid, launched)
+                result["samples_received"] = subscriber.samples
+            output = companion.stdout.read()
+            inside = _internal_latencies(output)
+            result["ticks_per_setpoint"] = _ticks_per_setpoint(output)
         finally:
             companion.terminate()
             companion.wait(timeout=10)
     inside = inside[len(inside) // 10 :]  # steady state: drop the first tenth
     result["in_p50_ms"] = 1e3 * statistics.median(inside)
-    result["in_p99_ms"] = 1e3 * sorted(inside)[int(0.99 * (len(inside) - 1))]
-    result["in_max_ms"] = 1e3 * max(inside)
+    result["in_p99_ms"] = 1e3 * percentile(inside, 0.99)
     return result
+
+
+class Subscriber:
+    """A zenoh subscriber to the companion's state and guidance samples (None: none)."""
+
+    def __init__(self, endpoint: str | None) -> None:
+        self.endpoint = endpoint
+        self.samples = 0
+        self._session: Any = None
+
+    def __enter__(self) -> Subscriber:
+        if self.endpoint is None:
+            return self
+        import zenoh
+
+        from ezcompanion.telemetry import TelemetrySettings, key, session_config
+        from ezcompanion.telemetry.schema import decode
+
+        def take(sample: zenoh.Sample) -> None:
+            decode(sample.payload.to_bytes(), str(sample.encoding))
+            self.samples += 1
+
+        conf = session_config(TelemetrySettings(listen=(), connect=(self.endpoint,)))
+        self._session = zenoh.open(conf)
+        self._subs = [
+            self._session.declare_subscriber(key("bench", leaf), take)
+            for leaf in ("state", "guidance")
+        ]
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        if self._session is not None:
+            self._session.close()
+
+
+def _ticks_per_setpoint(output: str) -> float:
+    """The service's law ticks per setpoint sent, over the whole run (echo: 1)."""
+    for line in output.splitlines():
+        if line.startswith("TICKS "):
+            ticks, sent = (int(v) for v in line.split()[1:])
+            return ticks / max(sent, 1)
+    return 1.0
 
 
 def _internal_latencies(output: str) -> list[float]:
@@ -93,11 +175,13 @@ def _internal_latencies(output: str) -> list[float]:
     raise RuntimeError("the timed companion printed no latencies")
 
 
-def _fly(port: int, rate_hz: float, seconds: float, pid: int) -> dict[str, float]:
+def _fly(port: int, rate_hz: float, seconds: float, pid: int, launched: float) -> dict[str, float]:
     period = 1.0 / rate_hz
+    origin = load_scenario(CONFIG).origin
     sent: list[float] = []  # send time of each position
     latencies: list[float] = []
     setpoints = 0
+    first_setpoint_s = math.nan
     with open_link(f"udpout:127.0.0.1:{port}", system_id=1, component_id=1) as link:
         mav = link.mav
         start = time.perf_counter()
@@ -121,6 +205,12 @@ def _fly(port: int, rate_hz: float, seconds: float, pid: int) -> dict[str, float
                         mavlink.MAV_STATE_ACTIVE,
                     )
                 )
+                link.send(  # the origin told at once: no waiting for it
+                    mav.gps_global_origin_encode(
+                        deg_to_e7(origin.lat_deg), deg_to_e7(origin.lon_deg),
+                        m_to_mm(origin.alt_m), 0,
+                    )
+                )  # fmt: skip
                 next_hb += 1.0
             if now >= next_pos:
                 boot_ms += round(period * 1000) or 1
@@ -141,45 +231,186 @@ def _fly(port: int, rate_hz: float, seconds: float, pid: int) -> dict[str, float
             for msg in link.recv_messages():
                 if msg.get_type() == "SET_POSITION_TARGET_LOCAL_NED":
                     arrived = time.perf_counter()
+                    if setpoints == 0:
+                        first_setpoint_s = arrived - launched
                     setpoints += 1
                     if sent and arrived >= measured_from:
                         latencies.append(arrived - sent[-1])
         wall = time.perf_counter() - wall_start
         cpu = proc_cpu_s(pid) - (cpu_start or 0.0)
-        rss, peak = proc_rss_mb(pid)
+        _rss, peak = proc_rss_mb(pid)
     ticks = setpoints - setpoints_start
-    latencies.sort()
     return {
         "rate_hz": rate_hz,
         "setpoint_rate_hz": ticks / wall,
-        "p50_ms": 1e3 * statistics.median(latencies),
-        "p99_ms": 1e3 * latencies[int(0.99 * (len(latencies) - 1))],
-        "max_ms": 1e3 * latencies[-1],
+        "rt_p50_ms": 1e3 * statistics.median(latencies),
+        "rt_p99_ms": 1e3 * percentile(latencies, 0.99),
         "cpu_core_pct": 100.0 * cpu / wall,
         "cpu_per_tick_us": 1e6 * cpu / max(ticks, 1),
-        "rss_mb": rss,
         "peak_rss_mb": peak,
+        "startup_s": first_setpoint_s,
     }
+
+
+# --- the parts of a tick, warm and alone --------------------------------------------------
+
+
+def per_call_us(function: Callable[[], object], number: int = 2000, repeat: int = 5) -> float:
+    """Median over ``repeat`` rounds of the mean time of ``number`` calls (us)."""
+    function()
+    rounds = []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        for _ in range(number):
+            function()
+        rounds.append((time.perf_counter() - start) / number)
+    return 1e6 * statistics.median(rounds)
+
+
+def parts(rate_hz: float, publish_rate_hz: float = 20.0) -> dict[str, float]:
+    """Each part of one service tick on one position, in us."""
+    scenario = scenario_from_dict(bench_scenario(rate_hz))
+    out: dict[str, float] = {}
+    with open_link("udpin:127.0.0.1:0", system_id=245, component_id=191) as link:
+        mav = link.mav
+        # UDP: select, a datagram in, a datagram out (the tick's share of the socket)
+        a = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        b = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        a.bind(("127.0.0.1", 0))
+        b.bind(("127.0.0.1", 0))
+        datagram = link.pack(mav.local_position_ned_encode(1, 1.0, 2.0, -20.0, 1.0, 0.0, 0.0))
+        to_b = b.getsockname()
+
+        def udp() -> None:
+            a.sendto(datagram, to_b)
+            select.select([b], [], [], 1.0)
+            b.recvfrom(65535)
+
+        out["udp receive and send"] = per_call_us(udp)
+        a.close()
+        b.close()
+        frames: list[Frame] = []
+        out["decode a frame"] = per_call_us(
+            lambda: link._parse(datagram, None, frames) or frames.clear()
+        )
+        # the state: one new local position each call, along a straight track
+        state = TelemetryState(origin=scenario.origin)
+        state.assume_scenario_origin()
+        counter = iter(range(10**9))
+        messages = [
+            mav.local_position_ned_encode(20 * k + 20, 0.02 * k, 0.0, -20.0, 1.0, 0.0, 0.0)
+            for k in range(20000)
+        ]
+
+        def update() -> None:
+            k = next(counter)
+            state.update(messages[k], 0.02 * k, "LOCAL_POSITION_NED")
+
+        out["state update"] = per_call_us(update, number=2000, repeat=5)
+        # the law's tick as the service calls it
+        loop = GuidanceLoop(scenario, loop_rate_hz=rate_hz, stale_after_s=1.0)
+        clock = iter(range(10**9))
+        last: list[TickCommand] = []
+
+        def tick() -> None:
+            t = 0.02 * next(clock)
+            command = loop.tick(
+                VehicleState(
+                    north_m=8.0 - 0.832 * t, east_m=-4.0 + 0.555 * t, down_m=-20.0,
+                    velocity_north_m_s=-0.832, velocity_east_m_s=0.555, yaw_rad=2.55,
+                    position_time_s=t, attitude_time_s=t, position_source="local",
+                ),
+                t,
+            )  # fmt: skip
+            assert isinstance(command, TickCommand)
+            last[:] = [command]
+
+        out["loop tick (the law)"] = per_call_us(tick, number=1000)
+        setpoints = make_setpoints(
+            SetpointKind.VELOCITY, link, target_system=1, target_component=1,
+            accel_max_m_s2=scenario.guidance.accel_max_m_s2,
+        )  # fmt: skip
+        command = last[0]
+        out["setpoint encode"] = per_call_us(lambda: link.pack(setpoints.message(command)))
+        out["telemetry, per tick"] = telemetry_share(command, rate_hz, publish_rate_hz)
+    return out
+
+
+def telemetry_share(command: TickCommand, rate_hz: float, publish_rate_hz: float) -> float:
+    """The publisher's CPU per tick without zenoh: the slot every tick, both samples built
+    and encoded at the publish rate."""
+    from ezcompanion.telemetry.schema import encode, guidance_payload, state_payload
+
+    def build() -> None:
+        wall = time.time()
+        encode("guidance", guidance_payload("bench", 1, command, wall, ()), "msgpack")
+        encode("state", state_payload("bench", 1, command, wall), "msgpack")
+
+    return per_call_us(build) * min(1.0, publish_rate_hz / rate_hz)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=10.0)
-    parser.add_argument("--rates", default="50,100,200,500,1000")
+    parser.add_argument("--rate", type=float, default=50.0)
+    parser.add_argument("--rates", default="", help="also the service alone at these rates")
     args = parser.parse_args()
-    print("latency inside the companion (datagram read -> setpoint written) and round trip")
-    print("(position sent by the vehicle -> setpoint received by it, two UDP hops included)")
-    print(
-        f"{'rate':>6s} {'setpts/s':>9s} {'in p50':>8s} {'in p99':>8s} {'in max':>8s} "
-        f"{'rt p50':>8s} {'rt p99':>8s} {'rt max':>8s} {'cpu':>7s} {'cpu/tick':>9s} {'rss':>8s}"
+    rate = args.rate
+    print(f"vehicle at {rate:g} Hz, {args.seconds:g} s per companion, on loopback UDP")
+    header = (
+        f"{'companion':10s} {'setpts/s':>9s} {'in p50':>8s} {'in p99':>8s} {'rt p50':>8s} "
+        f"{'rt p99':>8s} {'cpu':>7s} {'cpu/tick':>9s} {'peak rss':>9s} {'start-up':>9s} "
+        f"{'ticks/setpt':>11s}"
     )
-    for rate in (float(r) for r in args.rates.split(",")):
-        r = run_rate(rate, args.seconds)
+    print(header)
+    rows = {}
+    for mode in MODES:
+        r = rows[mode] = run_mode(mode, rate, args.seconds)
+        extra = f"  ({r['samples_received']:.0f} samples received)" if mode == "telemetry" else ""
         print(
-            f"{r['rate_hz']:6.0f} {r['setpoint_rate_hz']:9.1f} {r['in_p50_ms']:6.3f}ms "
-            f"{r['in_p99_ms']:6.3f}ms {r['in_max_ms']:6.3f}ms {r['p50_ms']:6.3f}ms "
-            f"{r['p99_ms']:6.3f}ms {r['max_ms']:6.3f}ms {r['cpu_core_pct']:6.1f}% "
-            f"{r['cpu_per_tick_us']:7.0f}us {r['peak_rss_mb']:6.1f}MB",
+            f"{mode:10s} {r['setpoint_rate_hz']:9.1f} {r['in_p50_ms']:6.3f}ms "
+            f"{r['in_p99_ms']:6.3f}ms {r['rt_p50_ms']:6.3f}ms {r['rt_p99_ms']:6.3f}ms "
+            f"{r['cpu_core_pct']:6.1f}% {r['cpu_per_tick_us']:7.0f}us {r['peak_rss_mb']:7.1f}MB "
+            f"{r['startup_s']:8.2f}s {r['ticks_per_setpoint']:11.2f}{extra}",
+            flush=True,
+        )
+    costs = parts(rate)
+    print("\nparts of one tick, warm and alone in this process")
+    for name, us in costs.items():
+        print(f"  {name:24s} {us:8.1f} us")
+    base = sum(v for k, v in costs.items() if not k.startswith("telemetry"))
+    with_telemetry = base + costs["telemetry, per tick"]
+    service, telemetry, bare = rows["service"], rows["telemetry"], rows["echo"]
+    print(f"  {'sum (telemetry off)':24s} {base:8.1f} us")
+    print(f"  {'sum (telemetry on)':24s} {with_telemetry:8.1f} us\n")
+    print(
+        f"service tick CPU {service['cpu_per_tick_us']:.0f} us vs the sum of its parts "
+        f"{base:.0f} us: {service['cpu_per_tick_us'] / base:.2f}x (target <= 2x)"
+    )
+    print(
+        f"telemetry on {telemetry['cpu_per_tick_us']:.0f} us vs off "
+        f"{service['cpu_per_tick_us']:.0f} us per tick: "
+        f"{telemetry['cpu_per_tick_us'] / service['cpu_per_tick_us']:.2f}x (target <= 1.2x; "
+        f"its parts: {with_telemetry / base:.2f}x)"
+    )
+    print(
+        f"round trip p99 {service['rt_p99_ms']:.3f} ms vs the bare echo loop's "
+        f"{bare['rt_p99_ms']:.3f} ms: {service['rt_p99_ms'] / bare['rt_p99_ms']:.2f}x "
+        "(target <= 2x)"
+    )
+    print(
+        f"launch to first setpoint {service['startup_s']:.2f} s (telemetry on "
+        f"{telemetry['startup_s']:.2f} s, echo {bare['startup_s']:.2f} s; target <= 1 s warm)"
+    )
+    print(
+        f"peak resident memory {service['peak_rss_mb']:.0f} MB, with telemetry "
+        f"{telemetry['peak_rss_mb']:.0f} MB (target <= 200 MB)"
+    )
+    for extra_rate in (float(r) for r in args.rates.split(",") if r):
+        r = run_mode("service", extra_rate, args.seconds)
+        print(
+            f"service at {extra_rate:g} Hz: {r['setpoint_rate_hz']:.1f} setpoints/s, "
+            f"{r['cpu_core_pct']:.1f}% of a core, rt p99 {r['rt_p99_ms']:.3f} ms",
             flush=True,
         )
 

@@ -47,7 +47,7 @@ from ezcompanion.config import scenario_from_dict
 from ezcompanion.service.loop import GuidanceLoop, TickCommand
 from ezcompanion.service.state import VehicleState
 from ezcompanion.telemetry import TelemetryPublisher, TelemetrySettings, session_config
-from ezcompanion.telemetry.schema import guidance_payload, key
+from ezcompanion.telemetry.schema import decode, encode, guidance_payload, key
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "paper_scenario1.yaml"
 SLOW_S = 0.1  # what the slow consumer spends on each sample (default)
@@ -76,7 +76,7 @@ def subscriber(endpoint: str, seconds: float, leaf: str, how: str, slow_s: float
 
     def note(sample: zenoh.Sample) -> None:
         now = time.time()
-        payload = json.loads(sample.payload.to_bytes())
+        payload = decode(sample.payload.to_bytes(), str(sample.encoding))
         delays.append((now - payload["wall_time_unix_s"], now - payload["sent_unix_s"]))
 
     def slow(sample: zenoh.Sample) -> None:
@@ -165,7 +165,7 @@ def guidance_size(rate_hz: float) -> int:
     assert isinstance(command, TickCommand)
     payload = guidance_payload("bench", 1, command, time.time(), ())
     payload["sent_unix_s"] = time.time()
-    return len(json.dumps(payload, separators=(",", ":")).encode())
+    return len(encode("guidance", payload, TelemetrySettings().payload))
 
 
 def raw_putter(pub: zenoh.Publisher, size: int, publish_hz: float) -> Any:

@@ -35,6 +35,7 @@ from ezcompanion.telemetry import (
     session_config,
     telemetry_settings,
 )
+from ezcompanion.telemetry.schema import decode
 from ezcompanion.telemetry.settings import release
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "paper_scenario1.yaml"
@@ -97,7 +98,11 @@ class Collector:
 
     def __call__(self, sample: zenoh.Sample) -> None:
         self.samples.append(
-            (str(sample.key_expr), str(sample.encoding), json.loads(sample.payload.to_bytes()))
+            (
+                str(sample.key_expr),
+                str(sample.encoding),
+                decode(sample.payload.to_bytes(), str(sample.encoding)),
+            )
         )
         if self.sleep_s:
             time.sleep(self.sleep_s)  # a deliberately slow subscriber
@@ -190,8 +195,8 @@ def test_a_subscriber_sees_every_tick_as_the_loop_computed_it(endpoint: str) -> 
     assert pub.ticks_skipped == 0
     encodings = {k.rsplit("/", 1)[1]: e for k, e, _ in got.samples}
     assert encodings == {
-        "state": "application/json;ezcompanion.state.v1",
-        "guidance": "application/json;ezcompanion.guidance.v1",
+        "state": "application/msgpack;ezcompanion.state.v1",
+        "guidance": "application/msgpack;ezcompanion.guidance.v1",
     }
     states, guidance = got.of("state"), got.of("guidance")
     assert [g["seq"] for g in guidance] == [s["seq"] for s in states]
@@ -301,7 +306,8 @@ def test_a_slow_subscriber_gets_the_newest_sample_not_a_backlog(endpoint: str) -
                 newest = pub.ticks_published
                 time.sleep(0.06)  # the slow consumer's work
                 sample = ring.recv()
-                taken.append((json.loads(sample.payload.to_bytes())["seq"], newest))
+                payload = decode(sample.payload.to_bytes(), str(sample.encoding))
+                taken.append((payload["seq"], newest))
         finally:
             stop.set()
             ticker.join()

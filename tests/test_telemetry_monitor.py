@@ -127,7 +127,7 @@ def test_json_lines_are_the_raw_samples() -> None:
     assert keys.count("ezcompanion/vehicle1/state") == 5
     assert "ezcompanion/vehicle1/alive" in keys and "ezcompanion/vehicle1/status" in keys
     guidance = next(line for line in lines if line["key"].endswith("/guidance"))
-    assert guidance["encoding"] == "application/json;ezcompanion.guidance.v1"
+    assert guidance["encoding"] == "application/msgpack;ezcompanion.guidance.v1"
     assert guidance["payload"]["vehicle_id"] == "vehicle1"
 
 

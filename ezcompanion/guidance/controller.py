@@ -134,6 +134,7 @@ class GuidanceController:
         self._flown = np.zeros(1)  # the model's flown lateral acceleration (backup law)
         self._backup = np.full(1, BACKUP_NONE, dtype=np.int8)
         self._shield = pack_shield(self.params)
+        self._no_shield: _ShieldViews | None = None
 
     @property
     def accel_m_s2(self) -> FloatArray:
@@ -180,13 +181,13 @@ class GuidanceController:
         accel_next = np.empty_like(accel)
         mode = np.empty(accel.shape, dtype=np.int8)
         _advance_batch(self._packed, out, accel, dt_s, accel_next, mode)
-        size = accel.shape[0]
-        backup = np.full(size, BACKUP_NONE, dtype=np.int8)
-        shield = np.full((size, 6), math.nan)
+        shape = self._shape
         if self.law is LawName.BACKUP:
             backup, shield = self._shield_step(state, rows, out, dt_s, accel_next, mode)
+            views = _shield_views(backup, shield, shape)
+        else:
+            views = self._unshielded(accel.shape[0], shape)
         self._accel = accel_next
-        shape = self._shape
         mode = mode.reshape(shape)
         return GuidanceStep(
             law=LawOutput(out, out_zone, shape),
@@ -194,11 +195,22 @@ class GuidanceController:
             accel_lat_cmd_m_s2=accel_next.reshape(shape),
             mode=mode,
             captured=mode == _CAPTURED,
-            backup=backup.reshape(shape),
-            shield_weight=shield[:, 3].reshape(shape),
-            certificate_m=shield[:, 4].reshape(shape),
-            certificate_ahead_m=shield[:, 5].reshape(shape),
+            backup=views[0],
+            shield_weight=views[1],
+            certificate_m=views[2],
+            certificate_ahead_m=views[3],
         )
+
+    def _unshielded(self, size: int, shape: tuple[int, ...]) -> _ShieldViews:
+        """No backup and NaN shield outputs for ``size`` vehicles (shaped ``shape``):
+        read-only, made once."""
+        cached = self._no_shield
+        if cached is None or cached[0].shape != shape:
+            backup = np.full(size, BACKUP_NONE, dtype=np.int8)
+            shield = np.full((size, 6), math.nan)
+            backup.flags.writeable = shield.flags.writeable = False
+            cached = self._no_shield = _shield_views(backup, shield, shape)
+        return cached
 
     def _shield_step(
         self,
@@ -253,6 +265,13 @@ class GuidanceController:
         self, state: KinematicState
     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         """The state as four contiguous rows of the batch's size, checked finite."""
+        if not self._shape:  # one vehicle (the service): four numbers, checked as floats
+            values = (state.north_m, state.east_m, state.course_rad, state.speed_m_s)
+            if all(type(v) is float for v in values):
+                finite = all(map(math.isfinite, values))  # type: ignore[arg-type]
+                if finite and values[3] > 0.0:  # else the checks below name the field
+                    rows = np.array(values).reshape(4, 1)
+                    return rows[0], rows[1], rows[2], rows[3]
         rows = np.empty((4, self._accel.shape[0]))
         shaped = rows.reshape((4, *self._shape))
         for index, name in enumerate(_STATE_FIELDS):
@@ -270,6 +289,20 @@ class GuidanceController:
 
 
 _STATE_FIELDS = ("north_m", "east_m", "course_rad", "speed_m_s")
+
+# GuidanceStep's backup, shield_weight, certificate_m and certificate_ahead_m
+_ShieldViews = tuple[npt.NDArray[np.int8], FloatArray, FloatArray, FloatArray]
+
+
+def _shield_views(
+    backup: npt.NDArray[np.int8], shield: FloatArray, shape: tuple[int, ...]
+) -> _ShieldViews:
+    return (
+        backup.reshape(shape),
+        shield[:, 3].reshape(shape),
+        shield[:, 4].reshape(shape),
+        shield[:, 5].reshape(shape),
+    )
 
 
 @jit

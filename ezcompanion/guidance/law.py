@@ -143,6 +143,11 @@ class LawOutput:
     def _field(self, index: int) -> FloatArray:
         return self._out[:, index].reshape(self._shape)
 
+    def values(self, vehicle: int = 0) -> tuple[list[float], list[list[float]]]:
+        """One vehicle's outputs as plain floats, at once (for a telemetry payload): the
+        ``O_*`` row and the ``Z_*`` rows (one value per zone each)."""
+        return self._out[vehicle].tolist(), self._zone[vehicle].tolist()
+
     def _zone_field(self, index: int) -> FloatArray:
         return self._zone[:, index].reshape((*self._shape, self._zone.shape[2]))
 

@@ -13,10 +13,16 @@ is the engagement's (:mod:`ezcompanion.service.engagement`).
    ``target_system`` configured, or one with the configured id before guidance starts or
    within ``_DISCOVERY_S`` after: both are named in a ``vehicle_refused`` event, guidance
    never starts (or stops) and the service ends.
-2. Ask for telemetry: REQUEST_DATA_STREAM first (ArduPilot lets it override message
-   intervals), then SET_MESSAGE_INTERVAL per message at the configured rate (capped at
-   40 Hz for fixed wing, which ArduPlane would deny), and check two seconds later that the
-   position arrives at least at half that rate; ask again once if not.
+2. Ask for the telemetry the state uses, and only that: SET_MESSAGE_INTERVAL for
+   LOCAL_POSITION_NED and GLOBAL_POSITION_INT at the configured rate (capped at 40 Hz for
+   fixed wing, which ArduPlane would deny) and ATTITUDE at ``_ATTITUDE_RATE_HZ`` at most
+   (its yaw stands in for the course only when the vehicle is slow); check two seconds
+   later that the position arrives at least at half that rate. If not, ask again once,
+   and from ArduPilot also REQUEST_DATA_STREAM for the groups that carry those messages
+   (POSITION, EXTRA1; an old firmware without message intervals), before the intervals
+   (ArduPilot lets a stream request override them). While local positions are fresh,
+   GLOBAL_POSITION_INT is asked at ``CROSS_CHECK_PERIOD_S`` only (the cross-check's rate),
+   and at the full rate again as soon as the local position goes stale.
 3. With ``engage``, ask for GUIDED (OFFBOARD on PX4) every second while not in it. Never arm.
 4. No heartbeat from the vehicle for ``link_lost_after_s`` is a lost link: the address lock
    is released and discovery runs again, for the same system and component only.
@@ -42,7 +48,7 @@ from ezcompanion.service.autopilots import AutopilotProfile, autopilot_profile
 from ezcompanion.service.events import EventLog
 from ezcompanion.service.parameters import ParameterReader
 from ezcompanion.service.settings import CompanionSettings, SetpointKind
-from ezcompanion.service.state import TelemetryState
+from ezcompanion.service.state import CROSS_CHECK_PERIOD_S, TelemetryState
 from ezcompanion.service.trust import Alarms, HeartbeatJudge
 from ezcompanion.wire import (
     Address,
@@ -65,7 +71,10 @@ _SPOOF_HOLD_S = 3.0  # a heartbeat conflict holds guidance this long after the l
 _TELEMETRY_HOLD_S = 0.5  # a refused position holds guidance this long after the last one
 _ORIGIN_RETRY_S = 0.5
 _ORIGIN_TRIES = 6  # then the scenario's origin is assumed (with a warning)
-_STREAMED = ("LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "ATTITUDE", "VFR_HUD")
+_ATTITUDE_RATE_HZ = 10.0  # ATTITUDE at most this often: yaw is used only when slow
+_GLOBAL_REPACE_S = 1.0  # the global position's rate changes at most this often
+# ArduPilot's stream groups of the messages the state uses (only if intervals fail)
+_GROUPS = (mavlink.MAV_DATA_STREAM_POSITION, mavlink.MAV_DATA_STREAM_EXTRA1)
 POSITIONS = frozenset({"LOCAL_POSITION_NED", "GLOBAL_POSITION_INT"})
 
 
@@ -89,6 +98,7 @@ class VehicleSession:
             adopt_origin=not scenario.origin_given,
             accel_bound_m_s2=settings.gate_accel_m_s2 or 2.0 * scenario.guidance.accel_max_m_s2,
             gate_position_m=settings.gate_position_m,
+            stale_after_s=settings.stale_after_s,
         )
         self.target: tuple[int, int] | None = None
         self.address: Address = None  # the vehicle's transport address, once locked
@@ -114,6 +124,8 @@ class VehicleSession:
         self._next_engage_s = 0.0
         self.requested_rate_hz = settings.telemetry_rate_hz
         self.parameters = ParameterReader(link, send)
+        self.global_rate_hz = settings.telemetry_rate_hz  # what GLOBAL_POSITION_INT is asked
+        self._global_paced_s = -math.inf
 
     @property
     def setpoint_kind(self) -> SetpointKind:
@@ -143,18 +155,16 @@ class VehicleSession:
 
     def on_frame(self, frame: Frame, now: float) -> str | None:
         """Take one frame; the telemetry kind it fed (a position drives a tick), or None."""
-        msg = frame.message
-        kind = msg.get_type()
-        source = (msg.get_srcSystem(), msg.get_srcComponent())
+        msg, kind = frame.message, frame.kind
         if kind == "HEARTBEAT":
             self._on_heartbeat(frame, now)
             return None
-        if not self.locked or source != self.target:
+        if not self.locked or (msg.get_srcSystem(), msg.get_srcComponent()) != self.target:
             return None
         if frame.source != self.address:
             self._refuse_foreign(frame, now)
             return None
-        used = self.telemetry.update(msg, now)
+        used = self.telemetry.update(msg, now, kind)
         if used is not None:
             self.received[used] = self.received.get(used, 0) + 1
             if used == "GPS_GLOBAL_ORIGIN":
@@ -344,46 +354,84 @@ class VehicleSession:
         (``waiting`` for GUIDED) mode requests."""
         self._check_link(now)
         self._check_rates(now)
+        self._pace_global(now)
         self._request_origin(now)
         self.parameters.periodic(now)
         if waiting:
             self._engage(now)
 
-    def request_streams(self, now: float) -> None:
-        """Ask for the telemetry streams at the configured rate."""
+    def request_streams(self, now: float, *, groups: bool = False) -> None:
+        """Ask for the telemetry the state uses at the configured rate (``groups``: also
+        ArduPilot's stream groups, first; see the module docstring)."""
         assert self.target is not None
         system, component = self.target
         rate = self.settings.telemetry_rate_hz
         if self.fixed_wing:
             rate = min(rate, _PLANE_MAX_RATE_HZ)
+        attitude_hz = min(rate, _ATTITUDE_RATE_HZ)
+        heartbeat = self.heartbeat
+        ardupilot = (
+            heartbeat is not None and heartbeat.autopilot == mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
+        )
         mav = self._link.mav
-        for stream in (
-            mavlink.MAV_DATA_STREAM_POSITION,
-            mavlink.MAV_DATA_STREAM_EXTRA1,
-            mavlink.MAV_DATA_STREAM_EXTRA2,
+        if groups and ardupilot:
+            for stream, hz in zip(_GROUPS, (rate, attitude_hz), strict=True):
+                self._send(mav.request_data_stream_encode(system, component, stream, round(hz), 1))
+        for name, hz in (
+            ("LOCAL_POSITION_NED", rate),
+            ("GLOBAL_POSITION_INT", rate),
+            ("ATTITUDE", attitude_hz),
         ):
-            self._send(mav.request_data_stream_encode(system, component, stream, round(rate), 1))
-        for name in _STREAMED:
-            self._send(
-                mav.command_long_encode(
-                    system,
-                    component,
-                    mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
-                    0,
-                    float(getattr(mavlink, f"MAVLINK_MSG_ID_{name}")),
-                    1e6 / rate,
-                    0,
-                    0,
-                    0,
-                    0,
-                    0,
-                )
-            )
+            self._send_interval(name, hz)
         self._streams_requested_s = now
         self._counts_at_request = dict(self.received)
-        self.requested_rate_hz = rate
+        self.requested_rate_hz = self.global_rate_hz = rate
+        self._global_paced_s = now
         self.events.emit(
             EventKind.STREAMS_REQUESTED, now, f"telemetry at {rate:g} Hz", rate_hz=rate
+        )
+
+    def _send_interval(self, name: str, rate_hz: float) -> None:
+        assert self.target is not None
+        self._send(
+            self._link.mav.command_long_encode(
+                self.target[0],
+                self.target[1],
+                mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+                0,
+                float(getattr(mavlink, f"MAVLINK_MSG_ID_{name}")),
+                1e6 / rate_hz,
+                0,
+                0,
+                0,
+                0,
+                0,
+            )
+        )
+
+    def _pace_global(self, now: float) -> None:
+        """GLOBAL_POSITION_INT at the cross-check's rate while local positions are fresh,
+        at the full rate once they are not (then it is the position)."""
+        if not self.connected or self._streams_requested_s is not None:
+            return  # not yet asked, or the rate check is still to come
+        if now - self._global_paced_s < _GLOBAL_REPACE_S:
+            return
+        cross_hz = 1.0 / CROSS_CHECK_PERIOD_S
+        fresh = self.telemetry.local_fresh(now)
+        if fresh and self.global_rate_hz > cross_hz:
+            rate, why = cross_hz, "the cross-check, local positions fresh"
+        elif not fresh and self.global_rate_hz < self.requested_rate_hz:
+            rate, why = self.requested_rate_hz, "the position, local positions stale"
+        else:
+            return
+        self._send_interval("GLOBAL_POSITION_INT", rate)
+        self.global_rate_hz, self._global_paced_s = rate, now
+        self.events.emit(
+            EventKind.STREAMS_REQUESTED,
+            now,
+            f"GLOBAL_POSITION_INT at {rate:g} Hz ({why})",
+            rate_hz=rate,
+            stream="GLOBAL_POSITION_INT",
         )
 
     def _check_rates(self, now: float) -> None:
@@ -404,7 +452,7 @@ class VehicleSession:
                 rate_hz=rate,
             )
             if self._rate_checks == 0 and self.connected:
-                self.request_streams(now)
+                self.request_streams(now, groups=True)
             self._rate_checks += 1
 
     def _engage(self, now: float) -> None:

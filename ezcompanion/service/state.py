@@ -37,11 +37,20 @@ Refused, and counted (a refused sample changes nothing):
   enough"); only samples back on the prediction are taken again.
 - local and global disagreeing (``Hold.DISAGREE``): when both are fresh, each new sample is
   compared with the other source propagated to its time stamp.
+
+Converted only when needed (issue 13: 5.5% of a tick went to pymap3d while the local
+position was fresh): while local positions are fresh (within ``stale_after_s``), a
+GLOBAL_POSITION_INT is converted and judged at most every ``cross_check_period_s`` of
+vehicle time (the session also asks for it at that rate then); the others are skipped
+(counted in ``skipped``, neither used nor refused). The cross-check still runs on every
+local sample, against the last global one propagated to its time; once the local position
+is stale, every global sample is converted again.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from ezcompanion.config import GeoOrigin
@@ -57,7 +66,12 @@ from ezcompanion.wire import (
     ms_to_s,
 )
 
-__all__ = ["TelemetryState", "VehicleState"]
+__all__ = ["CROSS_CHECK_PERIOD_S", "TelemetryState", "VehicleState"]
+
+# While the local position is fresh, global positions are taken this often (vehicle time):
+# the cross-check's rate. 10 Hz: a local sample is compared with a global one at most
+# 0.1 s (plus jitter) old, well within _CROSS_MAX_AGE_S.
+CROSS_CHECK_PERIOD_S = 0.1
 
 # time_boot_ms going back by more than this is a reboot (or a forgery), not reordering
 _REBOOT_BACKSTEP_S = 10.0
@@ -129,7 +143,10 @@ class TelemetryState:
     adopt_origin: bool = False
     accel_bound_m_s2: float = 2.0
     gate_position_m: float = 0.5
+    stale_after_s: float = 0.25  # local positions older than this: every global one counts
+    cross_check_period_s: float = CROSS_CHECK_PERIOD_S
     refused: dict[str, int] = field(default_factory=dict)
+    skipped: int = 0  # global positions not converted while the local one was fresh
     alarm: Hold | None = None  # a refusal that lasts: the origin changed after the latch
     _tracks: dict[str, _Track] = field(default_factory=dict)
     _yaw_rad: float = 0.0
@@ -139,17 +156,29 @@ class TelemetryState:
     _latched: bool = False
     _origin_told: bool = False  # adopt_origin: the vehicle's origin has been taken
     _refusal: tuple[Hold, str] | None = None
+    # the newest skipped global position: (lat, lon, alt as sent, boot_s, speed_m_s)
+    _skipped_global: tuple[tuple[int, int, int], float, float] | None = None
 
-    def update(self, msg: Message, now_s: float) -> str | None:
-        """Take one message; returns its type if it was used, None if not ours or refused."""
-        kind = msg.get_type()
+    def update(self, msg: Message, now_s: float, kind: str | None = None) -> str | None:
+        """Take one message (``kind``: its type, if the caller has it already); returns its
+        type if it was used, None if not ours, skipped or refused."""
+        if kind is None:
+            kind = str(msg.get_type())
         handler = _HANDLERS.get(kind)
         if handler is None:
             return None
-        if not handler(self, msg, now_s):
+        used = handler(self, msg, now_s)
+        if used is None:
+            return None
+        if not used:
             self.refused[kind] = self.refused.get(kind, 0) + 1
             return None
-        return str(kind)
+        return kind
+
+    def local_fresh(self, now_s: float) -> bool:
+        """A local position arrived (and moved) within ``stale_after_s``."""
+        track = self._tracks.get("local")
+        return track is not None and now_s - track.moved.arrived_s <= self.stale_after_s
 
     def take_refusal(self) -> tuple[Hold, str] | None:
         """The trust refusal of the last :meth:`update` (cause, why), once."""
@@ -213,9 +242,32 @@ class TelemetryState:
         )
         return self._accept("local", sample)
 
-    def _on_global(self, msg: Message, now_s: float) -> bool:
+    def _on_global(self, msg: Message, now_s: float) -> bool | None:
         if self.adopt_origin and self._local_offset is None:
             return False  # the frame is the vehicle's origin, not told yet
+        boot_s = ms_to_s(msg.time_boot_ms)
+        track = self._tracks.get("global")
+        raw = (msg.lat, msg.lon, msg.alt)
+        speed_m_s = math.hypot(cm_s_to_m_s(msg.vx), cm_s_to_m_s(msg.vy))
+        if (
+            track is not None
+            and 0.0 < boot_s - track.pred_boot_s < self.cross_check_period_s
+            and self.local_fresh(now_s)
+        ):
+            self.skipped += 1
+            if self._skipped_global is None or self._skipped_global[0] != raw:
+                self._skipped_global = (raw, boot_s, speed_m_s)
+            return None  # the local position is fresh: this one is not needed
+        anchor = self._skipped_global
+        if anchor is not None and anchor[0] == raw:
+            # Not moved since a skipped sample (the frozen rule, with that sample as its
+            # anchor: the last converted one may lie a skipped step behind).
+            if boot_s > anchor[1] and (boot_s - anchor[1]) * min(anchor[2], speed_m_s) > (
+                2.0 * _STILL_M
+            ):
+                return False
+        else:
+            self._skipped_global = None
         lat, lon = e7_to_deg(msg.lat), e7_to_deg(msg.lon)
         if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0) or (msg.lat, msg.lon) == (0, 0):
             return False
@@ -235,7 +287,7 @@ class TelemetryState:
             down,
             cm_s_to_m_s(msg.vx),
             cm_s_to_m_s(msg.vy),
-            ms_to_s(msg.time_boot_ms),
+            boot_s,
             now_s,
         )
         return self._accept("global", sample)
@@ -418,7 +470,8 @@ def _advances(last_boot_s: float, boot_s: float) -> bool:
     return boot_s > last_boot_s or boot_s < last_boot_s - _REBOOT_BACKSTEP_S
 
 
-_HANDLERS = {
+# each returns True (used), False (refused) or None (skipped)
+_HANDLERS: dict[str, Callable[[TelemetryState, Message, float], bool | None]] = {
     "LOCAL_POSITION_NED": TelemetryState._on_local,
     "GLOBAL_POSITION_INT": TelemetryState._on_global,
     "ATTITUDE": TelemetryState._on_attitude,

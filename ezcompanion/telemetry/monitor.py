@@ -31,7 +31,7 @@ from typing import Any, Protocol, TextIO
 
 import zenoh
 
-from ezcompanion.telemetry.schema import key, vehicle_of
+from ezcompanion.telemetry.schema import decode, key, vehicle_of
 from ezcompanion.telemetry.settings import open_session, release
 
 __all__ = ["MonitorView", "SampleSink", "VehicleView", "run_monitor", "sample_line"]
@@ -236,7 +236,7 @@ def run_monitor(
                 except queue.Empty:
                     key_expr = ""
                 if key_expr:
-                    payload = raw if isinstance(raw, bool) else _decode(raw)
+                    payload = raw if isinstance(raw, bool) else _decode(raw, enc)
                     vid, leaf = vehicle_of(key_expr)
                     if (leaf == "alive" and payload and not view.vehicle(vid).alive) or (
                         sinks and leaf == "event" and _is_scenario_event(payload)
@@ -270,8 +270,8 @@ def _is_scenario_event(payload: Any) -> bool:
     return isinstance(payload, dict) and payload.get("kind") == "scenario"
 
 
-def _decode(raw: bytes) -> Any:
+def _decode(raw: bytes, enc: str) -> Any:
     try:
-        return json.loads(raw)
+        return decode(raw, enc)
     except ValueError:
         return {"undecodable": raw.decode("utf-8", "replace")}

@@ -4,10 +4,11 @@
 context manager and ``close()`` undeclares and closes all of it. The guidance loop's thread
 only ever stores: ``publish_tick`` puts the tick's (immutable) ``TickCommand`` with the wall
 time in a one-sample slot, replacing one not yet sent, and a publisher thread, waking
-``publish_rate_hz`` times a second, takes the newest tick there, builds the JSON and puts
-it. The loop never waits for it, nor wakes it. Every publisher uses congestion control
-DROP, so a slow subscriber or a full network queue drops samples inside zenoh instead of
-blocking the publisher thread either. Events are queued and all sent, as they come.
+``publish_rate_hz`` times a second, takes the newest tick there, builds the payloads and
+puts them (MessagePack by default, JSON with ``payload: json``; see :mod:`.schema`). The
+loop never waits for it, nor wakes it. Every publisher uses congestion control DROP, so a
+slow subscriber or a full network queue drops samples inside zenoh instead of blocking the
+publisher thread either. Events are queued and all sent, as they come.
 
 The queryables run on zenoh's threads: ``status`` calls the status provider; ``scenario``
 exists only when ``scenario_updates`` is enabled (zenoh's ACL then decides who reaches it,
@@ -20,7 +21,6 @@ takes the scenario between ticks). Updates are logged by size and digest, never 
 from __future__ import annotations
 
 import collections
-import json
 import logging
 import queue
 import threading
@@ -36,6 +36,8 @@ from ezcompanion.records import Event, TickCommand
 from ezcompanion.telemetry.exposure import exposure_warnings
 from ezcompanion.telemetry.schema import (
     SCHEMAS,
+    encode,
+    encoding_name,
     event_payload,
     guidance_payload,
     key,
@@ -58,13 +60,13 @@ _RECENT_EVENTS = 20  # kept for the status reply, so a late monitor sees how it 
 _CLOSE_TIMEOUT_S = 2.0
 
 
-def encoding(leaf: str) -> zenoh.Encoding:
-    """``application/json;<schema>`` of a leaf's payload."""
-    return zenoh.Encoding.APPLICATION_JSON.with_schema(SCHEMAS[leaf])
+def encoding(leaf: str, fmt: str = "json") -> zenoh.Encoding:
+    """``application/json;<schema>`` (or ``application/msgpack;...``) of a leaf's payload."""
+    return zenoh.Encoding(encoding_name(leaf, fmt))
 
 
 def _dumps(payload: Any) -> bytes:
-    return json.dumps(payload, separators=(",", ":"), allow_nan=False, default=str).encode()
+    return encode("status", payload)
 
 
 class TelemetryPublisher:
@@ -119,12 +121,16 @@ class TelemetryPublisher:
         self.session = open_session(conf)
         try:
             drop = zenoh.CongestionControl.DROP
+            fmt = settings.payload
             self._state_pub = self.session.declare_publisher(
-                key(vid, "state"), encoding=encoding("state"), congestion_control=drop, express=True
+                key(vid, "state"),
+                encoding=encoding("state", fmt),
+                congestion_control=drop,
+                express=True,
             )
             self._guidance_pub = self.session.declare_publisher(
                 key(vid, "guidance"),
-                encoding=encoding("guidance"),
+                encoding=encoding("guidance", fmt),
                 congestion_control=drop,
                 express=True,
             )
@@ -229,21 +235,22 @@ class TelemetryPublisher:
     def _send_event(self, event: Event, wall_unix_s: float) -> None:
         payload = event_payload(self.vehicle_id, self._next_seq(), event, wall_unix_s)
         self._recent_events.append(payload)
-        self._put(self._event_pub, payload)
+        self._put(self._event_pub, _dumps(payload))
 
     def _send_tick(self, command: TickCommand, wall_unix_s: float, names: tuple[str, ...]) -> None:
         seq = self._next_seq()
+        fmt = self.settings.payload
         self._last_tick = (seq, command, wall_unix_s, names)
         # each sample is built only when someone subscribes to it (the status reply builds
         # the last ones when asked); guidance first: it is what monitors wait for
         if self.has_subscribers("guidance"):
             guidance = guidance_payload(self.vehicle_id, seq, command, wall_unix_s, names)
             guidance["sent_unix_s"] = time.time()
-            self._put(self._guidance_pub, guidance)
+            self._put(self._guidance_pub, encode("guidance", guidance, fmt))
         if self.has_subscribers("state"):
             state = state_payload(self.vehicle_id, seq, command, wall_unix_s)
             state["sent_unix_s"] = time.time()
-            self._put(self._state_pub, state)
+            self._put(self._state_pub, encode("state", state, fmt))
         self.ticks_published += 1
 
     @property
@@ -262,9 +269,9 @@ class TelemetryPublisher:
         self._seq += 1
         return self._seq
 
-    def _put(self, publisher: zenoh.Publisher, payload: dict[str, Any]) -> None:
+    def _put(self, publisher: zenoh.Publisher, payload: bytes) -> None:
         try:
-            publisher.put(_dumps(payload))
+            publisher.put(payload)
             self.samples_published += 1
         except zenoh.ZError:
             _log.warning("telemetry: could not publish on %s", publisher.key_expr, exc_info=True)
@@ -290,6 +297,7 @@ class TelemetryPublisher:
                 "connect": list(s.connect),
                 "config_file": s.config_file,
                 "publish_rate_hz": s.publish_rate_hz,
+                "payload": s.payload,
                 "tls": s.tls is not None,
                 "client_auth": s.tls is not None and s.tls.client_auth,
                 "logins": s.auth is not None and s.auth.credentials_file is not None,

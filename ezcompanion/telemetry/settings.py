@@ -11,6 +11,7 @@ Layout (every key optional)::
       config_file: null               # any zenoh json5 config instead of the keys above
       vehicle_id: vehicle1            # the <vehicle> chunk of every key
       publish_rate_hz: 20.0           # state and guidance samples a second, at most
+      payload: msgpack                # msgpack | json: the state and guidance samples' format
       tls: {...}                      # certificates (ezcompanion.telemetry.access)
       auth: {...}                     # user-password logins (ezcompanion.telemetry.access)
       scenario_updates: {...}         # off unless enabled (ezcompanion.telemetry.access)
@@ -74,6 +75,7 @@ class TelemetrySettings:
     config_file: str | None = None
     vehicle_id: str = "vehicle1"
     publish_rate_hz: float = 20.0
+    payload: str = "msgpack"
     tls: TlsSettings | None = None
     auth: AuthSettings | None = None
     scenario_updates: UpdateSettings = field(default_factory=UpdateSettings)
@@ -108,6 +110,8 @@ class TelemetrySettings:
         rate = self.publish_rate_hz
         if not isinstance(rate, float | int) or isinstance(rate, bool) or not 0.1 <= rate <= 1000:
             raise ConfigError("publish_rate_hz", rate, "must be a number in [0.1, 1000]")
+        if self.payload not in ("msgpack", "json"):
+            raise ConfigError("payload", self.payload, "must be msgpack or json")
         for name, kind in (("tls", TlsSettings), ("auth", AuthSettings)):
             if not isinstance(getattr(self, name), kind | None):
                 raise ConfigError(name, getattr(self, name), "must be a mapping")

@@ -40,10 +40,16 @@ class LinkStats:
 
 @dataclass(frozen=True)
 class Frame:
-    """One decoded message and the transport address it came from."""
+    """One decoded message, the transport address it came from and its type (the
+    message's ``get_type()``, read once when the frame was parsed)."""
 
     message: Message
     source: Address
+    kind: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.kind:
+            object.__setattr__(self, "kind", str(self.message.get_type()))
 
     @property
     def mavlink1(self) -> bool:
@@ -209,7 +215,7 @@ class Link:
             if chunk is None:
                 break
             data, source = chunk
-            out.extend(Frame(msg, source) for msg in self._parse(data))
+            self._parse(data, source, out)
         return out
 
     # the peer
@@ -294,18 +300,16 @@ class Link:
             return None
         return bytes(data), None
 
-    def _parse(self, chunk: bytes) -> list[Message]:
-        out: list[Message] = []
+    def _parse(self, chunk: bytes, source: Address, out: list[Frame]) -> None:
         mav = self._conn.mav
         try:
             msg = mav.parse_char(chunk)
             while msg is not None:
-                self._keep(msg, out)
+                self._keep(msg, source, out)
                 msg = mav.parse_char(b"")
         except Exception:
             self._bad += 1
             self._reset_parser(count_partial=False)
-        return out
 
     def _reset_parser(self, *, count_partial: bool = True) -> None:
         mav = self._conn.mav
@@ -315,13 +319,13 @@ class Link:
         mav.buf_index = 0
         mav.expected_length = mavlink.HEADER_LEN_V1 + 2
 
-    def _keep(self, msg: Message, out: list[Message]) -> None:
+    def _keep(self, msg: Message, source: Address, out: list[Frame]) -> None:
         kind = msg.get_type()
         if kind in ("BAD_DATA", "UNKNOWN") or kind.startswith("UNKNOWN_"):
             self._bad += 1
             return
         self._messages += 1
-        out.append(msg)
+        out.append(Frame(msg, source, kind))
 
     # send
     def pack(self, msg: Message) -> bytes:

@@ -28,8 +28,9 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from ezcompanion.wire import Message, euler_from_quaternion, is_finite, mavlink
 from sitl_stub.config import StubConfig
+from sitl_stub.mav import Message, finite, roll_of_quaternion
+from sitl_stub.mav import mav as mavlink
 from sitl_stub.profiles import Behaviour, ModeSpec, px4_custom_mode
 from sitl_stub.telemetry import STREAMED, StreamScheduler
 from sitl_stub.vehicle import (
@@ -197,7 +198,7 @@ class Autopilot:
                          and not mask & _R.POSITION_TARGET_TYPEMASK_FORCE_SET)
         yaw_rate_used = not mask & _R.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
         values = (msg.vx, msg.vy, msg.yaw_rate if yaw_rate_used else 0.0)
-        if self.spec.accepts_velocity and velocity_only and is_finite(*values):
+        if self.spec.accepts_velocity and velocity_only and finite(*values):
             self._last_setpoint_s = t_s  # PX4's offboard signal, even outside OFFBOARD
         if not self.spec.accepts_velocity:
             self._notice("SET_POSITION_TARGET_LOCAL_NED unsupported", t_s)
@@ -211,7 +212,7 @@ class Autopilot:
         if not velocity_only:
             self._notice(f"Setpoint type_mask {mask} unsupported", t_s)
             return
-        if not is_finite(*values):
+        if not finite(*values):
             self._notice("Setpoint rejected: not finite", t_s)
             return
         speed = math.hypot(msg.vx, msg.vy)
@@ -242,17 +243,17 @@ class Autopilot:
             return
         mask = int(msg.type_mask)
         q = [float(v) for v in msg.q]
-        q_ok = is_finite(*q) and 0.9 <= math.sqrt(sum(v * v for v in q)) <= 1.1
+        q_ok = finite(*q) and 0.9 <= math.sqrt(sum(v * v for v in q)) <= 1.1
         command: VehicleCommand | None = None
         if self.spec.ardupilot_attitude_mask:
             angles = (mask ^ 0xFF) & 0b10000111
             if (angles & 0b10000001 or angles == 0b10000000) and q_ok:
-                command = self._roll_command(euler_from_quaternion(q)[0])
+                command = self._roll_command(roll_of_quaternion(q))
         elif not mask & _R.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE and q_ok:
-            command = self._roll_command(euler_from_quaternion(q)[0])
+            command = self._roll_command(roll_of_quaternion(q))
         elif not mask & _R.ATTITUDE_TARGET_TYPEMASK_BODY_YAW_RATE_IGNORE:
             rate = float(msg.body_yaw_rate)
-            if is_finite(rate) and abs(rate) <= _MAX_YAW_RATE_RAD_S:
+            if finite(rate) and abs(rate) <= _MAX_YAW_RATE_RAD_S:
                 command = TurnRate(rate)
         if command is None:
             self._notice(f"Attitude target rejected (mask {mask})", t_s)
@@ -293,7 +294,7 @@ class Autopilot:
             command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()))
 
     def _cmd_set_mode(self, base: float, custom: float, sub: float, t_s: float) -> int:
-        if not is_finite(base, custom, sub) or not 0 <= custom < 2**32 or not 0 <= sub < 256:
+        if not finite(base, custom, sub) or not 0 <= custom < 2**32 or not 0 <= sub < 256:
             return int(_R.MAV_RESULT_DENIED)
         if not int(base) & _R.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
             return int(_R.MAV_RESULT_DENIED)
@@ -333,7 +334,7 @@ class Autopilot:
         return int(_R.MAV_RESULT_ACCEPTED)
 
     def _cmd_get_interval(self, msg_id: float) -> int:
-        if not is_finite(msg_id) or int(msg_id) != msg_id or int(msg_id) not in STREAMED:
+        if not finite(msg_id) or int(msg_id) != msg_id or int(msg_id) not in STREAMED:
             return int(_R.MAV_RESULT_FAILED)
         interval = self.scheduler.interval_s(STREAMED[int(msg_id)])
         interval_us = -1 if interval is None else round(interval * 1e6)
@@ -341,7 +342,7 @@ class Autopilot:
         return int(_R.MAV_RESULT_ACCEPTED)
 
     def _cmd_request_message(self, msg_id: float) -> int:
-        if not is_finite(msg_id) or int(msg_id) != msg_id:
+        if not finite(msg_id) or int(msg_id) != msg_id:
             return int(_R.MAV_RESULT_DENIED)
         if int(msg_id) == _R.MAVLINK_MSG_ID_HEARTBEAT:
             self.outbox.append(self.heartbeat())
@@ -360,7 +361,7 @@ class Autopilot:
     def _cmd_change_heading(self, kind: float, heading_deg: float, accel: float, t_s: float) -> int:
         if self.mode.behaviour is not Behaviour.GUIDED:
             return int(_R.MAV_RESULT_FAILED)
-        if not is_finite(kind, heading_deg, accel) or not 0.0 <= heading_deg < 360.0:
+        if not finite(kind, heading_deg, accel) or not 0.0 <= heading_deg < 360.0:
             return int(_R.MAV_RESULT_DENIED)
         if int(kind) == _R.HEADING_TYPE_DEFAULT:
             self._guided = None

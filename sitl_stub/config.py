@@ -51,7 +51,7 @@ from ezcompanion.config import GeoOrigin, Scenario, VehicleStart, build_dataclas
 from ezcompanion.config_limits import POSITION_LIMIT_M
 from ezcompanion.endpoint import pymavlink_url
 from ezcompanion.errors import ConfigError
-from ezcompanion.wire import signing_key_from_hex, signing_key_from_passphrase
+from sitl_stub.mav import key_from_hex, key_from_passphrase
 from sitl_stub.profiles import Profile, ProfileSpec, profile_spec
 
 __all__ = ["Faults", "StreamRates", "StubConfig", "StubSettings", "load_stub_config", "stub_config"]
@@ -180,7 +180,7 @@ class StubSettings:
         if self.signing_key_hex is not None:
             if not isinstance(self.signing_key_hex, str):
                 raise ConfigError("signing_key_hex", self.signing_key_hex, "must be a string")
-            signing_key_from_hex(self.signing_key_hex)
+            key_from_hex(self.signing_key_hex)
         if self.signing_passphrase is not None and not isinstance(self.signing_passphrase, str):
             raise ConfigError("signing_passphrase", self.signing_passphrase, "must be a string")
         spec = profile_spec(Profile(self.profile))
@@ -206,9 +206,9 @@ class StubSettings:
     def signing_key(self) -> bytes | None:
         """The configured signing key, if any."""
         if self.signing_key_hex is not None:
-            return signing_key_from_hex(self.signing_key_hex)
+            return key_from_hex(self.signing_key_hex)
         if self.signing_passphrase is not None:
-            return signing_key_from_passphrase(self.signing_passphrase)
+            return key_from_passphrase(self.signing_passphrase)
         return None
 
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 
-from ezcompanion.wire import mavlink
+from sitl_stub.mav import mav as mavlink
 
 __all__ = ["Behaviour", "ModeSpec", "Profile", "ProfileSpec", "profile_spec"]
 

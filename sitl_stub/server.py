@@ -24,10 +24,10 @@ from pathlib import Path
 from types import TracebackType
 
 from ezcompanion.sim.kinematics import Wind
-from ezcompanion.wire import Link, Message, open_link
 from sitl_stub.autopilot import Autopilot
 from sitl_stub.config import StubConfig
 from sitl_stub.faults import FaultInjector
+from sitl_stub.mav import Message, StubLink
 from sitl_stub.telemetry import StreamScheduler, TelemetryEncoder
 from sitl_stub.truth import TruthWriter
 from sitl_stub.vehicle import VehicleParams, VehicleState, step
@@ -68,7 +68,7 @@ class SitlStub:
         self._lock = threading.Condition()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self._link: Link | None = None
+        self._link: StubLink | None = None
         self._wake_r, self._wake_w = socket.socketpair()
         self._wake_r.setblocking(False)
         self._sim_s = 0.0
@@ -84,7 +84,7 @@ class SitlStub:
     def start(self) -> SitlStub:
         """Open the link and start the simulation thread."""
         s = self.config.settings
-        self._link = open_link(s.connect, system_id=s.system_id, component_id=s.component_id)
+        self._link = StubLink(s.connect, system_id=s.system_id, component_id=s.component_id)
         key = s.signing_key()
         if key is not None:
             self._link.enable_signing(key)
@@ -216,7 +216,7 @@ class SitlStub:
         except BlockingIOError:
             pass
 
-    def _receive(self, link: Link) -> None:
+    def _receive(self, link: StubLink) -> None:
         assert self.autopilot is not None
         for msg in link.recv_messages():
             try:

@@ -54,12 +54,15 @@ class SitlStub:
             yaw_rate_max_rad_s=math.radians(s.yaw_rate_max_deg_s),
             response_time_s=s.response_time_s, course_gain_1_s=s.course_gain_1_s,
             can_hover=config.spec.can_hover, wind=self._wind,
+            speed_ratio=config.model_value("speed_ratio"),
+            speed_lag_s=config.model_value("velocity_lag_s") if config.measured else 0.0,
+            follows_setpoint_speed=config.measured,
         )
         grounded = not s.start_armed and config.spec.can_hover
         speed = 0.0 if grounded else config.start.speed_m_s
         self._state = VehicleState(
             t_s=0.0, north_m=config.start.north_m, east_m=config.start.east_m,
-            heading_rad=config.start.course_rad, speed_m_s=speed,
+            heading_rad=config.start.course_rad, speed_m_s=speed, height_m=s.height_m,
         )
         self._truth_out = Path(truth_out) if truth_out is not None else None
         self._record = record_truth
@@ -90,7 +93,7 @@ class SitlStub:
             self._link.enable_signing(key)
         self._scheduler = StreamScheduler(s.streams, self.config.max_stream_rate_hz)
         self.autopilot = Autopilot(self.config, self._scheduler, self._link.mav)
-        self._encoder = TelemetryEncoder(self._link, self.config.origin, s.height_m, self._wind)
+        self._encoder = TelemetryEncoder(self._link, self.config.origin, self._wind)
         self._truth = TruthWriter(self._truth_out, self._wind) if self._truth_out else None
         if self._truth is not None:
             self._truth.write(self._state, self.autopilot.mode.name, self.autopilot.armed)
@@ -244,8 +247,10 @@ class SitlStub:
             if self._state.t_s + dt > now + 1e-12:
                 return True
             command = ap.command_at(self._state.t_s, self._state)
+            vertical = ap.vertical_at(self._state.t_s, self._state)
             self._steps += 1
-            new = replace(step(self._state, command, self.params, dt), t_s=self._steps * dt)
+            new = replace(step(self._state, command, self.params, dt, vertical),
+                          t_s=self._steps * dt)
             with self._lock:
                 self._state = new
             if self._record:
@@ -260,6 +265,8 @@ class SitlStub:
         assert self.autopilot is not None and self._link is not None
         while self._next_heartbeat_s <= t_s + 1e-9:
             self._link.send(self.autopilot.heartbeat())
+            for msg in self.autopilot.periodic_status(self._state, t_s):
+                self._link.send(msg)
             self._next_heartbeat_s += _HEARTBEAT_PERIOD_S
         for stamp, name in self._scheduler.pop_due(t_s):
             self._emit(name, stamp)

@@ -122,10 +122,9 @@ class StreamScheduler:
 class TelemetryEncoder:
     """Builds telemetry messages from a vehicle state (local NED of the scenario's origin)."""
 
-    def __init__(self, link: StubLink, origin: GeoOrigin, height_m: float, wind: Wind) -> None:
+    def __init__(self, link: StubLink, origin: GeoOrigin, wind: Wind) -> None:
         self._mav = link.mav
         self._origin = origin
-        self._height_m = height_m
         self._wind = wind
 
     def encode(self, name: str, state: VehicleState, stamp_s: float,
@@ -135,17 +134,17 @@ class TelemetryEncoder:
         east = state.east_m + offset_east_m
         vn, ve = state.ground_velocity(self._wind)
         t_ms = ms(stamp_s)
+        height, climb = state.height_m, state.climb_m_s
         if name == "GLOBAL_POSITION_INT":
             o = self._origin
-            lat, lon, alt = ned_to_lla(north, east, -self._height_m,
-                                       (o.lat_deg, o.lon_deg, o.alt_m))
+            lat, lon, alt = ned_to_lla(north, east, -height, (o.lat_deg, o.lon_deg, o.alt_m))
             return self._mav.global_position_int_encode(
-                t_ms, e7(lat), e7(lon), mm(alt), mm(self._height_m), cm_s(vn), cm_s(ve), 0,
+                t_ms, e7(lat), e7(lon), mm(alt), mm(height), cm_s(vn), cm_s(ve), cm_s(-climb),
                 hdg_cdeg(state.heading_rad),
             )
         if name == "LOCAL_POSITION_NED":
             return self._mav.local_position_ned_encode(
-                t_ms, north, east, -self._height_m, vn, ve, 0.0)
+                t_ms, north, east, -height, vn, ve, -climb)
         if name == "ATTITUDE":
             roll = math.atan2(state.accel_lat_m_s2, _GRAVITY_M_S2)  # coordinated turn
             return self._mav.attitude_encode(t_ms, roll, 0.0, state.heading_rad, 0.0, 0.0,
@@ -153,7 +152,7 @@ class TelemetryEncoder:
         if name == "VFR_HUD":
             return self._mav.vfr_hud_encode(
                 state.speed_m_s, math.hypot(vn, ve), hdg_deg(state.heading_rad),
-                50 if state.speed_m_s > 0.0 else 0, self._origin.alt_m + self._height_m, 0.0,
+                50 if state.speed_m_s > 0.0 else 0, self._origin.alt_m + height, climb,
             )
         raise KeyError(name)
 

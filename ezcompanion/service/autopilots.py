@@ -34,6 +34,7 @@ class AutopilotProfile:
 
     name: str
     response_lag_s: float
+    setpoint_lead_s: float = 0.0
     abandon_turn_s: float
     abandon_hold_s: float
     abandon_brake_m_s2: float
@@ -44,7 +45,7 @@ ARDUCOPTER = AutopilotProfile(
     abandon_brake_m_s2=2.5,
 )  # fmt: skip
 PX4_COPTER = AutopilotProfile(
-    name="PX4", response_lag_s=1.2, abandon_turn_s=0.0, abandon_hold_s=1.15,
+    name="PX4", response_lag_s=0.3, setpoint_lead_s=1.2, abandon_turn_s=0.0, abandon_hold_s=1.15,
     abandon_brake_m_s2=3.0,
 )  # fmt: skip
 ARDUPLANE = AutopilotProfile(

@@ -35,6 +35,10 @@ from ezcompanion.wire import Link, Message, course_command, s_to_ms, velocity_se
 __all__ = ["CourseSetpoints", "Setpoints", "VelocitySetpoints", "make_setpoints"]
 
 _MAX_LEAD_RAD = math.radians(30.0)
+_MAX_COMPENSATED_LEAD_RAD = math.radians(85.0)
+_STILL_FRACTION = 0.5  # of the nominal speed: slower, the vehicle stands still
+_HEIGHT_GAIN_1_S = 1.0  # height hold: vz = gain * error ...
+_MAX_CLIMB_M_S = 1.0  # ... within this
 _COURSE_HORIZON_S = 2.0
 _COURSE_MIN_INTERVAL_S = 0.1
 _MIN_ACCEL_LIMIT_RATIO = 0.02  # of a_max: the smallest limit we hand the autopilot
@@ -59,6 +63,7 @@ class Setpoints(ABC):
         self.target_component = target_component
         self.accel_max_m_s2 = accel_max_m_s2
         self.ground_vehicle = ground_vehicle  # a rover or boat: no vertical velocity
+        self.lead_s = 0.0  # the vehicle's course lag the setpoints cancel (0: none)
         self.reset()
 
     @abstractmethod
@@ -80,18 +85,52 @@ class VelocitySetpoints(Setpoints):
 
     kind = SetpointKind.VELOCITY
     _reference_rad: float | None
+    _hold_down_m: float | None
 
     def reset(self) -> None:
         self._reference_rad = None
+        self._hold_down_m = None
+
+    def reference_rad(self, command: TickCommand) -> float:
+        """The direction of the velocity to send for ``command``.
+
+        Standing still (slower than half the nominal speed: the course is the yaw) the
+        reference is the course itself, so it does not turn while the vehicle cannot.
+        With ``lead_s`` (the vehicle's measured first-order course lag, PX4) it leads the
+        course by omega * lead_s, the inverse of that lag, so that the course turns at omega
+        now instead of lagging it (within 85 degrees). Without, it integrates omega and
+        leads the measured course by at most 30 degrees, so it cannot wind up.
+        """
+        omega = command.turn_rate_rad_s
+        course = command.course_rad
+        if command.state.ground_speed_m_s < _STILL_FRACTION * command.nominal_speed_m_s:
+            self._reference_rad = None
+            return course
+        if self.lead_s > 0.0:
+            lead = min(max(omega * self.lead_s, -_MAX_COMPENSATED_LEAD_RAD),
+                       _MAX_COMPENSATED_LEAD_RAD)
+            return course + lead
+        reference = course if self._reference_rad is None else self._reference_rad
+        reference += omega * command.dt_s
+        lead = float(wrap_pi(reference - course))
+        lead = min(max(lead, -_MAX_LEAD_RAD), _MAX_LEAD_RAD)
+        self._reference_rad = course + lead
+        return self._reference_rad
+
+    def climb_down_m_s(self, command: TickCommand) -> float:
+        """Vertical velocity (down) holding the height of the first tick after a reset:
+        PX4 does not hold its height on vz = 0 (measured -2.5 m to +5.2 m). A feedback on
+        the measured height, not a z setpoint, so no frame offset between the vehicle's
+        local origin and the scenario's can shift it."""
+        down = command.state.down_m
+        if self._hold_down_m is None:
+            self._hold_down_m = down
+        error = self._hold_down_m - down
+        return min(max(_HEIGHT_GAIN_1_S * error, -_MAX_CLIMB_M_S), _MAX_CLIMB_M_S)
 
     def message(self, command: TickCommand) -> Message:
         omega = command.turn_rate_rad_s
-        reference = command.course_rad if self._reference_rad is None else self._reference_rad
-        reference += omega * command.dt_s
-        lead = float(wrap_pi(reference - command.course_rad))
-        lead = min(max(lead, -_MAX_LEAD_RAD), _MAX_LEAD_RAD)
-        reference = command.course_rad + lead
-        self._reference_rad = reference
+        reference = self.reference_rad(command)
         speed = command.nominal_speed_m_s
         return velocity_setpoint(
             self.link,
@@ -100,11 +139,10 @@ class VelocitySetpoints(Setpoints):
             time_boot_ms=s_to_ms(command.time_s) % 2**32,
             north_m_s=speed * math.cos(reference),
             east_m_s=speed * math.sin(reference),
-            down_m_s=0.0,
+            down_m_s=0.0 if self.ground_vehicle else self.climb_down_m_s(command),
             yaw_rate_rad_s=omega,
             horizontal_only=self.ground_vehicle,
         )
-
 
     def brake(self, time_s: float) -> Message:
         """Zero velocity: a copter, rover or PX4 multicopter stops and holds at once, instead

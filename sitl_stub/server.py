@@ -263,6 +263,8 @@ class SitlStub:
 
     def _periodic(self, t_s: float) -> None:
         assert self.autopilot is not None and self._link is not None
+        if self._next_heartbeat_s < t_s - _HEARTBEAT_PERIOD_S:
+            self._next_heartbeat_s = t_s  # fell behind (a starved process): do not burst
         while self._next_heartbeat_s <= t_s + 1e-9:
             self._link.send(self.autopilot.heartbeat())
             for msg in self.autopilot.periodic_status(self._state, t_s):

@@ -35,6 +35,7 @@ class AutopilotProfile:
     name: str
     response_lag_s: float
     setpoint_lead_s: float = 0.0
+    turn_ratio: float = 1.0
     abandon_turn_s: float
     abandon_hold_s: float
     abandon_brake_m_s2: float
@@ -49,7 +50,7 @@ PX4_COPTER = AutopilotProfile(
     abandon_brake_m_s2=3.0,
 )  # fmt: skip
 ARDUPLANE = AutopilotProfile(
-    name="ArduPlane", response_lag_s=1.0, abandon_turn_s=2.0, abandon_hold_s=8.0,
+    name="ArduPlane", response_lag_s=1.0, turn_ratio=0.54, abandon_turn_s=2.0, abandon_hold_s=8.0,
     abandon_brake_m_s2=0.0,
 )  # fmt: skip
 

@@ -295,7 +295,7 @@ class CompanionService:
                 self.engagement.setpoints = self._make_setpoints()
                 if session.heartbeat is not None:  # the autopilot's measured response
                     profile = autopilot_profile(session.heartbeat)
-                    self.engagement.setpoints.lead_s = profile.setpoint_lead_s
+                    self.engagement.setpoints.use_profile(profile)
                     self.loop.assume_response_lag(profile.response_lag_s)
             self.phase = Phase.WAITING
         if self.phase is Phase.WAITING and session.in_guided and session.frame_settled:

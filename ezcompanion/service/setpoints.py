@@ -28,6 +28,7 @@ import math
 from abc import ABC, abstractmethod
 
 from ezcompanion.frames import wrap_pi
+from ezcompanion.service.autopilots import AutopilotProfile
 from ezcompanion.service.loop import TickCommand
 from ezcompanion.service.settings import SetpointKind
 from ezcompanion.wire import Link, Message, course_command, s_to_ms, velocity_setpoint
@@ -42,6 +43,10 @@ _MAX_CLIMB_M_S = 1.0  # ... within this
 _COURSE_HORIZON_S = 2.0
 _COURSE_MIN_INTERVAL_S = 0.1
 _MIN_ACCEL_LIMIT_RATIO = 0.02  # of a_max: the smallest limit we hand the autopilot
+_MAX_COURSE_LEAD_RAD = 0.5 * math.pi  # a course command never more than 90 degrees ahead
+_TRIM_FROM_RATIO = 0.2  # of a_max: the outer loop trims only in a clear turn
+_TRIM_RATE_1_S = 0.5  # relative gain change per second per unit of relative turn error
+_GAIN_MIN, _GAIN_MAX = 0.5, 4.0  # p3 / |a|
 
 
 class Setpoints(ABC):
@@ -64,6 +69,7 @@ class Setpoints(ABC):
         self.accel_max_m_s2 = accel_max_m_s2
         self.ground_vehicle = ground_vehicle  # a rover or boat: no vertical velocity
         self.lead_s = 0.0  # the vehicle's course lag the setpoints cancel (0: none)
+        self.turn_ratio = 1.0  # flown / asked lateral acceleration of a course command
         self.reset()
 
     @abstractmethod
@@ -73,6 +79,13 @@ class Setpoints(ABC):
     @abstractmethod
     def message(self, command: TickCommand) -> Message | None:
         """The message for ``command``, or None if nothing is due this tick."""
+
+    def use_profile(self, profile: AutopilotProfile) -> None:
+        """Take the autopilot's measured response: the course lag to cancel (velocity) and
+        the share of a course command's turn it flies (ArduPlane); starts afresh."""
+        self.lead_s = profile.setpoint_lead_s
+        self.turn_ratio = profile.turn_ratio
+        self.reset()
 
     def brake(self, time_s: float) -> Message | None:
         """What stops the vehicle where it is when guidance must stop (a failsafe), built
@@ -161,20 +174,59 @@ class VelocitySetpoints(Setpoints):
 
 
 class CourseSetpoints(Setpoints):
-    """ArduPlane's course command."""
+    """ArduPlane's course command, with an outer loop on the measured turn.
+
+    The course asked for is the measured course plus omega * 2 s (at most 90 degrees ahead,
+    so that wrapping it to [0, 360) never turns the plane the wrong way), and the
+    lateral-acceleration limit p3 is |a| times a gain. ArduPlane flies only 0.54x (a_max
+    4.5 m/s^2) to 0.62x (9.81) of p3 (issue 11: roll to 75% of its limit, and 72% of the
+    turn that roll predicts), so the gain starts at 1 / ``turn_ratio`` (the profile's) and
+    an integrator trims it on the measured course rate until the flown |a| = v |course
+    rate| follows the law's |a|.
+    """
 
     kind = SetpointKind.COURSE
     _last_sent_s: float
+    _gain: float
+    _last_tick_s: float | None
 
     def reset(self) -> None:
         self._last_sent_s = -math.inf
+        self._gain = 1.0 / self.turn_ratio
+        self._last_tick_s = None
+
+    @property
+    def gain(self) -> float:
+        """p3 / |a|: the outer loop's current gain."""
+        return self._gain
+
+    def _trim(self, command: TickCommand) -> None:
+        """Integrate the turn-rate error into the gain (only in a clear turn that the
+        vehicle flies the same way round)."""
+        last, self._last_tick_s = self._last_tick_s, command.time_s
+        rate = command.state.course_rate_rad_s
+        wanted = command.accel_lat_m_s2
+        if last is None or rate is None or not math.isfinite(rate):
+            return
+        flown = command.state.ground_speed_m_s * rate
+        if abs(wanted) < _TRIM_FROM_RATIO * self.accel_max_m_s2 or flown * wanted <= 0.0:
+            return
+        dt = min(max(command.time_s - last, 0.0), 0.5)
+        error = (abs(wanted) - abs(flown)) / abs(wanted)
+        gain = self._gain * (1.0 + _TRIM_RATE_1_S * dt * error)
+        self._gain = min(max(gain, _GAIN_MIN), _GAIN_MAX)
 
     def message(self, command: TickCommand) -> Message | None:
+        self._trim(command)
         if command.time_s - self._last_sent_s < _COURSE_MIN_INTERVAL_S:
             return None
         self._last_sent_s = command.time_s
-        course = command.course_rad + command.turn_rate_rad_s * _COURSE_HORIZON_S
-        limit = max(abs(command.accel_lat_m_s2), _MIN_ACCEL_LIMIT_RATIO * self.accel_max_m_s2)
+        lead = command.turn_rate_rad_s * _COURSE_HORIZON_S
+        lead = min(max(lead, -_MAX_COURSE_LEAD_RAD), _MAX_COURSE_LEAD_RAD)
+        course = command.course_rad + lead
+        floor = _MIN_ACCEL_LIMIT_RATIO * self.accel_max_m_s2
+        limit = min(max(abs(command.accel_lat_m_s2) * self._gain, floor),
+                    _GAIN_MAX * self.accel_max_m_s2)
         return course_command(
             self.link,
             target_system=self.target_system,

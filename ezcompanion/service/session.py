@@ -41,6 +41,7 @@ from ezcompanion.records import EventKind, Hold
 from ezcompanion.service.events import EventLog
 from ezcompanion.service.settings import CompanionSettings, SetpointKind
 from ezcompanion.service.state import TelemetryState
+from ezcompanion.service.statustext import StatusTextAssembler
 from ezcompanion.service.trust import Alarms, HeartbeatJudge
 from ezcompanion.wire import (
     Address,
@@ -98,6 +99,7 @@ class VehicleSession:
         self._discovery_until_s: float | None = None
         self.alarms = Alarms(events)
         self._judge = HeartbeatJudge()
+        self._texts = StatusTextAssembler()
         self._origin_tries = 0
         self._next_origin_s = math.inf
         self.mode = ""
@@ -160,8 +162,10 @@ class VehicleSession:
             self.alarms.hold(cause, now, why, hold_s=_TELEMETRY_HOLD_S)
         if kind == "COMMAND_ACK":
             self._on_ack(msg, now)
-        elif kind == "STATUSTEXT":
-            self.events.emit(EventKind.STATUSTEXT, now, str(msg.text), severity=int(msg.severity))
+        elif kind == "STATUSTEXT":  # a chunked text is one event (service/statustext.py)
+            for t in self._texts.feed(str(msg.text), int(msg.severity), int(getattr(msg, "id", 0)),
+                                      int(getattr(msg, "chunk_seq", 0)), now):
+                self.events.emit(EventKind.STATUSTEXT, now, t.text, severity=t.severity)
         return used
 
     def _on_ack(self, msg: Message, now: float) -> None:

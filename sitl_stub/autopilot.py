@@ -9,10 +9,13 @@ whatever it cannot follow is announced in a STATUSTEXT where they would stay sil
 Setpoints are followed only in the guided mode (GUIDED, or OFFBOARD for PX4):
 
 - SET_POSITION_TARGET_LOCAL_NED (copter, PX4) with a velocity in MAV_FRAME_LOCAL_NED or
-  MAV_FRAME_BODY_NED: its direction becomes the commanded course (a body-frame direction is
-  fixed when received, turning at the yaw rate if one is given); the speed stays the
-  vehicle's cruise speed; a zero velocity stops the vehicle. Timeout: the last velocity is
-  flown for ``setpoint_timeout_s``, then the vehicle stops and holds (PX4: switches to HOLD).
+  MAV_FRAME_BODY_NED: its direction becomes the commanded course, followed with the
+  measured lag (a body-frame direction is fixed when received, turning at the yaw rate if
+  one is given); its speed, times the measured shortfall, is flown (the ideal model: the
+  cruise speed); a z holds a height, else vz is flown (PX4: with its drift); a zero
+  velocity stops the vehicle. Timeout: the last velocity is flown for
+  ``setpoint_timeout_s``, then the vehicle stops and holds (PX4: 1 s without any setpoint,
+  then a failsafe to POSCTL, descending).
 - SET_ATTITUDE_TARGET: the roll angle becomes a coordinated turn, a = g tan(roll) (or, copter
   and PX4 with the attitude ignored, a body yaw rate becomes a turn rate). Plane reads
   type_mask as ArduPlane does (198 = roll only). Held for ``attitude_timeout_s``.

@@ -6,12 +6,19 @@ Figures (issues 9 and 11, ArduCopter and ArduPlane V4.7.0-dev SITL, PX4 v1.16 SI
 - ArduCopter: the flown course rate lags the commanded one by about 0.5 s; with no new
   setpoint it flies the last velocity for its GUIDED timeout (GUID_TIMEOUT, 3 s), then
   brakes (WPNAV_ACCEL, 2.5 m/s^2 by default).
-- PX4 multicopter: velocity setpoints lag by 0.9 to 1.4 s (1.2 s taken); offboard loss after
-  1.04 to 1.15 s (COM_OF_LOSS_T 1.0 s), then a failsafe to POSCTL, which brakes
-  (MPC_ACC_HOR 3 m/s^2).
+- PX4 multicopter: velocity setpoints lag by 0.9 to 1.4 s (1.2 s taken) and it flies 0.78
+  to 0.80 of the commanded speed; offboard loss after 1.04 to 1.15 s (COM_OF_LOSS_T 1.0 s),
+  then a failsafe to POSCTL, which brakes (MPC_ACC_HOR 3 m/s^2) and, with no RC, descends.
+  The velocity setpoints cancel the 1.2 s lag (``setpoint_lead_s``: the direction leads
+  the course by omega * 1.2 s, the inverse of a first-order lag), so the law is given
+  only what remains, 0.3 s (telemetry age and a tick, with room for the 0.9-1.4 s spread).
+  On the measured stub this flies both paper scenarios outside every zone, where the law
+  told the full 1.2 s and a 30-degree lead clamp entered two zones (scenario 2).
 - ArduPlane: a course command is flown until another comes, for ever; the law takes a
   configured horizon of 10 s (long enough for a person to take over), the turn to the
-  commanded course (2 s ahead) first. Roll response lag about 1 s.
+  commanded course (2 s ahead) first. Roll response lag about 1 s. It turns at only 0.54x
+  (a_max 4.5 m/s^2) to 0.62x (9.81) of what a GUIDED_CHANGE_HEADING limit asks
+  (``turn_ratio`` 0.54: the course setpoints' outer loop starts from 1 / 0.54).
 
 The law uses ``response_lag_s`` unless the scenario states its own. The abandon figures are
 reported with each profile; the law checks them only where the scenario sets

@@ -9,14 +9,21 @@ with it. (Measured on ArduPilot 4.7 SITL: a 2 m/s vector rotated at 15 deg/s wit
 15 deg/s flew 2.02 m/s at 15.1 deg/s.) LOCAL_NED rather than BODY_NED, because ArduCopter
 turns a body-frame velocity into a fixed direction when it arrives. The reference course
 starts at the measured course and may lead it by at most 30 degrees, so it cannot wind up
-while the vehicle lags. Vertical velocity 0 holds altitude. Streamed every tick, well
-inside the autopilots' timeouts (ArduCopter 3 s, PX4 needs > 2 Hz).
+while the vehicle lags; for PX4, whose 1.2 s lag would need far more lead than that, the
+reference is instead the measured course plus omega * 1.2 s (the profile's
+``setpoint_lead_s``), the inverse of its first-order lag. Standing still (slower than half
+the nominal speed) the reference does not turn. The vertical velocity holds the height of
+the first tick by feedback on the measured height (PX4 does not hold it on vz = 0).
+Streamed every tick, well inside the autopilots' timeouts (ArduCopter 3 s, PX4 1 s).
 
 ``course`` (ArduPlane): MAV_CMD_GUIDED_CHANGE_HEADING as COMMAND_INT, p1 = 0 (course over
 ground), p2 = the course to turn to, p3 = the lateral-acceleration limit. We ask for the
-course 2 s of turning ahead (course + omega * 2 s) with the limit |a|, so the autopilot turns
-at the rate we want (its own heading loop would turn harder; the limit binds) and flies
-straight when a = 0. It has no timeout on ArduPlane and is acknowledged each time, so it is
+course 2 s of turning ahead (course + omega * 2 s, at most 90 degrees ahead so the wrapped
+course never turns the plane the wrong way) with the limit |a| times a gain, so the autopilot
+turns at the rate we want (its own heading loop would turn harder; the limit binds) and flies
+straight when a = 0. ArduPlane flies only 0.54x of the limit, so the gain starts at 1 / 0.54
+and an outer loop trims it on the measured course rate (CourseSetpoints). It has no
+timeout on ArduPlane and is acknowledged each time, so it is
 sent at most 10 times a second. (The roll-only SET_ATTITUDE_TARGET alternative is held for
 only 3 s and turned slower than its bank angle predicts, so it would need its own outer loop
 on the measured turn rate: not used.)

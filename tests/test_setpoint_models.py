@@ -19,8 +19,8 @@ from hypothesis import strategies as st
 from ezcompanion import wire
 from ezcompanion.records import TickCommand, VehicleState
 from ezcompanion.service.autopilots import ARDUPLANE, PX4_COPTER
-from ezcompanion.service.settings import SetpointKind
 from ezcompanion.service.setpoints import CourseSetpoints, VelocitySetpoints, make_setpoints
+from ezcompanion.service.settings import SetpointKind
 
 
 @pytest.fixture(scope="module")

@@ -182,8 +182,10 @@ def test_px4_offboard_needs_setpoints_then_fails_safe(gcs: Gcs) -> None:
         posctl = 3 << 16
         assert gcs.recv("HEARTBEAT", 3.0, lambda m: m.custom_mode == posctl) is not None
         assert stub.mode_name == "POSCTL"
-        t1 = stub.sim_time_s
-        stub.wait_sim_time(t1 + 1.5)
-        assert stub.state.speed_m_s == 0.0
-        assert stub.state.climb_m_s == pytest.approx(-0.8)
-        assert stub.state.height_m < height0 - 0.8 * 1.5
+        s1 = stub.state
+        assert stub.wait_sim_time(s1.t_s + 1.5)
+        s2 = stub.state
+        assert s2.speed_m_s == 0.0
+        assert s2.climb_m_s == pytest.approx(-0.8)
+        assert s2.height_m - s1.height_m == pytest.approx(-0.8 * (s2.t_s - s1.t_s), abs=1e-6)
+        assert s2.height_m < height0

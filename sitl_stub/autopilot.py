@@ -9,10 +9,13 @@ whatever it cannot follow is announced in a STATUSTEXT where they would stay sil
 Setpoints are followed only in the guided mode (GUIDED, or OFFBOARD for PX4):
 
 - SET_POSITION_TARGET_LOCAL_NED (copter, PX4) with a velocity in MAV_FRAME_LOCAL_NED or
-  MAV_FRAME_BODY_NED: its direction becomes the commanded course (a body-frame direction is
-  fixed when received, turning at the yaw rate if one is given); the speed stays the
-  vehicle's cruise speed; a zero velocity stops the vehicle. Timeout: the last velocity is
-  flown for ``setpoint_timeout_s``, then the vehicle stops and holds (PX4: switches to HOLD).
+  MAV_FRAME_BODY_NED: its direction becomes the commanded course, followed with the
+  measured lag (a body-frame direction is fixed when received, turning at the yaw rate if
+  one is given); its speed, times the measured shortfall, is flown (the ideal model: the
+  cruise speed); a z holds a height, else vz is flown (PX4: with its drift); a zero
+  velocity stops the vehicle. Timeout: the last velocity is flown for
+  ``setpoint_timeout_s``, then the vehicle stops and holds (PX4: 1 s without any setpoint,
+  then a failsafe to POSCTL, descending).
 - SET_ATTITUDE_TARGET: the roll angle becomes a coordinated turn, a = g tan(roll) (or, copter
   and PX4 with the attitude ignored, a body yaw rate becomes a turn rate). Plane reads
   type_mask as ArduPlane does (198 = roll only). Held for ``attitude_timeout_s``.
@@ -28,10 +31,17 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from ezcompanion.wire import Message, euler_from_quaternion, is_finite, mavlink
+from sitl_stub.commands import CommandHandlers
 from sitl_stub.config import StubConfig
-from sitl_stub.profiles import Behaviour, ModeSpec, Profile, px4_custom_mode
-from sitl_stub.telemetry import STREAMED, StreamScheduler
+from sitl_stub.mav import Message, finite, roll_of_quaternion
+from sitl_stub.mav import mav as mavlink
+from sitl_stub.profiles import Behaviour, ModeSpec
+from sitl_stub.status import (
+    extended_sys_state,
+    gps_global_origin,
+    statustext_frames,
+)
+from sitl_stub.telemetry import StreamScheduler
 from sitl_stub.vehicle import (
     FollowCourse,
     LateralAccel,
@@ -40,6 +50,7 @@ from sitl_stub.vehicle import (
     TurnRate,
     VehicleCommand,
     VehicleState,
+    Vertical,
 )
 
 __all__ = ["Autopilot"]
@@ -52,8 +63,10 @@ _MAX_YAW_RATE_RAD_S = 2.0 * math.pi
 _MAX_ROLL_RAD = math.radians(80.0)
 _REPEAT_NOTICE_S = 1.0  # the same rejection is announced at most this often
 _R = mavlink
-_POS_IGNORE = (_R.POSITION_TARGET_TYPEMASK_X_IGNORE | _R.POSITION_TARGET_TYPEMASK_Y_IGNORE
-               | _R.POSITION_TARGET_TYPEMASK_Z_IGNORE)
+_POS_IGNORE = _R.POSITION_TARGET_TYPEMASK_X_IGNORE | _R.POSITION_TARGET_TYPEMASK_Y_IGNORE
+_Z_IGNORE = _R.POSITION_TARGET_TYPEMASK_Z_IGNORE
+_VZ_IGNORE = _R.POSITION_TARGET_TYPEMASK_VZ_IGNORE
+_MAX_HEIGHT_M = 100_000.0
 _ACC_IGNORE = (_R.POSITION_TARGET_TYPEMASK_AX_IGNORE | _R.POSITION_TARGET_TYPEMASK_AY_IGNORE
                | _R.POSITION_TARGET_TYPEMASK_AZ_IGNORE)
 _VEL_NE_IGNORE = _R.POSITION_TARGET_TYPEMASK_VX_IGNORE | _R.POSITION_TARGET_TYPEMASK_VY_IGNORE
@@ -68,6 +81,7 @@ class _Active:
     received_s: float
     timeout_s: float
     nose: tuple[float, float] | None = None  # body frame: (yaw_rad at received_s, yaw rate)
+    vertical: Vertical | None = None  # what the setpoint asks vertically (None: hold)
 
     def nose_rad(self, t_s: float) -> float | None:
         """Where the nose points at ``t_s`` for a body-frame setpoint (yaw turns at its rate)."""
@@ -79,7 +93,7 @@ class _Active:
         return self.timeout_s > 0.0 and t_s - self.received_s > self.timeout_s
 
 
-class Autopilot:
+class Autopilot(CommandHandlers):
     """Mode, arming and guidance state of the imitated autopilot (one thread owns it)."""
 
     def __init__(self, config: StubConfig, scheduler: StreamScheduler, mav: Any) -> None:
@@ -100,6 +114,9 @@ class Autopilot:
         self._last_setpoint_s = -math.inf
         self._noticed: dict[str, float] = {}
         self._label = ""
+        self._descending = False  # PX4's failsafe without RC: descend in POSCTL
+        self._text_id = 0
+        self._origin_sent = False
 
     # ---- what the vehicle does ----------------------------------------------------------
     def command_at(self, t_s: float, state: VehicleState) -> VehicleCommand:
@@ -120,12 +137,17 @@ class Autopilot:
         if self._override is not None and self._override.expired(t_s):
             self.statustext(f"{self.mode.name}: attitude timeout", _R.MAV_SEVERITY_WARNING)
             self._override = None
-        if self._guided is not None and self._guided.expired(t_s):
+        timeout = self.config.timeout_s("setpoint")
+        offboard_lost = (self.spec.failsafe_mode is not None and timeout > 0.0
+                         and t_s - self._last_setpoint_s > timeout)
+        if offboard_lost or (self._guided is not None and self._guided.expired(t_s)):
             self._guided = None
             if self.spec.failsafe_mode is not None:
                 self._set_mode(self.spec.failsafe_mode)
-                self.statustext(f"Failsafe: setpoints lost, {self.mode.name}",
-                                _R.MAV_SEVERITY_WARNING)
+                self._descending = self.config.model_value("failsafe_descent_m_s") > 0.0
+                then = "descending (no RC)" if self._descending else "holding"
+                self.statustext(f"Failsafe activated: offboard setpoints lost, switching to "
+                                f"{self.mode.name}, {then}", _R.MAV_SEVERITY_WARNING)
                 return self._resolve(t_s, state)
             self.statustext(f"{self.mode.name}: setpoint timeout", _R.MAV_SEVERITY_WARNING)
             if self.spec.can_hover:
@@ -134,6 +156,30 @@ class Autopilot:
         if active is not None:
             return active.command, active.label
         return self._hold(state)
+
+    def vertical_at(self, t_s: float, state: VehicleState) -> Vertical:
+        """The vertical command in force (call after :meth:`command_at`)."""
+        if self._descending and self.armed:
+            return Vertical(climb_m_s=-self.config.model_value("failsafe_descent_m_s"))
+        if (self.armed and self.mode.behaviour is Behaviour.GUIDED and self._guided is not None
+                and self._guided.vertical is not None and self._override is None):
+            return self._guided.vertical
+        return Vertical()
+
+    def in_air(self, state: VehicleState) -> bool:
+        """EXTENDED_SYS_STATE's landed state: armed and above the ground (a plane: armed)."""
+        return self.armed and (state.height_m > 0.0 or not self.spec.can_hover)
+
+    def periodic_status(self, state: VehicleState, t_s: float) -> list[Message]:
+        """What goes with each HEARTBEAT: EXTENDED_SYS_STATE, and GPS_GLOBAL_ORIGIN once,
+        when the local origin is first set (ArduPilot and PX4 send it only then)."""
+        out = [extended_sys_state(self._mav, fixed_wing=not self.spec.can_hover,
+                                  in_air=self.in_air(state))]
+        after = self.config.settings.local_origin_after_s
+        if not self._origin_sent and 0.0 <= after <= t_s:
+            self._origin_sent = True
+            out.append(gps_global_origin(self._mav, self.config.origin, int(t_s * 1e6)))
+        return out
 
     def _hold(self, state: VehicleState) -> tuple[VehicleCommand, str]:
         if self.spec.can_hover:
@@ -155,10 +201,10 @@ class Autopilot:
                                           self.mode.custom_mode, status, 3)
 
     def statustext(self, text: str, severity: int = _R.MAV_SEVERITY_NOTICE) -> None:
-        """Queue a STATUSTEXT (cut to the 50 characters of one frame)."""
+        """Queue a STATUSTEXT (chunked, with MAVLink 2's id and chunk_seq, beyond 50 chars)."""
         _log.info("statustext: %s", text)
-        payload = text[:50].encode("ascii", "replace")
-        self.outbox.append(self._mav.statustext_encode(severity, payload))
+        self._text_id = self._text_id % 65535 + 1
+        self.outbox.extend(statustext_frames(self._mav, text, severity, self._text_id))
 
     def _notice(self, text: str, t_s: float) -> None:
         """Announce a rejection, at most once per second of simulated time per text."""
@@ -178,9 +224,6 @@ class Autopilot:
             return  # addressed to another vehicle
         handler(self, msg, t_s, state)
 
-    def _for_us(self, msg: Message) -> bool:
-        return getattr(msg, "target_component", 0) in (0, self.component_id)
-
     def _guided_ok(self, what: str, t_s: float) -> bool:
         if self.mode.behaviour is not Behaviour.GUIDED:
             self._notice(f"{what} ignored: not in {self.spec.guided_mode}", t_s)
@@ -192,12 +235,15 @@ class Autopilot:
 
     def _on_position_target(self, msg: Message, t_s: float, state: VehicleState) -> None:
         mask = int(msg.type_mask)
+        # horizontal velocity, with a height (z) or a vertical velocity or neither
         velocity_only = (mask & _POS_IGNORE == _POS_IGNORE and mask & _ACC_IGNORE == _ACC_IGNORE
                          and not mask & _VEL_NE_IGNORE
                          and not mask & _R.POSITION_TARGET_TYPEMASK_FORCE_SET)
         yaw_rate_used = not mask & _R.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
-        values = (msg.vx, msg.vy, msg.yaw_rate if yaw_rate_used else 0.0)
-        if self.spec.accepts_velocity and velocity_only and is_finite(*values):
+        z_used, vz_used = not mask & _Z_IGNORE, not mask & _VZ_IGNORE
+        values = (msg.vx, msg.vy, msg.yaw_rate if yaw_rate_used else 0.0,
+                  msg.z if z_used else 0.0, msg.vz if vz_used else 0.0)
+        if self.spec.accepts_velocity and velocity_only and finite(*values):
             self._last_setpoint_s = t_s  # PX4's offboard signal, even outside OFFBOARD
         if not self.spec.accepts_velocity:
             self._notice("SET_POSITION_TARGET_LOCAL_NED unsupported", t_s)
@@ -211,17 +257,26 @@ class Autopilot:
         if not velocity_only:
             self._notice(f"Setpoint type_mask {mask} unsupported", t_s)
             return
-        if not is_finite(*values):
+        if not finite(*values):
             self._notice("Setpoint rejected: not finite", t_s)
             return
         speed = math.hypot(msg.vx, msg.vy)
-        if speed > _MAX_SETPOINT_SPEED_M_S or abs(values[2]) > _MAX_YAW_RATE_RAD_S:
+        if (speed > _MAX_SETPOINT_SPEED_M_S or abs(values[2]) > _MAX_YAW_RATE_RAD_S
+                or abs(values[3]) > _MAX_HEIGHT_M or abs(values[4]) > _MAX_SETPOINT_SPEED_M_S):
             self._notice("Setpoint rejected: out of range", t_s)
             return
         timeout = self.config.timeout_s("setpoint")
+        if z_used:  # position control of the height: held
+            vertical = Vertical(height_m=-float(msg.z))
+        else:  # vz (0 when ignored); PX4 does not hold its height this way (drift)
+            drift = self.config.model_value("vz_hold_drift_m_s")
+            vertical = Vertical(climb_m_s=-float(values[4]) + drift)
         if speed < 1e-3:
-            self._guided = _Active("velocity zero, holding", Stop(), t_s, timeout)
+            self._guided = _Active("velocity zero, holding", Stop(), t_s, timeout,
+                                   vertical=vertical)
             return
+        lag = self.config.model_value("velocity_lag_s")
+        gain = 1.0 / max(lag, self.config.settings.physics_dt_s)
         direction = math.atan2(msg.vy, msg.vx)
         if frame == _R.MAV_FRAME_BODY_NED:
             # fixed on receipt relative to the nose; the nose yaws at the yaw rate (as
@@ -230,35 +285,37 @@ class Autopilot:
             previous = self._guided.nose_rad(t_s) if self._guided is not None else None
             nose = state.heading_rad if previous is None else previous
             rate = float(values[2])
-            command = FollowCourse(nose + direction, course_rate_rad_s=rate, since_s=t_s)
+            command = FollowCourse(nose + direction, course_rate_rad_s=rate, since_s=t_s,
+                                   gain_1_s=gain, speed_m_s=speed)
             self._guided = _Active("following body velocity", command, t_s, timeout,
-                                   nose=(nose, rate))
+                                   nose=(nose, rate), vertical=vertical)
             return
-        command = FollowCourse(direction, since_s=t_s)
-        self._guided = _Active("following velocity", command, t_s, timeout)
+        command = FollowCourse(direction, since_s=t_s, gain_1_s=gain, speed_m_s=speed)
+        self._guided = _Active("following velocity", command, t_s, timeout, vertical=vertical)
 
     def _on_attitude_target(self, msg: Message, t_s: float, state: VehicleState) -> None:
         if not self._guided_ok("Attitude target", t_s):
             return
         mask = int(msg.type_mask)
         q = [float(v) for v in msg.q]
-        q_ok = is_finite(*q) and 0.9 <= math.sqrt(sum(v * v for v in q)) <= 1.1
+        q_ok = finite(*q) and 0.9 <= math.sqrt(sum(v * v for v in q)) <= 1.1
         command: VehicleCommand | None = None
         if self.spec.ardupilot_attitude_mask:
             angles = (mask ^ 0xFF) & 0b10000111
             if (angles & 0b10000001 or angles == 0b10000000) and q_ok:
-                command = self._roll_command(euler_from_quaternion(q)[0])
+                command = self._roll_command(roll_of_quaternion(q))
         elif not mask & _R.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE and q_ok:
-            command = self._roll_command(euler_from_quaternion(q)[0])
+            command = self._roll_command(roll_of_quaternion(q))
         elif not mask & _R.ATTITUDE_TARGET_TYPEMASK_BODY_YAW_RATE_IGNORE:
             rate = float(msg.body_yaw_rate)
-            if is_finite(rate) and abs(rate) <= _MAX_YAW_RATE_RAD_S:
+            if finite(rate) and abs(rate) <= _MAX_YAW_RATE_RAD_S:
                 command = TurnRate(rate)
         if command is None:
             self._notice(f"Attitude target rejected (mask {mask})", t_s)
             return
         label = "following roll" if isinstance(command, LateralAccel) else "following yaw rate"
         self._override = _Active(label, command, t_s, self.config.timeout_s("attitude"))
+        self._last_setpoint_s = t_s  # an offboard signal too (PX4)
 
     @staticmethod
     def _roll_command(roll_rad: float) -> VehicleCommand | None:
@@ -266,57 +323,10 @@ class Autopilot:
             return None
         return LateralAccel(_GRAVITY_M_S2 * math.tan(roll_rad))
 
-    def _on_command(self, msg: Message, t_s: float, state: VehicleState) -> None:
-        if not self._for_us(msg):
-            return
-        command = int(msg.command)
-        params = [float(getattr(msg, f"param{i}")) for i in range(1, 5)]
-        if command == _R.MAV_CMD_DO_SET_MODE:
-            result = self._cmd_set_mode(params[0], params[1], params[2], t_s)
-        elif command == _R.MAV_CMD_COMPONENT_ARM_DISARM:
-            result = self._cmd_arm(params[0])
-        elif command == _R.MAV_CMD_SET_MESSAGE_INTERVAL:
-            result = self.scheduler.set_message_interval(params[0], params[1], t_s)
-        elif command == _R.MAV_CMD_GET_MESSAGE_INTERVAL:
-            result = self._cmd_get_interval(params[0])
-        elif command == _R.MAV_CMD_REQUEST_MESSAGE:
-            result = self._cmd_request_message(params[0])
-        elif command == _R.MAV_CMD_GUIDED_CHANGE_HEADING and self.spec.accepts_course_command:
-            result = self._cmd_change_heading(params[0], params[1], params[2], t_s)
-        else:
-            result = _R.MAV_RESULT_UNSUPPORTED
-        self.ack(msg, command, int(result))
-
-    def ack(self, msg: Message, command: int, result: int) -> None:
-        """Queue the COMMAND_ACK for ``command``, addressed to the sender of ``msg``."""
-        self.outbox.append(self._mav.command_ack_encode(
-            command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()))
-
-    def _cmd_set_mode(self, base: float, custom: float, sub: float, t_s: float) -> int:
-        if not is_finite(base, custom, sub) or not 0 <= custom < 2**32 or not 0 <= sub < 256:
-            return int(_R.MAV_RESULT_DENIED)
-        if not int(base) & _R.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-            return int(_R.MAV_RESULT_DENIED)
-        if self.spec.autopilot == _R.MAV_AUTOPILOT_PX4:
-            if not custom < 256:
-                return int(_R.MAV_RESULT_DENIED)
-            number = px4_custom_mode(int(custom), int(sub))
-        else:
-            number = int(custom)
-        mode = self.spec.mode_by_number(number)
-        if mode is None:
-            return int(_R.MAV_RESULT_FAILED)
-        if (mode.behaviour is Behaviour.GUIDED and self.spec.failsafe_mode is not None
-                and t_s - self._last_setpoint_s > self.config.timeout_s("setpoint")):
-            self._notice(f"{mode.name} needs setpoints first", t_s)
-            return int(_R.MAV_RESULT_TEMPORARILY_REJECTED)
-        self._set_mode(mode.name)
-        return int(_R.MAV_RESULT_ACCEPTED)
-
-    def set_mode_message(self, msg: Message, t_s: float, state: VehicleState) -> None:
-        """SET_MODE (the message, not the command): ArduPilot acks it with command = 11."""
-        result = self._cmd_set_mode(float(msg.base_mode), float(msg.custom_mode), 0.0, t_s)
-        self.ack(msg, int(_R.MAVLINK_MSG_ID_SET_MODE), result)
+    def _follow(self, label: str, command: FollowCourse | None, t_s: float) -> None:
+        """A course command (GUIDED_CHANGE_HEADING) in force from ``t_s``; None cancels."""
+        self._guided = (None if command is None else
+                        _Active(label, command, t_s, self.config.timeout_s("course")))
 
     def _set_mode(self, name: str) -> None:
         mode = self.spec.mode_by_name(name)
@@ -324,96 +334,9 @@ class Autopilot:
         if mode != self.mode:
             self._guided = None
             self._override = None
+            self._descending = False
         self.mode = mode
 
-    def _cmd_arm(self, arm: float) -> int:
-        if arm not in (0.0, 1.0):
-            return int(_R.MAV_RESULT_DENIED)
-        self.armed = arm == 1.0
-        return int(_R.MAV_RESULT_ACCEPTED)
-
-    def _cmd_get_interval(self, msg_id: float) -> int:
-        if not is_finite(msg_id) or int(msg_id) != msg_id or int(msg_id) not in STREAMED:
-            return int(_R.MAV_RESULT_FAILED)
-        interval = self.scheduler.interval_s(STREAMED[int(msg_id)])
-        interval_us = -1 if interval is None else round(interval * 1e6)
-        self.outbox.append(self._mav.message_interval_encode(int(msg_id), interval_us))
-        return int(_R.MAV_RESULT_ACCEPTED)
-
-    def _cmd_request_message(self, msg_id: float) -> int:
-        if not is_finite(msg_id) or int(msg_id) != msg_id:
-            return int(_R.MAV_RESULT_DENIED)
-        if int(msg_id) == _R.MAVLINK_MSG_ID_HEARTBEAT:
-            self.outbox.append(self.heartbeat())
-        elif int(msg_id) in STREAMED:
-            self.requested.append(STREAMED[int(msg_id)])
-        elif int(msg_id) == _R.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN:
-            # the EKF origin, as ArduPilot answers the request (encoded here, in degE7 and mm)
-            origin = self.config.origin
-            self.outbox.append(self._mav.gps_global_origin_encode(
-                round(origin.lat_deg * 1e7), round(origin.lon_deg * 1e7),
-                round(origin.alt_m * 1000.0), 0))
-        else:
-            return int(_R.MAV_RESULT_DENIED)
-        return int(_R.MAV_RESULT_ACCEPTED)
-
-    def _cmd_change_heading(self, kind: float, heading_deg: float, accel: float, t_s: float) -> int:
-        if self.mode.behaviour is not Behaviour.GUIDED:
-            return int(_R.MAV_RESULT_FAILED)
-        if not is_finite(kind, heading_deg, accel) or not 0.0 <= heading_deg < 360.0:
-            return int(_R.MAV_RESULT_DENIED)
-        if int(kind) == _R.HEADING_TYPE_DEFAULT:
-            self._guided = None
-            return int(_R.MAV_RESULT_ACCEPTED)
-        if int(kind) not in (_R.HEADING_TYPE_COURSE_OVER_GROUND, _R.HEADING_TYPE_HEADING):
-            return int(_R.MAV_RESULT_DENIED)
-        over_ground = int(kind) == _R.HEADING_TYPE_COURSE_OVER_GROUND
-        command = FollowCourse(math.radians(heading_deg), over_ground=over_ground,
-                               accel_limit_m_s2=max(accel, 0.05), since_s=t_s)
-        label = "following course" if over_ground else "following heading"
-        self._guided = _Active(label, command, t_s, self.config.timeout_s("course"))
-        return int(_R.MAV_RESULT_ACCEPTED)
-
-    def _on_data_stream(self, msg: Message, t_s: float, state: VehicleState) -> None:
-        if not self._for_us(msg):
-            return
-        if not self.spec.supports_data_streams:
-            self._notice("REQUEST_DATA_STREAM unsupported", t_s)
-            return
-        rate = int(msg.req_message_rate)
-        if rate > self.scheduler.max_rate_hz:
-            self._notice(f"Stream rate limited to {self.scheduler.max_rate_hz:g} Hz", t_s)
-        if not self.scheduler.request_data_stream(int(msg.req_stream_id), rate,
-                                                  bool(msg.start_stop), t_s):
-            self._notice(f"Data stream {int(msg.req_stream_id)} unsupported", t_s)
-
-    def parameters(self) -> dict[str, float]:
-        """The parameters the stub answers for: its setpoint timeout, under the imitated
-        autopilot's name (ArduCopter GUID_TIMEOUT, PX4 COM_OF_LOSS_T). ArduPlane's course
-        command has no timeout: nothing."""
-        timeout = self.config.timeout_s("setpoint")
-        if self.spec.profile is Profile.PX4:
-            return {"COM_OF_LOSS_T": timeout}
-        if self.spec.profile is Profile.COPTER:
-            return {"GUID_TIMEOUT": timeout}
-        return {}
-
-    def _on_param_request_read(self, msg: Message, t_s: float, state: VehicleState) -> None:
-        if not self._for_us(msg):
-            return
-        name = msg.param_id.decode("ascii", "replace") if isinstance(msg.param_id, bytes) \
-            else str(msg.param_id)
-        name = name.rstrip("\x00")
-        params = self.parameters()
-        if name in params:  # an unknown name gets no answer, as on ArduPilot
-            index = sorted(params).index(name)
-            self.outbox.append(self._mav.param_value_encode(
-                name.encode("ascii"), params[name], _R.MAV_PARAM_TYPE_REAL32, len(params),
-                index))
-
-    def _on_timesync(self, msg: Message, t_s: float, state: VehicleState) -> None:
-        if int(msg.tc1) == 0:
-            self.outbox.append(self._mav.timesync_encode(int(t_s * 1e9), int(msg.ts1)))
 
 
 _HANDLERS = {

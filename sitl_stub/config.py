@@ -10,6 +10,12 @@ Layout (every key optional; see ``docs/sitl_stub.md``)::
       speedup: 1.0
       seed: 0
       physics_dt_s: 0.01
+      model: measured               # measured | ideal (docs/sitl_stub.md)
+      velocity_lag_s: null          # null: the model's (measured: copter 0.5, PX4 1.2)
+      speed_ratio: null             # flown / commanded (measured: PX4 0.8, plane 23.4/22)
+      heading_accel_ratio: null     # plane course command (measured 0.54)
+      vz_hold_drift_m_s: null       # climb under vz = 0 without a height (PX4 0.1)
+      failsafe_descent_m_s: null    # after PX4's offboard-loss failsafe (0.8)
       response_time_s: 0.0          # first-order lag of lateral acceleration, 0 = ideal
       course_gain_1_s: 2.0
       yaw_rate_max_deg_s: 90.0
@@ -51,7 +57,7 @@ from ezcompanion.config import GeoOrigin, Scenario, VehicleStart, build_dataclas
 from ezcompanion.config_limits import POSITION_LIMIT_M
 from ezcompanion.endpoint import pymavlink_url
 from ezcompanion.errors import ConfigError
-from ezcompanion.wire import signing_key_from_hex, signing_key_from_passphrase
+from sitl_stub.mav import key_from_hex, key_from_passphrase
 from sitl_stub.profiles import Profile, ProfileSpec, profile_spec
 
 __all__ = ["Faults", "StreamRates", "StubConfig", "StubSettings", "load_stub_config", "stub_config"]
@@ -118,6 +124,19 @@ class Faults:
         return self != Faults()
 
 
+#: The response models: ``measured`` (the autopilots as measured in SITL) or ``ideal``.
+MODELS = ("measured", "ideal")
+_MODEL_RANGES = (
+    ("velocity_lag_s", 0.0, 10.0),
+    ("speed_ratio", 0.1, 2.0),
+    ("heading_accel_ratio", 0.05, 1.0),
+    ("vz_hold_drift_m_s", -5.0, 5.0),
+    ("failsafe_descent_m_s", 0.0, 10.0),
+)
+#: What each model key is in the ideal vehicle (velocity_lag_s: 1 / course_gain_1_s).
+_IDEAL = {"speed_ratio": 1.0, "heading_accel_ratio": 1.0, "vz_hold_drift_m_s": 0.0}
+
+
 @dataclass(frozen=True, kw_only=True)
 class StubSettings:
     """The ``sitl_stub:`` section: how the loopback vehicle behaves and talks."""
@@ -129,6 +148,12 @@ class StubSettings:
     speedup: float = 1.0
     seed: int = 0
     physics_dt_s: float = 0.01
+    model: str = "measured"
+    velocity_lag_s: float | None = None
+    speed_ratio: float | None = None
+    heading_accel_ratio: float | None = None
+    vz_hold_drift_m_s: float | None = None
+    failsafe_descent_m_s: float | None = None
     response_time_s: float = 0.0
     course_gain_1_s: float = 2.0
     yaw_rate_max_deg_s: float = 90.0
@@ -161,6 +186,11 @@ class StubSettings:
         _check("speedup", self.speedup, low=0.0, high=1000.0, low_open=True)
         _check("physics_dt_s", self.physics_dt_s, low=0.0, high=0.1, low_open=True)
         _check("response_time_s", self.response_time_s, low=0.0, high=60.0)
+        if self.model not in MODELS:
+            raise ConfigError("model", self.model, "must be measured or ideal")
+        for name, low, high in _MODEL_RANGES:
+            if getattr(self, name) is not None:
+                _check(name, getattr(self, name), low=low, high=high)
         _check("course_gain_1_s", self.course_gain_1_s, low=0.0, high=100.0, low_open=True)
         _check("yaw_rate_max_deg_s", self.yaw_rate_max_deg_s, low=0.0, high=3600.0, low_open=True)
         _check("loiter_radius_m", self.loiter_radius_m, low=0.0, high=1e5, low_open=True)
@@ -182,7 +212,7 @@ class StubSettings:
         if self.signing_key_hex is not None:
             if not isinstance(self.signing_key_hex, str):
                 raise ConfigError("signing_key_hex", self.signing_key_hex, "must be a string")
-            signing_key_from_hex(self.signing_key_hex)
+            key_from_hex(self.signing_key_hex)
         if self.signing_passphrase is not None and not isinstance(self.signing_passphrase, str):
             raise ConfigError("signing_passphrase", self.signing_passphrase, "must be a string")
         spec = profile_spec(Profile(self.profile))
@@ -208,9 +238,9 @@ class StubSettings:
     def signing_key(self) -> bytes | None:
         """The configured signing key, if any."""
         if self.signing_key_hex is not None:
-            return signing_key_from_hex(self.signing_key_hex)
+            return key_from_hex(self.signing_key_hex)
         if self.signing_passphrase is not None:
-            return signing_key_from_passphrase(self.signing_passphrase)
+            return key_from_passphrase(self.signing_passphrase)
         return None
 
 
@@ -232,6 +262,22 @@ class StubConfig:
         """``setpoint``, ``attitude`` or ``course`` timeout: the setting or the profile's."""
         value = getattr(self.settings, f"{kind}_timeout_s")
         return float(getattr(self.spec, f"{kind}_timeout_s") if value is None else value)
+
+    @property
+    def measured(self) -> bool:
+        """The measured response model (else the ideal vehicle)."""
+        return self.settings.model == "measured"
+
+    def model_value(self, name: str) -> float:
+        """A response-model figure: the setting, else the model's (profile's measured one)."""
+        value = getattr(self.settings, name)
+        if value is not None:
+            return float(value)
+        if self.measured or name == "failsafe_descent_m_s":
+            return float(getattr(self.spec, name))
+        if name == "velocity_lag_s":
+            return 1.0 / self.settings.course_gain_1_s
+        return _IDEAL[name]
 
     @property
     def max_stream_rate_hz(self) -> float:

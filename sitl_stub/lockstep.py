@@ -18,7 +18,7 @@ import logging
 import math
 import time
 
-from ezcompanion.wire import Message
+from sitl_stub.mav import Message
 
 __all__ = ["LockstepGate"]
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 
-from ezcompanion.wire import mavlink
+from sitl_stub.mav import mav as mavlink
 
 __all__ = ["Behaviour", "ModeSpec", "Profile", "ProfileSpec", "profile_spec"]
 
@@ -65,11 +65,22 @@ class ProfileSpec:
     ardupilot_attitude_mask: bool  # SET_ATTITUDE_TARGET type_mask read as ArduPlane does
     supports_data_streams: bool  # REQUEST_DATA_STREAM
     can_hover: bool
+    # the measured response (docs/sitl_stub.md, "Measured response models")
+    velocity_lag_s: float  # flown velocity direction behind the setpoint's (first order)
+    speed_ratio: float  # flown / commanded speed (plane: ground speed / cruise airspeed)
+    heading_accel_ratio: float  # flown / commanded lateral acceleration of a course command
+    vz_hold_drift_m_s: float  # climb while told vz = 0 without a height (up)
+    failsafe_descent_m_s: float  # descent after the offboard-loss failsafe (no RC)
+    acks_twice: bool  # every COMMAND_ACK is sent twice (PX4 v1.16)
+    firmware: tuple[int, int, int, int]  # AUTOPILOT_VERSION: major, minor, patch, type
+    aliases: tuple[tuple[str, str], ...] = ()  # other names a mode is known by
 
     def mode_by_name(self, name: str) -> ModeSpec | None:
-        """The mode called ``name`` (case-insensitive), if this autopilot has one."""
+        """The mode called ``name`` (case-insensitive, or an alias), if this autopilot has one."""
+        wanted = name.upper()
+        wanted = dict(self.aliases).get(wanted, wanted)
         for mode in self.modes:
-            if mode.name == name.upper():
+            if mode.name == wanted:
                 return mode
         return None
 
@@ -100,6 +111,8 @@ _COPTER = ProfileSpec(
     max_stream_rate_hz=200.0, setpoint_timeout_s=3.0, attitude_timeout_s=3.0, course_timeout_s=0.0,
     accepts_velocity=True, accepts_course_command=False, ardupilot_attitude_mask=False,
     supports_data_streams=True, can_hover=True,
+    velocity_lag_s=0.5, speed_ratio=1.0, heading_accel_ratio=1.0, vz_hold_drift_m_s=0.0,
+    failsafe_descent_m_s=0.0, acks_twice=False, firmware=(4, 7, 0, 0),
 )
 
 _PLANE = ProfileSpec(
@@ -115,6 +128,8 @@ _PLANE = ProfileSpec(
     max_stream_rate_hz=40.0, setpoint_timeout_s=0.0, attitude_timeout_s=3.0, course_timeout_s=0.0,
     accepts_velocity=False, accepts_course_command=True, ardupilot_attitude_mask=True,
     supports_data_streams=True, can_hover=False,
+    velocity_lag_s=0.0, speed_ratio=23.4 / 22.0, heading_accel_ratio=0.54, vz_hold_drift_m_s=0.0,
+    failsafe_descent_m_s=0.0, acks_twice=False, firmware=(4, 7, 0, 0),
 )
 
 _PX4 = ProfileSpec(
@@ -123,14 +138,17 @@ _PX4 = ProfileSpec(
     autopilot=mavlink.MAV_AUTOPILOT_PX4,
     modes=(
         ModeSpec("POSCTL", px4_custom_mode(3), _H),
-        ModeSpec("AUTO.LOITER", px4_custom_mode(4, 3), _H),
-        ModeSpec("AUTO.MISSION", px4_custom_mode(4, 4), _C),
+        ModeSpec("LOITER", px4_custom_mode(4, 3), _H),  # 0x03040000, pymavlink's name
+        ModeSpec("MISSION", px4_custom_mode(4, 4), _C),
         ModeSpec("OFFBOARD", px4_custom_mode(6), _G),
     ),
-    guided_mode="OFFBOARD", initial_mode="AUTO.MISSION", failsafe_mode="AUTO.LOITER",
+    aliases=(("AUTO.LOITER", "LOITER"), ("AUTO.MISSION", "MISSION")),
+    guided_mode="OFFBOARD", initial_mode="MISSION", failsafe_mode="POSCTL",
     max_stream_rate_hz=200.0, setpoint_timeout_s=1.0, attitude_timeout_s=1.0, course_timeout_s=0.0,
     accepts_velocity=True, accepts_course_command=False, ardupilot_attitude_mask=False,
     supports_data_streams=False, can_hover=True,
+    velocity_lag_s=1.2, speed_ratio=0.8, heading_accel_ratio=1.0, vz_hold_drift_m_s=0.1,
+    failsafe_descent_m_s=0.8, acks_twice=True, firmware=(1, 16, 0, 255),
 )
 
 _SPECS = {spec.profile: spec for spec in (_COPTER, _PLANE, _PX4)}

@@ -30,11 +30,11 @@ from pathlib import Path
 from types import TracebackType
 
 from ezcompanion.sim.kinematics import Wind
-from ezcompanion.wire import Link, Message, open_link
 from sitl_stub.autopilot import Autopilot
 from sitl_stub.config import StubConfig
 from sitl_stub.faults import FaultInjector
 from sitl_stub.lockstep import LockstepGate
+from sitl_stub.mav import Message, StubLink
 from sitl_stub.telemetry import StreamScheduler, TelemetryEncoder
 from sitl_stub.truth import TruthWriter
 from sitl_stub.vehicle import VehicleParams, VehicleState, step
@@ -63,12 +63,15 @@ class SitlStub:
             yaw_rate_max_rad_s=math.radians(s.yaw_rate_max_deg_s),
             response_time_s=s.response_time_s, course_gain_1_s=s.course_gain_1_s,
             can_hover=config.spec.can_hover, wind=self._wind,
+            speed_ratio=config.model_value("speed_ratio"),
+            speed_lag_s=config.model_value("velocity_lag_s") if config.measured else 0.0,
+            follows_setpoint_speed=config.measured,
         )
         grounded = not s.start_armed and config.spec.can_hover
         speed = 0.0 if grounded else config.start.speed_m_s
         self._state = VehicleState(
             t_s=0.0, north_m=config.start.north_m, east_m=config.start.east_m,
-            heading_rad=config.start.course_rad, speed_m_s=speed,
+            heading_rad=config.start.course_rad, speed_m_s=speed, height_m=s.height_m,
         )
         self._truth_out = Path(truth_out) if truth_out is not None else None
         self._record = record_truth
@@ -77,7 +80,7 @@ class SitlStub:
         self._lock = threading.Condition()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self._link: Link | None = None
+        self._link: StubLink | None = None
         self._wake_r, self._wake_w = socket.socketpair()
         self._wake_r.setblocking(False)
         self._sim_s = 0.0
@@ -94,13 +97,13 @@ class SitlStub:
     def start(self) -> SitlStub:
         """Open the link and start the simulation thread."""
         s = self.config.settings
-        self._link = open_link(s.connect, system_id=s.system_id, component_id=s.component_id)
+        self._link = StubLink(s.connect, system_id=s.system_id, component_id=s.component_id)
         key = s.signing_key()
         if key is not None:
             self._link.enable_signing(key)
         self._scheduler = StreamScheduler(s.streams, self.config.max_stream_rate_hz)
         self.autopilot = Autopilot(self.config, self._scheduler, self._link.mav)
-        self._encoder = TelemetryEncoder(self._link, self.config.origin, s.height_m, self._wind)
+        self._encoder = TelemetryEncoder(self._link, self.config.origin, self._wind)
         self._truth = TruthWriter(self._truth_out, self._wind) if self._truth_out else None
         if self._truth is not None:
             self._truth.write(self._state, self.autopilot.mode.name, self.autopilot.armed)
@@ -245,7 +248,7 @@ class SitlStub:
         return self.faults.frozen(self._state.t_s) and (
             self.config.settings.faults.freeze_mode == "link")
 
-    def _receive(self, link: Link) -> None:
+    def _receive(self, link: StubLink) -> None:
         assert self.autopilot is not None
         messages = link.recv_messages()
         if self._link_down():
@@ -286,8 +289,10 @@ class SitlStub:
             if self._state.t_s + dt > now + 1e-12:
                 return True
             command = ap.command_at(self._state.t_s, self._state)
+            vertical = ap.vertical_at(self._state.t_s, self._state)
             self._steps += 1
-            new = replace(step(self._state, command, self.params, dt), t_s=self._steps * dt)
+            new = replace(step(self._state, command, self.params, dt, vertical),
+                          t_s=self._steps * dt)
             with self._lock:
                 self._state = new
             if self._record:
@@ -302,9 +307,13 @@ class SitlStub:
 
     def _periodic(self, t_s: float) -> None:
         assert self.autopilot is not None and self._link is not None
+        if self._next_heartbeat_s < t_s - _HEARTBEAT_PERIOD_S:
+            self._next_heartbeat_s = t_s  # fell behind (a starved process): do not burst
         while self._next_heartbeat_s <= t_s + 1e-9:
             if not self._link_down():
                 self._link.send(self.autopilot.heartbeat())
+                for msg in self.autopilot.periodic_status(self._state, t_s):
+                    self._link.send(msg)
             self._next_heartbeat_s += _HEARTBEAT_PERIOD_S
         for stamp, name in self._scheduler.pop_due(t_s):
             self._emit(name, stamp)

@@ -13,19 +13,8 @@ from dataclasses import dataclass
 
 from ezcompanion.config import GeoOrigin
 from ezcompanion.sim.kinematics import Wind
-from ezcompanion.wire import (
-    Link,
-    Message,
-    deg_to_e7,
-    heading_cdeg,
-    heading_deg_0_360,
-    m_s_to_cm_s,
-    m_to_mm,
-    mavlink,
-    ned_to_geodetic,
-    s_to_ms,
-)
 from sitl_stub.config import StreamRates
+from sitl_stub.mav import Message, StubLink, cm_s, e7, hdg_cdeg, hdg_deg, mav, mm, ms, ned_to_lla
 from sitl_stub.vehicle import VehicleState
 
 __all__ = ["STREAMED", "StreamScheduler", "TelemetryEncoder"]
@@ -34,18 +23,18 @@ _GRAVITY_M_S2 = 9.80665
 
 #: Streamed messages by MAVLink id.
 STREAMED: dict[int, str] = {
-    mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: "GLOBAL_POSITION_INT",
-    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: "LOCAL_POSITION_NED",
-    mavlink.MAVLINK_MSG_ID_ATTITUDE: "ATTITUDE",
-    mavlink.MAVLINK_MSG_ID_VFR_HUD: "VFR_HUD",
+    mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: "GLOBAL_POSITION_INT",
+    mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED: "LOCAL_POSITION_NED",
+    mav.MAVLINK_MSG_ID_ATTITUDE: "ATTITUDE",
+    mav.MAVLINK_MSG_ID_VFR_HUD: "VFR_HUD",
 }
 
 # ArduPilot's stream groups (MAV_DATA_STREAM) for the messages the stub streams.
 _DATA_STREAMS: dict[int, tuple[str, ...]] = {
-    mavlink.MAV_DATA_STREAM_ALL: tuple(STREAMED.values()),
-    mavlink.MAV_DATA_STREAM_POSITION: ("GLOBAL_POSITION_INT", "LOCAL_POSITION_NED"),
-    mavlink.MAV_DATA_STREAM_EXTRA1: ("ATTITUDE",),
-    mavlink.MAV_DATA_STREAM_EXTRA2: ("VFR_HUD",),
+    mav.MAV_DATA_STREAM_ALL: tuple(STREAMED.values()),
+    mav.MAV_DATA_STREAM_POSITION: ("GLOBAL_POSITION_INT", "LOCAL_POSITION_NED"),
+    mav.MAV_DATA_STREAM_EXTRA1: ("ATTITUDE",),
+    mav.MAV_DATA_STREAM_EXTRA2: ("VFR_HUD",),
 }
 
 
@@ -79,9 +68,9 @@ class StreamScheduler:
     def set_message_interval(self, msg_id: float, interval_us: float, now_s: float) -> int:
         """MAV_CMD_SET_MESSAGE_INTERVAL; returns the MAV_RESULT."""
         if not math.isfinite(msg_id) or int(msg_id) != msg_id or int(msg_id) not in STREAMED:
-            return int(mavlink.MAV_RESULT_FAILED)
+            return int(mav.MAV_RESULT_FAILED)
         if not math.isfinite(interval_us) or interval_us < -1.0:
-            return int(mavlink.MAV_RESULT_DENIED)
+            return int(mav.MAV_RESULT_DENIED)
         stream = self._streams[STREAMED[int(msg_id)]]
         if interval_us == -1.0:
             stream.interval_s = None
@@ -90,9 +79,9 @@ class StreamScheduler:
         else:
             interval_s = interval_us / 1e6
             if 1.0 / interval_s > self.max_rate_hz * (1.0 + 1e-9):
-                return int(mavlink.MAV_RESULT_DENIED)
+                return int(mav.MAV_RESULT_DENIED)
             self._set(stream, interval_s, now_s)
-        return int(mavlink.MAV_RESULT_ACCEPTED)
+        return int(mav.MAV_RESULT_ACCEPTED)
 
     def request_data_stream(self, stream_id: int, rate_hz: int, start: bool, now_s: float) -> bool:
         """REQUEST_DATA_STREAM (rate clamped to the limit); False if the group is unknown."""
@@ -133,10 +122,9 @@ class StreamScheduler:
 class TelemetryEncoder:
     """Builds telemetry messages from a vehicle state (local NED of the scenario's origin)."""
 
-    def __init__(self, link: Link, origin: GeoOrigin, height_m: float, wind: Wind) -> None:
+    def __init__(self, link: StubLink, origin: GeoOrigin, wind: Wind) -> None:
         self._mav = link.mav
         self._origin = origin
-        self._height_m = height_m
         self._wind = wind
 
     def encode(self, name: str, state: VehicleState, stamp_s: float,
@@ -145,31 +133,29 @@ class TelemetryEncoder:
         north = state.north_m + offset_north_m
         east = state.east_m + offset_east_m
         vn, ve = state.ground_velocity(self._wind)
-        t_ms = s_to_ms(stamp_s)
+        t_ms = ms(stamp_s)
+        height, climb = state.height_m, state.climb_m_s
         if name == "GLOBAL_POSITION_INT":
-            lat, lon, alt = ned_to_geodetic(
-                north, east, -self._height_m, origin_lat_deg=self._origin.lat_deg,
-                origin_lon_deg=self._origin.lon_deg, origin_alt_m=self._origin.alt_m,
-            )
+            o = self._origin
+            lat, lon, alt = ned_to_lla(north, east, -height, (o.lat_deg, o.lon_deg, o.alt_m))
             return self._mav.global_position_int_encode(
-                t_ms, deg_to_e7(lat), deg_to_e7(lon), m_to_mm(alt),
-                m_to_mm(self._height_m), m_s_to_cm_s(vn), m_s_to_cm_s(ve), 0,
-                heading_cdeg(state.heading_rad),
+                t_ms, e7(lat), e7(lon), mm(alt), mm(height), cm_s(vn), cm_s(ve), cm_s(-climb),
+                hdg_cdeg(state.heading_rad),
             )
         if name == "LOCAL_POSITION_NED":
             return self._mav.local_position_ned_encode(
-                t_ms, north, east, -self._height_m, vn, ve, 0.0)
+                t_ms, north, east, -height, vn, ve, -climb)
         if name == "ATTITUDE":
             roll = math.atan2(state.accel_lat_m_s2, _GRAVITY_M_S2)  # coordinated turn
             return self._mav.attitude_encode(t_ms, roll, 0.0, state.heading_rad, 0.0, 0.0,
                                              state.yaw_rate_rad_s)
         if name == "VFR_HUD":
             return self._mav.vfr_hud_encode(
-                state.speed_m_s, math.hypot(vn, ve), int(heading_deg_0_360(state.heading_rad)),
-                50 if state.speed_m_s > 0.0 else 0, self._origin.alt_m + self._height_m, 0.0,
+                state.speed_m_s, math.hypot(vn, ve), hdg_deg(state.heading_rad),
+                50 if state.speed_m_s > 0.0 else 0, self._origin.alt_m + height, climb,
             )
         raise KeyError(name)
 
     def system_time(self, now_s: float) -> Message:
         """SYSTEM_TIME for the simulated clock (no Unix time: ``time_unix_usec`` 0)."""
-        return self._mav.system_time_encode(0, s_to_ms(now_s))
+        return self._mav.system_time_encode(0, ms(now_s))

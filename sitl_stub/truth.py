@@ -2,7 +2,7 @@
 
 The leading columns are those of ``ezcompanion simulate`` (``t_s, north_m, east_m,
 heading_rad, accel_lat_m_s2``) so the same tools read both; the stub adds its speed, course
-over ground, mode and arming state.
+over ground, mode, arming state and height above the origin.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from sitl_stub.vehicle import VehicleState
 
 __all__ = ["TRUTH_COLUMNS", "TruthWriter"]
 
-TRUTH_COLUMNS = (*TRACK_SERIES, "speed_m_s", "course_rad", "mode", "armed")
+TRUTH_COLUMNS = (*TRACK_SERIES, "speed_m_s", "course_rad", "mode", "armed", "height_m")
 
 
 class TruthWriter:
@@ -34,7 +34,7 @@ class TruthWriter:
         self._csv.writerow((
             f"{state.t_s:.6f}", f"{state.north_m:.9g}", f"{state.east_m:.9g}",
             f"{state.heading_rad:.9g}", f"{state.accel_lat_m_s2:.9g}", f"{state.speed_m_s:.9g}",
-            f"{state.course_rad(self._wind):.9g}", mode, int(armed),
+            f"{state.course_rad(self._wind):.9g}", mode, int(armed), f"{state.height_m:.9g}",
         ))
 
     def close(self) -> None:

@@ -1,13 +1,17 @@
-"""The stub's vehicle: a constant-speed unicycle with limited turn rate and a lagged response.
+"""The stub's vehicle: a unicycle with limited turn rate, lagged response and a height.
 
 State (local NED of the scenario, SI):
 
 - ``north_m``, ``east_m``: position of the vehicle.
 - ``heading_rad``: where the nose points, clockwise from north; the vehicle moves through the
   air along it at ``speed_m_s`` (with a steady wind, course over ground differs).
-- ``speed_m_s``: airspeed; the scenario's constant cruise speed, except that a vehicle that
-  can hover (copter, PX4) brakes to 0 when told to stop and speeds up again at
-  ``accel_max_m_s2``.
+- ``speed_m_s``: airspeed. A plane flies ``speed_ratio`` times the scenario's cruise speed.
+  A vehicle that can hover (copter, PX4) flies ``speed_ratio`` times the speed of its
+  velocity setpoint (:class:`FollowCourse` ``speed_m_s``; the cruise speed when it has none),
+  reached with a first-order lag of ``speed_lag_s`` and at most ``accel_max_m_s2``; it
+  brakes to 0 when told to stop.
+- ``height_m``, ``climb_m_s``: height above the scenario's origin (up) and its rate; a
+  :class:`Vertical` command holds a height or flies a climb rate; never below 0 once above.
 - ``accel_lat_m_s2``: the lateral acceleration actually flown, positive turning right; it
   follows the desired one with a first-order lag of ``response_time_s`` (0 = at once) and is
   bounded by ``accel_max_m_s2`` and by ``speed * yaw_rate_max``.
@@ -36,6 +40,7 @@ __all__ = [
     "VehicleCommand",
     "VehicleParams",
     "VehicleState",
+    "Vertical",
     "desired_accel",
     "step",
 ]
@@ -59,6 +64,9 @@ class FollowCourse:
 
     The reference may rotate at ``course_rate_rad_s`` from ``since_s`` (a body-frame velocity
     with a yaw rate); the turn is bounded by ``accel_limit_m_s2`` as well as the airframe.
+    The course loop's gain is ``gain_1_s`` (None: the airframe's ``course_gain_1_s``): the
+    course follows a turning reference with a lag of ``1 / gain``. ``speed_m_s`` is the
+    commanded speed of a velocity setpoint (None: cruise).
     """
 
     course_rad: float
@@ -66,6 +74,8 @@ class FollowCourse:
     accel_limit_m_s2: float = math.inf
     course_rate_rad_s: float = 0.0
     since_s: float = 0.0
+    gain_1_s: float | None = None
+    speed_m_s: float | None = None
 
     def reference_rad(self, t_s: float) -> float:
         """The course to fly at ``t_s``."""
@@ -89,6 +99,14 @@ class LateralAccel:
 VehicleCommand = Straight | Stop | FollowCourse | TurnRate | LateralAccel
 
 
+@dataclass(frozen=True)
+class Vertical:
+    """The vertical command: hold ``height_m`` (position control) or fly ``climb_m_s`` (up)."""
+
+    climb_m_s: float = 0.0
+    height_m: float | None = None
+
+
 @dataclass(frozen=True, kw_only=True)
 class VehicleParams:
     """The airframe and its inner loops."""
@@ -99,6 +117,11 @@ class VehicleParams:
     response_time_s: float = 0.0
     course_gain_1_s: float = 2.0
     can_hover: bool = True
+    speed_ratio: float = 1.0  # flown / commanded speed (plane: / cruise)
+    speed_lag_s: float = 0.0  # first-order lag of the speed (hovering vehicles)
+    follows_setpoint_speed: bool = True  # False: a hovering vehicle flies cruise, not |v|
+    height_gain_1_s: float = 1.0  # height hold: climb = gain * error ...
+    climb_max_m_s: float = 2.0  # ... within this
     wind: Wind = field(default_factory=Wind)
 
 
@@ -113,6 +136,8 @@ class VehicleState:
     speed_m_s: float
     accel_lat_m_s2: float = 0.0
     yaw_rate_rad_s: float = 0.0  # heading rate over the last step
+    height_m: float = 0.0  # above the origin, up
+    climb_m_s: float = 0.0  # rate of height_m over the last step
 
     def ground_velocity(self, wind: Wind) -> tuple[float, float]:
         """Velocity over ground ``(north_m_s, east_m_s)``; a hovering vehicle holds still."""
@@ -139,7 +164,8 @@ def desired_accel(state: VehicleState, command: VehicleCommand, params: VehicleP
     if isinstance(command, FollowCourse):
         current = state.course_rad(params.wind) if command.over_ground else state.heading_rad
         error = float(wrap_pi(command.reference_rad(state.t_s) - current))
-        wanted = params.course_gain_1_s * state.speed_m_s * error
+        gain = params.course_gain_1_s if command.gain_1_s is None else command.gain_1_s
+        wanted = gain * state.speed_m_s * error
         bound = min(bound, command.accel_limit_m_s2)
     elif isinstance(command, TurnRate):
         wanted = command.rate_rad_s * state.speed_m_s
@@ -151,7 +177,41 @@ def desired_accel(state: VehicleState, command: VehicleCommand, params: VehicleP
 
 
 def _target_speed(command: VehicleCommand, params: VehicleParams) -> float:
-    return 0.0 if isinstance(command, Stop) and params.can_hover else params.cruise_speed_m_s
+    if not params.can_hover:
+        return params.speed_ratio * params.cruise_speed_m_s
+    if isinstance(command, Stop):
+        return 0.0
+    if (isinstance(command, FollowCourse) and command.speed_m_s is not None
+            and params.follows_setpoint_speed):
+        return params.speed_ratio * command.speed_m_s
+    return params.speed_ratio * params.cruise_speed_m_s
+
+
+def _next_speed(speed_m_s: float, target_m_s: float, params: VehicleParams, dt_s: float,
+                braking: bool) -> float:
+    """The speed after one step: a first-order lag (not while braking to a stop, which is
+    at ``accel_max``), never faster than ``accel_max``; within 1 mm/s it is reached."""
+    wanted = target_m_s
+    if params.speed_lag_s > 0.0 and params.can_hover and not braking:
+        wanted = target_m_s + (speed_m_s - target_m_s) * math.exp(-dt_s / params.speed_lag_s)
+        if abs(wanted - target_m_s) < 1e-3:
+            wanted = target_m_s
+    dv = params.accel_max_m_s2 * dt_s
+    return speed_m_s + max(-dv, min(dv, wanted - speed_m_s))
+
+
+def _next_height(state: VehicleState, vertical: Vertical, params: VehicleParams,
+                 dt_s: float) -> tuple[float, float]:
+    """``(height_m, climb_m_s)`` after one step."""
+    if vertical.height_m is not None:
+        climb = params.height_gain_1_s * (vertical.height_m - state.height_m)
+    else:
+        climb = vertical.climb_m_s
+    climb = max(-params.climb_max_m_s, min(params.climb_max_m_s, climb))
+    height = state.height_m + climb * dt_s
+    if state.height_m >= 0.0 > height:  # on the ground
+        height, climb = 0.0, 0.0
+    return height, climb
 
 
 def _hover_yaw_rate(state: VehicleState, command: VehicleCommand, params: VehicleParams,
@@ -166,20 +226,23 @@ def _hover_yaw_rate(state: VehicleState, command: VehicleCommand, params: Vehicl
 
 
 def step(
-    state: VehicleState, command: VehicleCommand, params: VehicleParams, dt_s: float
+    state: VehicleState, command: VehicleCommand, params: VehicleParams, dt_s: float,
+    vertical: Vertical | None = None,
 ) -> VehicleState:
-    """Advance the vehicle by one fixed step ``dt_s`` under ``command``."""
-    speed_target = _target_speed(command, params)
-    dv = params.accel_max_m_s2 * dt_s
-    speed_next = state.speed_m_s + max(-dv, min(dv, speed_target - state.speed_m_s))
+    """Advance the vehicle by one fixed step ``dt_s`` under ``command`` (and ``vertical``:
+    None holds the climb rate at 0)."""
+    speed_next = _next_speed(state.speed_m_s, _target_speed(command, params), params, dt_s,
+                             braking=isinstance(command, Stop))
     speed_mean = 0.5 * (state.speed_m_s + speed_next)
     t_next = state.t_s + dt_s
+    height, climb = _next_height(state, vertical or Vertical(), params, dt_s)
     if speed_mean <= _HOVER_M_S:
         rate = _hover_yaw_rate(state, command, params, dt_s)
         return VehicleState(
             t_s=t_next, north_m=state.north_m, east_m=state.east_m,
             heading_rad=float(wrap_pi(state.heading_rad + rate * dt_s)),
             speed_m_s=speed_next, accel_lat_m_s2=0.0, yaw_rate_rad_s=rate,
+            height_m=height, climb_m_s=climb,
         )
     wanted = desired_accel(state, command, params)
     if params.response_time_s > 0.0:
@@ -204,4 +267,5 @@ def step(
         t_s=t_next, north_m=float(x1[0]), east_m=float(x1[1]), heading_rad=heading_next,
         speed_m_s=speed_next, accel_lat_m_s2=accel_next,
         yaw_rate_rad_s=float(wrap_pi(float(x1[2]) - state.heading_rad)) / dt_s,
+        height_m=height, climb_m_s=climb,
     )

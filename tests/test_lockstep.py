@@ -169,8 +169,9 @@ def test_two_lockstep_engagements_leave_the_same_tracks_byte_for_byte(tmp_path: 
     times = [float(row.split(",")[0]) for row in rows]
     assert len(times) > 90  # 50 Hz for 2 s
     assert all(t1 - t0 >= 0.01 - 1e-9 for t0, t1 in itertools.pairwise(times))
-    # from the engagement on (its first ticks may wait for a full fresh state, a few ticks)
-    assert 2.0 - 0.1 <= times[-1] - times[0] <= 2.0 + 0.03
+    # 2 s from the engagement on: the ticks lie inside that window (the first may wait for
+    # a full fresh state, position and attitude, a few ticks) and fill most of it
+    assert 2.0 - 0.2 <= times[-1] - times[0] <= 2.0 + 1e-9
     assert all(r.companion_exit == 1 and not r.intercepted for r in runs)
 
 

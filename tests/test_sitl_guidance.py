@@ -56,7 +56,7 @@ def test_setpoints_ignored_outside_guided(gcs: Gcs) -> None:
 def test_copter_local_velocity_turns_to_course_at_the_turn_limit(gcs: Gcs) -> None:
     # 10x, not 20x: the stream below must beat the 3 s (simulated) guided timeout even when
     # this process is starved for a moment on a loaded machine
-    with running_stub(gcs, speedup=10.0) as stub:
+    with running_stub(gcs, speedup=10.0, model="ideal") as stub:
         assert gcs.set_mode(4).result == M.MAV_RESULT_ACCEPTED
         # GUIDED on a copter stops and holds until it has a setpoint, as ArduCopter does
         assert gcs.recv("STATUSTEXT", 2.0, lambda m: "holding position" in m.text) is not None
@@ -119,7 +119,7 @@ def test_copter_guided_timeout_stops_and_holds(gcs: Gcs) -> None:
 
 
 def test_plane_course_command_has_no_timeout(gcs: Gcs) -> None:
-    with running_stub(gcs, profile="plane", speedup=25.0) as stub:
+    with running_stub(gcs, profile="plane", speedup=25.0, model="ideal") as stub:
         assert gcs.set_mode(15).result == M.MAV_RESULT_ACCEPTED  # GUIDED
         ack = gcs.command_int(M.MAV_CMD_GUIDED_CHANGE_HEADING, 0, 0.0, 0.5)  # north, 0.5 m/s2
         assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
@@ -147,7 +147,7 @@ def test_plane_course_command_only_in_guided(gcs: Gcs) -> None:
 
 def test_plane_roll_target_held_for_3_s(gcs: Gcs) -> None:
     roll = math.atan(0.05)  # coordinated turn at g tan(roll) = 0.49 m/s2
-    with running_stub(gcs, profile="plane", speedup=20.0) as stub:
+    with running_stub(gcs, profile="plane", speedup=20.0, model="ideal") as stub:
         assert gcs.set_mode(15).result == M.MAV_RESULT_ACCEPTED
         gcs.mav.set_attitude_target_send(
             0, 1, 1, 198, wire.quaternion_from_euler(roll, 0.0, 0.0), 0.0, 0.0, 0.0, 0.0)
@@ -172,13 +172,20 @@ def test_px4_offboard_needs_setpoints_then_fails_safe(gcs: Gcs) -> None:
         stream_until(stub, lambda: gcs.velocity(0.0, 1.0), t0 + 0.5)
         ack = gcs.set_mode(6)
         assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
-        stream_until(stub, lambda: gcs.velocity(0.0, 1.0), stub.sim_time_s + 4.0)
+        # the course follows with PX4's 1.2 s lag: 56 degrees off decay to < 1 in 6 s
+        stream_until(stub, lambda: gcs.velocity(0.0, 1.0), stub.sim_time_s + 6.0)
         assert abs(angle_diff_deg(course_deg(stub.state), 90.0)) < 1.0
-        # the stream stops: after COM_OF_LOSS_T (1 s) PX4 falls back to HOLD
+        height0 = stub.state.height_m
+        # the stream stops: after COM_OF_LOSS_T (1 s) PX4 fails safe to POSCTL, no RC: descends
         text = gcs.recv("STATUSTEXT", 3.0, lambda m: "Failsafe" in m.text)
         assert text is not None
-        hold = (4 << 16) | (3 << 24)
-        assert gcs.recv("HEARTBEAT", 3.0, lambda m: m.custom_mode == hold) is not None
-        assert stub.mode_name == "AUTO.LOITER"
-        stub.wait_sim_time(stub.sim_time_s + 1.5)
-        assert stub.state.speed_m_s == 0.0
+        posctl = 3 << 16
+        assert gcs.recv("HEARTBEAT", 3.0, lambda m: m.custom_mode == posctl) is not None
+        assert stub.mode_name == "POSCTL"
+        s1 = stub.state
+        assert stub.wait_sim_time(s1.t_s + 1.5)
+        s2 = stub.state
+        assert s2.speed_m_s == 0.0
+        assert s2.climb_m_s == pytest.approx(-0.8)
+        assert s2.height_m - s1.height_m == pytest.approx(-0.8 * (s2.t_s - s1.t_s), abs=1e-6)
+        assert s2.height_m < height0

@@ -6,12 +6,19 @@ Figures (issues 9 and 11, ArduCopter and ArduPlane V4.7.0-dev SITL, PX4 v1.16 SI
 - ArduCopter: the flown course rate lags the commanded one by about 0.5 s; with no new
   setpoint it flies the last velocity for its GUIDED timeout (GUID_TIMEOUT, 3 s), then
   brakes (WPNAV_ACCEL, 2.5 m/s^2 by default).
-- PX4 multicopter: velocity setpoints lag by 0.9 to 1.4 s (1.2 s taken); offboard loss after
-  1.04 to 1.15 s (COM_OF_LOSS_T 1.0 s), then a failsafe to POSCTL, which brakes
-  (MPC_ACC_HOR 3 m/s^2).
+- PX4 multicopter: velocity setpoints lag by 0.9 to 1.4 s (1.2 s taken) and it flies 0.78
+  to 0.80 of the commanded speed; offboard loss after 1.04 to 1.15 s (COM_OF_LOSS_T 1.0 s),
+  then a failsafe to POSCTL, which brakes (MPC_ACC_HOR 3 m/s^2) and, with no RC, descends.
+  The velocity setpoints cancel the 1.2 s lag (``setpoint_lead_s``: the direction leads
+  the course by omega * 1.2 s, the inverse of a first-order lag), so the law is given
+  only what remains, 0.3 s (telemetry age and a tick, with room for the 0.9-1.4 s spread).
+  On the measured stub this flies both paper scenarios outside every zone, where the law
+  told the full 1.2 s and a 30-degree lead clamp entered two zones (scenario 2).
 - ArduPlane: a course command is flown until another comes, for ever; the law takes a
   configured horizon of 10 s (long enough for a person to take over), the turn to the
-  commanded course (2 s ahead) first. Roll response lag about 1 s.
+  commanded course (2 s ahead) first. Roll response lag about 1 s. It turns at only 0.54x
+  (a_max 4.5 m/s^2) to 0.62x (9.81) of what a GUIDED_CHANGE_HEADING limit asks
+  (``turn_ratio`` 0.54: the course setpoints' outer loop starts from 1 / 0.54).
 
 The law uses ``response_lag_s`` unless the scenario states its own. With
 ``companion.abandon_check`` (off by default) or a scenario's own ``abandon_hold_s``, every
@@ -37,6 +44,8 @@ class AutopilotProfile:
 
     name: str
     response_lag_s: float
+    setpoint_lead_s: float = 0.0
+    turn_ratio: float = 1.0
     abandon_turn_s: float
     abandon_hold_s: float
     abandon_brake_m_s2: float
@@ -58,11 +67,11 @@ ARDUCOPTER = AutopilotProfile(
     abandon_brake_m_s2=2.5, timeout_parameter="GUID_TIMEOUT",
 )  # fmt: skip
 PX4_COPTER = AutopilotProfile(
-    name="PX4", response_lag_s=1.2, abandon_turn_s=0.0, abandon_hold_s=1.15,
+    name="PX4", response_lag_s=0.3, setpoint_lead_s=1.2, abandon_turn_s=0.0, abandon_hold_s=1.15,
     abandon_brake_m_s2=3.0, timeout_parameter="COM_OF_LOSS_T", timeout_overshoot_s=0.15,
 )  # fmt: skip
 ARDUPLANE = AutopilotProfile(
-    name="ArduPlane", response_lag_s=1.0, abandon_turn_s=2.0, abandon_hold_s=8.0,
+    name="ArduPlane", response_lag_s=1.0, turn_ratio=0.54, abandon_turn_s=2.0, abandon_hold_s=8.0,
     abandon_brake_m_s2=0.0,
 )  # fmt: skip
 

@@ -391,6 +391,7 @@ class CompanionService:
                 self.engagement.setpoints = self._make_setpoints()
                 if session.heartbeat is not None:  # the autopilot's measured response
                     profile = autopilot_profile(session.heartbeat)
+                    self.engagement.setpoints.use_profile(profile)
                     self.loop.assume_response_lag(profile.response_lag_s)
             self.phase = Phase.WAITING
         if (

@@ -49,6 +49,7 @@ from ezcompanion.service.events import EventLog
 from ezcompanion.service.parameters import ParameterReader
 from ezcompanion.service.settings import CompanionSettings, SetpointKind
 from ezcompanion.service.state import CROSS_CHECK_PERIOD_S, TelemetryState
+from ezcompanion.service.statustext import StatusTextAssembler
 from ezcompanion.service.trust import Alarms, HeartbeatJudge
 from ezcompanion.wire import (
     Address,
@@ -111,6 +112,7 @@ class VehicleSession:
         self._discovery_until_s: float | None = None
         self.alarms = Alarms(events)
         self._judge = HeartbeatJudge()
+        self._texts = StatusTextAssembler()
         self._origin_tries = 0
         self._next_origin_s = math.inf
         self.mode = ""
@@ -177,8 +179,10 @@ class VehicleSession:
             self._on_ack(msg, now)
         elif kind == "PARAM_VALUE":
             self._on_param(msg, now)
-        elif kind == "STATUSTEXT":
-            self.events.emit(EventKind.STATUSTEXT, now, str(msg.text), severity=int(msg.severity))
+        elif kind == "STATUSTEXT":  # a chunked text is one event (service/statustext.py)
+            for t in self._texts.feed(str(msg.text), int(msg.severity), int(getattr(msg, "id", 0)),
+                                      int(getattr(msg, "chunk_seq", 0)), now):
+                self.events.emit(EventKind.STATUSTEXT, now, t.text, severity=t.severity)
         return used
 
     def _on_ack(self, msg: Message, now: float) -> None:

@@ -9,14 +9,21 @@ with it. (Measured on ArduPilot 4.7 SITL: a 2 m/s vector rotated at 15 deg/s wit
 15 deg/s flew 2.02 m/s at 15.1 deg/s.) LOCAL_NED rather than BODY_NED, because ArduCopter
 turns a body-frame velocity into a fixed direction when it arrives. The reference course
 starts at the measured course and may lead it by at most 30 degrees, so it cannot wind up
-while the vehicle lags. Vertical velocity 0 holds altitude. Streamed every tick, well
-inside the autopilots' timeouts (ArduCopter 3 s, PX4 needs > 2 Hz).
+while the vehicle lags; for PX4, whose 1.2 s lag would need far more lead than that, the
+reference is instead the measured course plus omega * 1.2 s (the profile's
+``setpoint_lead_s``), the inverse of its first-order lag. Standing still (slower than half
+the nominal speed) the reference does not turn. The vertical velocity holds the height of
+the first tick by feedback on the measured height (PX4 does not hold it on vz = 0).
+Streamed every tick, well inside the autopilots' timeouts (ArduCopter 3 s, PX4 1 s).
 
 ``course`` (ArduPlane): MAV_CMD_GUIDED_CHANGE_HEADING as COMMAND_INT, p1 = 0 (course over
 ground), p2 = the course to turn to, p3 = the lateral-acceleration limit. We ask for the
-course 2 s of turning ahead (course + omega * 2 s) with the limit |a|, so the autopilot turns
-at the rate we want (its own heading loop would turn harder; the limit binds) and flies
-straight when a = 0. It has no timeout on ArduPlane and is acknowledged each time, so it is
+course 2 s of turning ahead (course + omega * 2 s, at most 90 degrees ahead so the wrapped
+course never turns the plane the wrong way) with the limit |a| times a gain, so the autopilot
+turns at the rate we want (its own heading loop would turn harder; the limit binds) and flies
+straight when a = 0. ArduPlane flies only 0.54x of the limit, so the gain starts at 1 / 0.54
+and an outer loop trims it on the measured course rate (CourseSetpoints). It has no
+timeout on ArduPlane and is acknowledged each time, so it is
 sent at most 10 times a second. (The roll-only SET_ATTITUDE_TARGET alternative is held for
 only 3 s and turned slower than its bank angle predicts, so it would need its own outer loop
 on the measured turn rate: not used.)
@@ -28,6 +35,7 @@ import math
 from abc import ABC, abstractmethod
 
 from ezcompanion.frames import wrap_pi
+from ezcompanion.service.autopilots import AutopilotProfile
 from ezcompanion.service.loop import TickCommand
 from ezcompanion.service.settings import SetpointKind
 from ezcompanion.wire import Link, Message, course_command, s_to_ms, velocity_setpoint
@@ -35,9 +43,17 @@ from ezcompanion.wire import Link, Message, course_command, s_to_ms, velocity_se
 __all__ = ["CourseSetpoints", "Setpoints", "VelocitySetpoints", "make_setpoints"]
 
 _MAX_LEAD_RAD = math.radians(30.0)
+_MAX_COMPENSATED_LEAD_RAD = math.radians(85.0)
+_STILL_FRACTION = 0.5  # of the nominal speed: slower, the vehicle stands still
+_HEIGHT_GAIN_1_S = 1.0  # height hold: vz = gain * error ...
+_MAX_CLIMB_M_S = 1.0  # ... within this
 _COURSE_HORIZON_S = 2.0
 _COURSE_MIN_INTERVAL_S = 0.1
 _MIN_ACCEL_LIMIT_RATIO = 0.02  # of a_max: the smallest limit we hand the autopilot
+_MAX_COURSE_LEAD_RAD = 0.5 * math.pi  # a course command never more than 90 degrees ahead
+_TRIM_FROM_RATIO = 0.2  # of a_max: the outer loop trims only in a clear turn
+_TRIM_RATE_1_S = 0.5  # relative gain change per second per unit of relative turn error
+_GAIN_MIN, _GAIN_MAX = 0.5, 4.0  # p3 / |a|
 
 
 class Setpoints(ABC):
@@ -59,6 +75,8 @@ class Setpoints(ABC):
         self.target_component = target_component
         self.accel_max_m_s2 = accel_max_m_s2
         self.ground_vehicle = ground_vehicle  # a rover or boat: no vertical velocity
+        self.lead_s = 0.0  # the vehicle's course lag the setpoints cancel (0: none)
+        self.turn_ratio = 1.0  # flown / asked lateral acceleration of a course command
         self.reset()
 
     @abstractmethod
@@ -68,6 +86,13 @@ class Setpoints(ABC):
     @abstractmethod
     def message(self, command: TickCommand) -> Message | None:
         """The message for ``command``, or None if nothing is due this tick."""
+
+    def use_profile(self, profile: AutopilotProfile) -> None:
+        """Take the autopilot's measured response: the course lag to cancel (velocity) and
+        the share of a course command's turn it flies (ArduPlane); starts afresh."""
+        self.lead_s = profile.setpoint_lead_s
+        self.turn_ratio = profile.turn_ratio
+        self.reset()
 
     def brake(self, time_s: float) -> Message | None:
         """What stops the vehicle where it is when guidance must stop (a failsafe), built
@@ -80,18 +105,52 @@ class VelocitySetpoints(Setpoints):
 
     kind = SetpointKind.VELOCITY
     _reference_rad: float | None
+    _hold_down_m: float | None
 
     def reset(self) -> None:
         self._reference_rad = None
+        self._hold_down_m = None
+
+    def reference_rad(self, command: TickCommand) -> float:
+        """The direction of the velocity to send for ``command``.
+
+        Standing still (slower than half the nominal speed: the course is the yaw) the
+        reference is the course itself, so it does not turn while the vehicle cannot.
+        With ``lead_s`` (the vehicle's measured first-order course lag, PX4) it leads the
+        course by omega * lead_s, the inverse of that lag, so that the course turns at omega
+        now instead of lagging it (within 85 degrees). Without, it integrates omega and
+        leads the measured course by at most 30 degrees, so it cannot wind up.
+        """
+        omega = command.turn_rate_rad_s
+        course = command.course_rad
+        if command.state.ground_speed_m_s < _STILL_FRACTION * command.nominal_speed_m_s:
+            self._reference_rad = None
+            return course
+        if self.lead_s > 0.0:
+            lead = min(max(omega * self.lead_s, -_MAX_COMPENSATED_LEAD_RAD),
+                       _MAX_COMPENSATED_LEAD_RAD)
+            return course + lead
+        reference = course if self._reference_rad is None else self._reference_rad
+        reference += omega * command.dt_s
+        lead = float(wrap_pi(reference - course))
+        lead = min(max(lead, -_MAX_LEAD_RAD), _MAX_LEAD_RAD)
+        self._reference_rad = course + lead
+        return self._reference_rad
+
+    def climb_down_m_s(self, command: TickCommand) -> float:
+        """Vertical velocity (down) holding the height of the first tick after a reset:
+        PX4 does not hold its height on vz = 0 (measured -2.5 m to +5.2 m). A feedback on
+        the measured height, not a z setpoint, so no frame offset between the vehicle's
+        local origin and the scenario's can shift it."""
+        down = command.state.down_m
+        if self._hold_down_m is None:
+            self._hold_down_m = down
+        error = self._hold_down_m - down
+        return min(max(_HEIGHT_GAIN_1_S * error, -_MAX_CLIMB_M_S), _MAX_CLIMB_M_S)
 
     def message(self, command: TickCommand) -> Message:
         omega = command.turn_rate_rad_s
-        reference = command.course_rad if self._reference_rad is None else self._reference_rad
-        reference += omega * command.dt_s
-        lead = float(wrap_pi(reference - command.course_rad))
-        lead = min(max(lead, -_MAX_LEAD_RAD), _MAX_LEAD_RAD)
-        reference = command.course_rad + lead
-        self._reference_rad = reference
+        reference = self.reference_rad(command)
         speed = command.nominal_speed_m_s
         return velocity_setpoint(
             self.link,
@@ -100,11 +159,10 @@ class VelocitySetpoints(Setpoints):
             time_boot_ms=s_to_ms(command.time_s) % 2**32,
             north_m_s=speed * math.cos(reference),
             east_m_s=speed * math.sin(reference),
-            down_m_s=0.0,
+            down_m_s=0.0 if self.ground_vehicle else self.climb_down_m_s(command),
             yaw_rate_rad_s=omega,
             horizontal_only=self.ground_vehicle,
         )
-
 
     def brake(self, time_s: float) -> Message:
         """Zero velocity: a copter, rover or PX4 multicopter stops and holds at once, instead
@@ -123,20 +181,59 @@ class VelocitySetpoints(Setpoints):
 
 
 class CourseSetpoints(Setpoints):
-    """ArduPlane's course command."""
+    """ArduPlane's course command, with an outer loop on the measured turn.
+
+    The course asked for is the measured course plus omega * 2 s (at most 90 degrees ahead,
+    so that wrapping it to [0, 360) never turns the plane the wrong way), and the
+    lateral-acceleration limit p3 is |a| times a gain. ArduPlane flies only 0.54x (a_max
+    4.5 m/s^2) to 0.62x (9.81) of p3 (issue 11: roll to 75% of its limit, and 72% of the
+    turn that roll predicts), so the gain starts at 1 / ``turn_ratio`` (the profile's) and
+    an integrator trims it on the measured course rate until the flown |a| = v |course
+    rate| follows the law's |a|.
+    """
 
     kind = SetpointKind.COURSE
     _last_sent_s: float
+    _gain: float
+    _last_tick_s: float | None
 
     def reset(self) -> None:
         self._last_sent_s = -math.inf
+        self._gain = 1.0 / self.turn_ratio
+        self._last_tick_s = None
+
+    @property
+    def gain(self) -> float:
+        """p3 / |a|: the outer loop's current gain."""
+        return self._gain
+
+    def _trim(self, command: TickCommand) -> None:
+        """Integrate the turn-rate error into the gain (only in a clear turn that the
+        vehicle flies the same way round)."""
+        last, self._last_tick_s = self._last_tick_s, command.time_s
+        rate = command.state.course_rate_rad_s
+        wanted = command.accel_lat_m_s2
+        if last is None or rate is None or not math.isfinite(rate):
+            return
+        flown = command.state.ground_speed_m_s * rate
+        if abs(wanted) < _TRIM_FROM_RATIO * self.accel_max_m_s2 or flown * wanted <= 0.0:
+            return
+        dt = min(max(command.time_s - last, 0.0), 0.5)
+        error = (abs(wanted) - abs(flown)) / abs(wanted)
+        gain = self._gain * (1.0 + _TRIM_RATE_1_S * dt * error)
+        self._gain = min(max(gain, _GAIN_MIN), _GAIN_MAX)
 
     def message(self, command: TickCommand) -> Message | None:
+        self._trim(command)
         if command.time_s - self._last_sent_s < _COURSE_MIN_INTERVAL_S:
             return None
         self._last_sent_s = command.time_s
-        course = command.course_rad + command.turn_rate_rad_s * _COURSE_HORIZON_S
-        limit = max(abs(command.accel_lat_m_s2), _MIN_ACCEL_LIMIT_RATIO * self.accel_max_m_s2)
+        lead = command.turn_rate_rad_s * _COURSE_HORIZON_S
+        lead = min(max(lead, -_MAX_COURSE_LEAD_RAD), _MAX_COURSE_LEAD_RAD)
+        course = command.course_rad + lead
+        floor = _MIN_ACCEL_LIMIT_RATIO * self.accel_max_m_s2
+        limit = min(max(abs(command.accel_lat_m_s2) * self._gain, floor),
+                    _GAIN_MAX * self.accel_max_m_s2)
         return course_command(
             self.link,
             target_system=self.target_system,

@@ -1,0 +1,300 @@
+"""The stub's own MAVLink wire: pymavlink's dialect, a link, signing and the wire units.
+
+The stub is the vehicle the companion's tests fly against, so it must not share the
+companion's wire code (``ezcompanion.wire``): a wrong unit or a wrong frame there would be
+made on both sides and cancel out. Everything MAVLink the stub speaks is written here, on
+pymavlink directly: the ``ardupilotmega`` dialect over MAVLink 2 (as ArduPilot and PX4
+speak it), a non-blocking link on a pymavlink URL (``udpout:``, ``udpin:``, ``tcpin:``,
+``tcp:`` or a serial device ``/dev/ttyX,BAUD``), MAVLink 2 signing that verifies before it
+stores a timestamp, and the conversions from the stub's SI state to wire integers.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import math
+import os
+import select
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import pymap3d
+
+from ezcompanion.errors import ConfigError
+
+os.environ.setdefault("MAVLINK20", "1")
+os.environ.setdefault("MAVLINK_DIALECT", "ardupilotmega")
+
+from pymavlink import mavutil
+
+if mavutil.mavlink.WIRE_PROTOCOL_VERSION != "2.0" or mavutil.current_dialect != "ardupilotmega":
+    os.environ["MAVLINK20"] = "1"
+    mavutil.set_dialect("ardupilotmega")
+
+__all__ = [
+    "Message",
+    "StubLink",
+    "StubLinkStats",
+    "cm_s",
+    "e7",
+    "finite",
+    "hdg_cdeg",
+    "hdg_deg",
+    "key_from_hex",
+    "key_from_passphrase",
+    "mav",
+    "mm",
+    "ms",
+    "ned_to_lla",
+    "roll_of_quaternion",
+]
+
+#: The generated dialect: message classes and enum constants.
+mav: Any = mavutil.mavlink
+
+#: A decoded pymavlink message.
+Message = Any
+
+_SIGNING_EPOCH_S = 1420070400  # 2015-01-01T00:00:00Z
+_NEW_STREAM_BEHIND_10US = 60 * 100_000  # a new signed stream may be a minute behind
+_DEFAULT_BAUD = 57600
+
+
+# --- wire units ------------------------------------------------------------------------------
+
+
+def e7(angle_deg: float) -> int:
+    """Degrees as int32 degE7."""
+    return round(angle_deg * 10_000_000.0)
+
+
+def mm(length_m: float) -> int:
+    """Metres as integer mm."""
+    return round(length_m * 1000.0)
+
+
+def cm_s(speed_m_s: float) -> int:
+    """Metres per second as integer cm/s."""
+    return round(speed_m_s * 100.0)
+
+
+def hdg_cdeg(heading_rad: float) -> int:
+    """A heading (rad, clockwise from north) as cdeg in [0, 35999]."""
+    return round(heading_rad * 18000.0 / math.pi) % 36000
+
+
+def hdg_deg(heading_rad: float) -> int:
+    """A heading (rad) as integer degrees in [0, 359] (VFR_HUD.heading)."""
+    return round(heading_rad * 180.0 / math.pi) % 360
+
+
+def ms(time_s: float) -> int:
+    """Simulated seconds as a wrapping uint32 ``time_boot_ms``."""
+    return int(time_s * 1000.0) & 0xFFFFFFFF
+
+
+def finite(*values: float) -> bool:
+    """Every value a finite number."""
+    return all(math.isfinite(v) for v in values)
+
+
+def roll_of_quaternion(q: list[float]) -> float:
+    """The ZYX roll angle (rad) of a unit quaternion ``[w, x, y, z]``."""
+    w, x, y, z = q
+    return math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+
+
+def ned_to_lla(north_m: float, east_m: float, down_m: float, origin: tuple[float, float, float]
+               ) -> tuple[float, float, float]:
+    """Local NED of ``origin = (lat_deg, lon_deg, alt_m)`` to WGS84 (pymap3d)."""
+    lat, lon, alt = pymap3d.ned2geodetic(north_m, east_m, down_m, *origin)
+    return float(lat), float(lon), float(alt)
+
+
+# --- signing ---------------------------------------------------------------------------------
+
+
+def key_from_hex(key_hex: str, *, field: str = "signing_key_hex") -> bytes:
+    """A 32-byte signing key from 64 hex digits; ConfigError naming ``field`` otherwise."""
+    try:
+        key = bytes.fromhex(key_hex)
+    except (TypeError, ValueError):
+        raise ConfigError(field, key_hex, "must be 64 hexadecimal digits") from None
+    if len(key) != 32:
+        raise ConfigError(field, key_hex, "must be 64 hexadecimal digits (32 bytes)")
+    return key
+
+
+def key_from_passphrase(passphrase: str) -> bytes:
+    """MAVProxy's ``signing setup PASSPHRASE`` key: SHA-256 of the UTF-8 text."""
+    return hashlib.sha256(passphrase.encode("utf-8")).digest()
+
+
+def _verify_then_store(parser: Any, buf: bytearray, system: int, component: int) -> bool:
+    """Check the signature first; only a genuine frame may advance a stream's timestamp
+    (pymavlink stores it before comparing, so one forged frame could lock a stream out)."""
+    signing = parser.signing
+    if signing.secret_key is None or len(buf) < 13:
+        return False
+    digest = hashlib.sha256(bytes(signing.secret_key) + bytes(buf[:-6])).digest()[:6]
+    if not hmac.compare_digest(digest, bytes(buf[-6:])):
+        return False
+    low, high = parser.mav_sign_unpacker.unpack(buf[-12:-6])
+    stamp = low + (high << 32)
+    stream = (buf[-13], system, component)
+    last = signing.stream_timestamps.get(stream)
+    if last is not None and stamp <= last:
+        return False
+    if last is None and stamp + _NEW_STREAM_BEHIND_10US < signing.timestamp:
+        return False
+    signing.stream_timestamps[stream] = stamp
+    signing.timestamp = max(signing.timestamp, stamp)
+    return True
+
+
+# --- the link --------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class StubLinkStats:
+    """Receive counters of the stub's link."""
+
+    messages: int
+    bad_frames: int  # bad CRC, length, unknown id, partial frames
+    rejected_unsigned: int
+    bad_signatures: int
+
+
+class StubLink:
+    """One MAVLink connection of the stub (one thread owns it); never raises on input."""
+
+    def __init__(self, url: str, *, system_id: int, component_id: int) -> None:
+        options: dict[str, Any] = {}
+        if url.startswith("/") or url.upper().startswith("COM"):
+            url, _, baud = url.partition(",")
+            options["baud"] = int(baud) if baud.isdigit() else _DEFAULT_BAUD
+        try:
+            self._conn: Any = mavutil.mavlink_connection(
+                url, source_system=system_id, source_component=component_id,
+                dialect="ardupilotmega", autoreconnect=False, **options)
+        except (OSError, ValueError, ImportError) as exc:
+            raise ConfigError("connect", url, f"cannot be opened: {exc}") from exc
+        self._conn.mav.robust_parsing = True
+        self._udp = isinstance(self._conn, mavutil.mavudp)
+        self._messages = 0
+        self._bad = 0
+
+    @property
+    def mav(self) -> Any:
+        """pymavlink's encoder for this link (``*_encode`` methods)."""
+        return self._conn.mav
+
+    @property
+    def stats(self) -> StubLinkStats:
+        signing = self._conn.mav.signing
+        return StubLinkStats(self._messages, self._bad, int(signing.reject_count),
+                             int(signing.badsig_count))
+
+    @property
+    def local_address(self) -> tuple[str, int] | None:
+        """Where the socket is bound (after ``udpin:127.0.0.1:0``)."""
+        sock: Any = getattr(self._conn, "listen", None) or getattr(self._conn, "port", None)
+        try:
+            host, port = sock.getsockname()[:2]
+        except (AttributeError, OSError):
+            return None
+        return str(host), int(port)
+
+    def fileno(self) -> int:
+        return int(self._conn.fd)
+
+    def close(self) -> None:
+        self._conn.close()
+
+    def enable_signing(self, key: bytes) -> None:
+        """Sign every frame sent; drop unsigned or badly signed input."""
+        stamp = int(max(time.time() - _SIGNING_EPOCH_S, 0.0) * 1e5)
+        self._conn.setup_signing(key, sign_outgoing=True, initial_timestamp=stamp)
+        parser = self._conn.mav
+        parser.check_signature = lambda buf, s, c: _verify_then_store(parser, buf, s, c)
+
+    def wait_readable(self, timeout_s: float, *extra_fds: int) -> list[int]:
+        readable, _, _ = select.select([self.fileno(), *extra_fds], [], [], max(timeout_s, 0.0))
+        return list(readable)
+
+    def recv_messages(self, max_reads: int = 64) -> list[Message]:
+        """Every valid message available now (bad frames dropped and counted)."""
+        out: list[Message] = []
+        for _ in range(max_reads):
+            data = self._read()
+            if not data:
+                break
+            out.extend(self._parse(data))
+        return out
+
+    def _read(self) -> bytes | None:
+        conn = self._conn
+        try:
+            if self._udp:
+                data, source = conn.port.recvfrom(65535)
+                if conn.udp_server:  # answer whoever talked last, as ArduPilot SITL
+                    conn.clients.add(source)
+                    conn.clients_last_alive[source] = time.time()
+                elif conn.broadcast:
+                    conn.last_address = source
+                self._drop_partial()  # a frame never spans two datagrams
+                return bytes(data)
+            data = conn.recv(4096)
+        except OSError:
+            return None
+        if isinstance(data, bytes) and not data and hasattr(conn, "listen") and conn.port:
+            conn.port.close()  # a tcpin peer closed: wait for the next one
+            conn.port = None
+            conn.fd = conn.listen.fileno()
+            return None
+        return bytes(data) if data else None
+
+    def _parse(self, data: bytes) -> list[Message]:
+        out: list[Message] = []
+        parser = self._conn.mav
+        try:
+            msg = parser.parse_char(data)
+            while msg is not None:
+                kind = msg.get_type()
+                if kind in ("BAD_DATA", "UNKNOWN") or kind.startswith("UNKNOWN_"):
+                    self._bad += 1
+                else:
+                    self._messages += 1
+                    out.append(msg)
+                msg = parser.parse_char(b"")
+        except Exception:  # a peer's bytes never raise out of the stub
+            self._bad += 1
+            self._drop_partial(count=False)
+        return out
+
+    def _drop_partial(self, *, count: bool = True) -> None:
+        parser = self._conn.mav
+        if count and len(parser.buf) - parser.buf_index > 0:
+            self._bad += 1
+        parser.buf = bytearray()
+        parser.buf_index = 0
+        parser.expected_length = mav.HEADER_LEN_V1 + 2
+
+    def pack(self, msg: Message) -> bytes:
+        """``msg`` as bytes with the next sequence number (and a signature)."""
+        parser = self._conn.mav
+        buf = bytes(msg.pack(parser))
+        parser.seq = (parser.seq + 1) % 256
+        return buf
+
+    def write(self, buf: bytes) -> bool:
+        try:
+            self._conn.write(buf)
+        except OSError:
+            return False
+        return True
+
+    def send(self, msg: Message) -> bool:
+        return self.write(self.pack(msg))

@@ -184,7 +184,7 @@ def _parse(argv: list[str]) -> argparse.Namespace:
 def test_validate_cli_writes_a_consistent_report(tmp_path: Path) -> None:
     out = tmp_path / "v"
     args = _parse(
-        ["--runs", "30", "--seed", "2", "--map-runs", "10", "--duration", "10", "--workers", "1",
+        ["--runs", "12", "--seed", "2", "--map-runs", "4", "--duration", "5", "--workers", "1",
          "--out", str(out), "--no-progress", "--set", "margin_m=0.25", "--chatter-runs", "1",
          "--dist", "start_range_m=5,7"]
     )  # fmt: skip
@@ -203,7 +203,7 @@ def test_validate_cli_writes_a_consistent_report(tmp_path: Path) -> None:
         )
     # every group partitions the runs
     for group in {r["group"] for r in rows}:
-        assert sum(r["runs"] for r in rows if r["group"] == group and r["policy"] == "robust") == 30
+        assert sum(r["runs"] for r in rows if r["group"] == group and r["policy"] == "robust") == 12
     assert "Oracle: safe manoeuvre found in" in (out / "summary.txt").read_text()
     assert "Chattering: robust" in (out / "summary.txt").read_text()
     for name in ("summary.txt", "runs.npz", "tables.md", "distributions.png", "failure_map.png"):

@@ -132,7 +132,10 @@ def plot_distributions(result: CampaignResult, path: Path) -> Path:
         if log:
             ax.set_yscale("log")
         ax.set_title(title)
-        ax.legend(fontsize=8)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8)
+        else:  # no run has a value here (none intercepted, none entered)
+            ax.text(0.5, 0.5, "no runs", transform=ax.transAxes, ha="center", va="center")
     axes[0, 0].axvline(0.0, color="k", lw=0.8)
     fig.suptitle(f"{len(result.scenarios)} random engagements, seed {result.spec.seed}")
     fig.tight_layout()

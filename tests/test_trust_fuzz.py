@@ -50,7 +50,7 @@ def forged(rng: random.Random, boot_ms: int) -> bytes:
             rng.randrange(256), rng.choice([0, 4, 5, 2**32 - 1]), M.MAV_STATE_ACTIVE, 3)
     elif kind == 1:
         msg = M.MAVLink_local_position_ned_message(
-            boot_ms + rng.randrange(-50, 50), target.north_m + rng.uniform(-2, 2),
+            max(0, boot_ms + rng.randrange(-50, 50)), target.north_m + rng.uniform(-2, 2),
             target.east_m + rng.uniform(-2, 2), -20.0, rng.uniform(-2, 2), rng.uniform(-2, 2),
             0.0)
     elif kind == 2:

@@ -1,0 +1,321 @@
+"""What each ``ezcompanion`` command does (simulate, run, scale, demo): typed functions that
+return an exit code; :mod:`ezcompanion.cli` parses the flags and calls them.
+
+Imports are made inside the commands: no command should pay for another's imports (the
+law's kernels, zenoh, matplotlib).
+
+Output directories: a command that writes a directory by default (``demo``, ``validate``)
+never writes into one that holds earlier results: ``demo-out`` is taken, so ``demo-out-2``,
+and so on. A directory given with ``--out`` is used as asked, with a note when it already
+holds files.
+"""
+
+from __future__ import annotations
+
+import itertools
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from ezcompanion.errors import LinkError
+from ezcompanion.exit_codes import ExitCode
+
+if TYPE_CHECKING:  # imported for real inside the commands (see above)
+    from ezcompanion.config import Scenario
+
+__all__ = [
+    "CONFIG_DIR",
+    "PAPER_SCENARIOS",
+    "output_directory",
+    "run_demo",
+    "run_reference_demo",
+    "run_scale",
+    "run_service",
+    "run_simulate",
+]
+
+CONFIG_DIR = Path(__file__).resolve().parents[1] / "config"
+PAPER_SCENARIOS = {1: "paper_scenario1.yaml", 2: "paper_scenario2.yaml"}
+
+
+def output_directory(given: Path | None, default: Path) -> Path:
+    """Where a command writes: ``given`` as asked (with a note on stdout if it already holds
+    files), else ``default`` or the first of ``default-2``, ``default-3``, ... that is absent
+    or empty, claimed by creating it."""
+    if given is not None:
+        if given.is_dir() and any(given.iterdir()):
+            print(f"note: {given}/ holds earlier results; files of the same name are replaced")
+        return given
+    for number in itertools.count(1):
+        candidate = default if number == 1 else default.with_name(f"{default.name}-{number}")
+        try:
+            candidate.mkdir(parents=True)
+        except FileExistsError:
+            if not (candidate.is_dir() and not any(candidate.iterdir())):
+                continue
+        if number > 1:
+            print(f"writing to {candidate}/ ({default}/ holds earlier results)")
+        return candidate
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
+def _load(config: Path) -> Scenario:
+    """The scenario, with its warnings printed on stderr."""
+    from ezcompanion.config import load_scenario, scenario_warnings
+
+    scenario = load_scenario(config)
+    for warning in scenario_warnings(scenario):
+        print(f"ezcompanion: warning: {warning}", file=sys.stderr)
+    return scenario
+
+
+def run_simulate(
+    config: Path,
+    *,
+    law: str | None = None,
+    out_csv: Path | None = None,
+    plot_png: Path | None = None,
+) -> int:
+    """Simulate one scenario in the reference simulator and print its outcome: 0 if it
+    intercepted outside every zone, 1 if not."""
+    from ezcompanion.guidance import LawName
+    from ezcompanion.sim.engine import simulate
+    from ezcompanion.sim.output import write_result_csv
+
+    run = simulate(_load(config), LawName(law) if law else None)
+    print(run.summary())
+    if out_csv is not None:
+        print(f"  wrote {write_result_csv(run, out_csv)}")
+    if plot_png is not None:
+        from ezcompanion.sim.plot import plot_result
+
+        print(f"  wrote {plot_result(run, plot_png)}")
+    outcome = run.outcome
+    ok = outcome.intercepted and min(outcome.min_clearance_m) > 0.0
+    return ExitCode.OK if ok else ExitCode.FAILED
+
+
+def run_service(
+    config: Path,
+    *,
+    law: str | None,
+    max_time_s: float | None,
+    track_csv: Path | None,
+    telemetry: dict[str, object] | None = None,
+    record: Path | None = None,
+    lockstep: bool = False,
+    **overrides: object,
+) -> int:
+    """Steer a vehicle through one engagement. 0 if intercepted; 1 if it ended otherwise;
+    3 if no vehicle was heard or the link was lost at the end; 130 if stopped by a signal.
+    Whatever the end, the vehicle is then left in the mode of ``on_exit`` (a warning on
+    stderr if it did not take it; ``ezcompanion.service.ending``).
+
+    ``connect`` (an override, or the scenario's ``companion.connect``) may be written in
+    MAVProxy's or MAVSDK's form; it is checked and passed on as pymavlink's string.
+    """
+    import signal
+
+    from ezcompanion.endpoint import pymavlink_url
+    from ezcompanion.guidance import LawName
+    from ezcompanion.service.events import EventKind, EventLog
+    from ezcompanion.service.runner import CompanionService
+    from ezcompanion.service.settings import companion_settings
+    from ezcompanion.telemetry import telemetry_settings
+
+    scenario = _load(config)
+    section = scenario.sections.get("companion", {})
+    if overrides.get("connect") is not None:
+        overrides["connect"] = pymavlink_url(overrides["connect"], field="--connect")
+    elif "connect" in section:
+        overrides["connect"] = pymavlink_url(section["connect"], field="companion.connect")
+    settings = companion_settings(scenario, **overrides)
+    zenoh = telemetry_settings(scenario.sections.get("telemetry", {}), **(telemetry or {}))
+    events = EventLog(lambda event: print(event.line(), flush=True))
+    service = CompanionService(
+        scenario,
+        settings,
+        law=LawName(law) if law else None,
+        events=events,
+        track_csv=track_csv,
+        telemetry=zenoh,
+        lockstep=lockstep,
+    )
+    recorder = None
+    if record is not None:  # the monitor's recorder on the service's own telemetry
+        from ezcompanion.telemetry.mcap_run import ServiceRecorder
+
+        recorder = ServiceRecorder(zenoh, record)
+        events.add_sink(recorder.on_event)
+    signalled: list[int] = []
+
+    def on_signal(signum: int, _frame: object) -> None:
+        signalled.append(signum)
+        service.stop()
+
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        outcome = service.run(max_time_s=max_time_s)
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        if recorder is not None:
+            recorder.close()
+    report = service.exit_report
+    if report is not None and report.failed:
+        print(f"ezcompanion: warning: on_exit {report.choice.value}: {report.detail}",
+              file=sys.stderr)  # fmt: skip
+    if outcome.intercepted:
+        return ExitCode.OK
+    if signalled:
+        print("ezcompanion: interrupted before the engagement ended", file=sys.stderr)
+        return ExitCode.INTERRUPTED
+    if not events.of_kind(EventKind.VEHICLE_FOUND):
+        raise LinkError("connect", settings.connect, f"no vehicle heard in {outcome.time_s:.1f} s")
+    lost, restored = events.of_kind(EventKind.LINK_LOST), events.of_kind(EventKind.LINK_RESTORED)
+    if lost and (not restored or restored[-1].time_s < lost[-1].time_s):
+        raise LinkError(
+            "connect", settings.connect, f"link to the vehicle lost at {lost[-1].time_s:.1f} s"
+        )
+    return ExitCode.FAILED
+
+
+def run_scale(
+    config: Path,
+    *,
+    speed_m_s: float,
+    accel_max_m_s2: float | None,
+    bank_deg: float | None,
+    out: Path,
+) -> int:
+    """Write ``config`` scaled to a vehicle of ``speed_m_s`` and lateral-acceleration bound
+    ``accel_max_m_s2`` (or g tan(``bank_deg``)) to ``out``: lengths times L = v^2 / a_max,
+    times times T = v / a_max (relative to the file's vehicle), every gain by its units."""
+    import yaml
+
+    from ezcompanion.config import load_scenario, scenario_from_dict, scenario_to_dict
+    from ezcompanion.config_yaml import read_yaml_file
+    from ezcompanion.errors import ConfigError
+    from ezcompanion.guidance.scaling import ScaleFactors
+
+    raw = read_yaml_file(config)
+    if isinstance(raw, dict) and "scale" in raw:
+        raise ConfigError("scale", raw["scale"], f"{config} is scaled already (its scale: key); "
+                          "scale the file it scales")  # fmt: skip
+    source = load_scenario(config)
+    wanted: dict[str, float] = {"speed_m_s": speed_m_s}
+    if bank_deg is not None:
+        wanted["bank_deg"] = bank_deg
+    else:
+        assert accel_max_m_s2 is not None
+        wanted["accel_max_m_s2"] = accel_max_m_s2
+    scaled = scenario_from_dict({**raw, "scale": wanted})  # the scale: key's own path
+    factors = ScaleFactors.between(
+        speed_m_s=source.start.speed_m_s,
+        accel_max_m_s2=source.guidance.accel_max_m_s2,
+        to_speed_m_s=scaled.start.speed_m_s,
+        to_accel_max_m_s2=scaled.guidance.accel_max_m_s2,
+    )
+    length, time = factors.length, factors.time
+    data = scenario_to_dict(scaled)
+    data.update({key: raw[key] for key in scaled.sections})  # the component sections, as given
+    header = (
+        f"# {source.name} ({config.name}) scaled by `ezcompanion scale` to {speed_m_s:g} m/s "
+        f"and a_max {scaled.guidance.accel_max_m_s2:.6g} m/s^2:\n"
+        f"# lengths x L = {length:.6g}, times x T = {time:.6g}, every gain by its units\n"
+    )
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(header + yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    g = scaled.guidance
+    print(f"{source.name}: L = {length:.6g} (lengths), T = {time:.6g} (times); "
+          f"speed {scaled.start.speed_m_s:g} m/s, a_max {g.accel_max_m_s2:.6g} m/s^2, "
+          f"margin {g.margin_m:.4g} m, intercept radius {g.intercept_radius_m:.4g} m, "
+          f"K_s {g.k_safety_1_s:.4g} 1/s, K_T {g.k_intercept_1_s:.4g} 1/s, "
+          f"K_a {g.k_track_m_s3:.4g} m/s^3")  # fmt: skip
+    print(f"  wrote {out}")
+    return ExitCode.OK
+
+
+def run_demo(
+    *,
+    scenarios: Sequence[int],
+    out_dir: Path,
+    speedup: float,
+    profile: str,
+    watch: bool = False,
+    zenoh_listen: str | None = None,
+) -> int:
+    """The paper's scenarios flown by the loopback vehicle and the companion, end to end,
+    in lockstep (the same result on a loaded machine as on an idle one; ``speedup`` is the
+    most the vehicle's time runs ahead of wall time; ``watch``: 1x, to follow live).
+
+    Returns 1 if any engagement fails to intercept or enters an engagement zone.
+    """
+    from ezcompanion.service.demo import judge_run, run_loopback, telemetry_endpoint
+    from ezcompanion.sim.demo_plot import plot_demo
+
+    if watch:
+        speedup = 1.0
+    failed = False
+    for number in scenarios:
+        config = CONFIG_DIR / PAPER_SCENARIOS[number]
+        scenario = _load(config)
+        where = out_dir / f"scenario{number}"
+        print(
+            f"--- scenario {number}: sitl_stub ({profile}) and the companion over loopback UDP, "
+            f"in lockstep, at most {speedup:g}x",
+            flush=True,
+        )
+        endpoint = zenoh_listen or telemetry_endpoint()
+        if zenoh_listen is None and not endpoint.endswith(":7447"):
+            print(f"    tcp/127.0.0.1:7447 is taken: telemetry on {endpoint} (choose with "
+                  "--zenoh-listen ENDPOINT)")  # fmt: skip
+        print(f"    telemetry on {endpoint}: watch with `ezcompanion monitor --connect {endpoint}`")
+        if watch:
+            print(
+                f"    or in Foxglove: `ezcompanion foxglove --connect {endpoint}`, then open "
+                "the WebSocket connection it prints",
+                flush=True,
+            )
+        result = run_loopback(config, where, speedup=speedup, profile=profile, telemetry=endpoint)
+        print(result.summary(scenario))
+        try:
+            track, view, judgement = judge_run(scenario, where)
+        except (OSError, ValueError) as exc:
+            print(f"  no figure: {exc}")
+        else:
+            print(f"  wrote {plot_demo(track, view, judgement, where / 'engagement.png')}")
+        if not (result.intercepted and min(result.min_clearance_m) > 0.0):
+            failed = True
+    return ExitCode.FAILED if failed else ExitCode.OK
+
+
+def run_reference_demo(*, scenarios: Sequence[int], out_dir: Path) -> int:
+    """The paper's scenarios in the reference simulator, the three laws side by side in one
+    figure per scenario, and a CSV per law.
+
+    Returns 1 if the default (backup) law fails to intercept or enters an engagement zone.
+    """
+    from ezcompanion.guidance import LawName
+    from ezcompanion.sim.compare_plot import plot_comparison
+    from ezcompanion.sim.engine import simulate
+    from ezcompanion.sim.output import write_result_csv
+
+    failed = False
+    for number in scenarios:
+        scenario = _load(CONFIG_DIR / PAPER_SCENARIOS[number])
+        runs = []
+        for law in (LawName.BACKUP, LawName.ROBUST, LawName.PAPER):
+            run = simulate(scenario, law)
+            runs.append(run)
+            print(run.summary())
+            stem = out_dir / f"scenario{number}_{law.value}"
+            print(f"  wrote {write_result_csv(run, stem.with_suffix('.csv'))}")
+            outcome = run.outcome
+            if law is LawName.BACKUP and not (
+                outcome.intercepted and min(outcome.min_clearance_m) > 0.0
+            ):
+                failed = True
+        print(f"  wrote {plot_comparison(runs, out_dir / f'scenario{number}_laws.png')}")
+    return ExitCode.FAILED if failed else ExitCode.OK

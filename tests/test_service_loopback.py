@@ -305,12 +305,12 @@ def test_link_loss_and_recovery(tmp_path: Path) -> None:
 
 def test_signing_mismatch_is_refused_and_a_match_flies(tmp_path: Path) -> None:
     mismatch = scenario_file(tmp_path, sitl_stub={"signing_key_hex": KEY_A})
-    flight = fly(mismatch, tmp_path, max_time_s=8.0, signing_key_hex=KEY_B)
+    flight = fly(mismatch, tmp_path, max_time_s=20.0, signing_key_hex=KEY_B)
     assert not flight.events.of_kind(EventKind.VEHICLE_FOUND)  # its frames were refused
     assert flight.outcome.setpoints_sent == 0 and not flight.outcome.intercepted
     # A companion without a key hears the signed vehicle, but its setpoints are refused:
     # the vehicle holds in GUIDED and never gets to the target.
-    unsigned = fly(mismatch, tmp_path, max_time_s=8.0)
+    unsigned = fly(mismatch, tmp_path, max_time_s=20.0)
     assert unsigned.outcome.setpoints_sent > 0
     assert not judge_truth(load_scenario(mismatch), unsigned.truth)[0]
     assert any(

@@ -13,7 +13,8 @@ is the engagement's (:mod:`ezcompanion.service.engagement`).
    ``target_system`` configured, or one with the configured id before guidance starts or
    within ``_DISCOVERY_S`` after: both are named in a ``vehicle_refused`` event, guidance
    never starts (or stops) and the service ends.
-2. Ask for the telemetry the state uses, and only that: SET_MESSAGE_INTERVAL for
+2. Ask for the telemetry the state uses, and only that (:mod:`ezcompanion.service.streams`):
+   SET_MESSAGE_INTERVAL for
    LOCAL_POSITION_NED and GLOBAL_POSITION_INT at the configured rate (capped at 40 Hz for
    fixed wing, which ArduPlane would deny) and ATTITUDE at ``_ATTITUDE_RATE_HZ`` at most
    (its yaw stands in for the course only when the vehicle is slow); check two seconds
@@ -48,8 +49,9 @@ from ezcompanion.service.autopilots import AutopilotProfile, autopilot_profile
 from ezcompanion.service.events import EventLog
 from ezcompanion.service.parameters import ParameterReader
 from ezcompanion.service.settings import CompanionSettings, SetpointKind
-from ezcompanion.service.state import CROSS_CHECK_PERIOD_S, TelemetryState
+from ezcompanion.service.state import TelemetryState
 from ezcompanion.service.statustext import StatusTextAssembler
+from ezcompanion.service.streams import POSITIONS, StreamRequests
 from ezcompanion.service.trust import Alarms, HeartbeatJudge
 from ezcompanion.wire import (
     Address,
@@ -64,22 +66,15 @@ from ezcompanion.wire import (
 
 __all__ = ["POSITIONS", "VehicleSession"]
 
-_RATE_CHECK_AFTER_S = 2.0
 _ENGAGE_RETRY_S = 1.0
-_PLANE_MAX_RATE_HZ = 40.0
 _DISCOVERY_S = 1.5  # listen this long for other autopilots before locking on one
 _SPOOF_HOLD_S = 3.0  # a heartbeat conflict holds guidance this long after the last one
 _TELEMETRY_HOLD_S = 0.5  # a refused position holds guidance this long after the last one
 _ORIGIN_RETRY_S = 0.5
 _ORIGIN_TRIES = 6  # then the scenario's origin is assumed (with a warning)
-_ATTITUDE_RATE_HZ = 10.0  # ATTITUDE at most this often: yaw is used only when slow
-_GLOBAL_REPACE_S = 1.0  # the global position's rate changes at most this often
-# ArduPilot's stream groups of the messages the state uses (only if intervals fail)
-_GROUPS = (mavlink.MAV_DATA_STREAM_POSITION, mavlink.MAV_DATA_STREAM_EXTRA1)
-POSITIONS = frozenset({"LOCAL_POSITION_NED", "GLOBAL_POSITION_INT"})
 
 
-class VehicleSession:
+class VehicleSession(StreamRequests):
     """What the service knows of the vehicle, from the frames it hears."""
 
     def __init__(
@@ -363,101 +358,6 @@ class VehicleSession:
         self.parameters.periodic(now)
         if waiting:
             self._engage(now)
-
-    def request_streams(self, now: float, *, groups: bool = False) -> None:
-        """Ask for the telemetry the state uses at the configured rate (``groups``: also
-        ArduPilot's stream groups, first; see the module docstring)."""
-        assert self.target is not None
-        system, component = self.target
-        rate = self.settings.telemetry_rate_hz
-        if self.fixed_wing:
-            rate = min(rate, _PLANE_MAX_RATE_HZ)
-        attitude_hz = min(rate, _ATTITUDE_RATE_HZ)
-        heartbeat = self.heartbeat
-        ardupilot = (
-            heartbeat is not None and heartbeat.autopilot == mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
-        )
-        mav = self._link.mav
-        if groups and ardupilot:
-            for stream, hz in zip(_GROUPS, (rate, attitude_hz), strict=True):
-                self._send(mav.request_data_stream_encode(system, component, stream, round(hz), 1))
-        for name, hz in (
-            ("LOCAL_POSITION_NED", rate),
-            ("GLOBAL_POSITION_INT", rate),
-            ("ATTITUDE", attitude_hz),
-        ):
-            self._send_interval(name, hz)
-        self._streams_requested_s = now
-        self._counts_at_request = dict(self.received)
-        self.requested_rate_hz = self.global_rate_hz = rate
-        self._global_paced_s = now
-        self.events.emit(
-            EventKind.STREAMS_REQUESTED, now, f"telemetry at {rate:g} Hz", rate_hz=rate
-        )
-
-    def _send_interval(self, name: str, rate_hz: float) -> None:
-        assert self.target is not None
-        self._send(
-            self._link.mav.command_long_encode(
-                self.target[0],
-                self.target[1],
-                mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
-                0,
-                float(getattr(mavlink, f"MAVLINK_MSG_ID_{name}")),
-                1e6 / rate_hz,
-                0,
-                0,
-                0,
-                0,
-                0,
-            )
-        )
-
-    def _pace_global(self, now: float) -> None:
-        """GLOBAL_POSITION_INT at the cross-check's rate while local positions are fresh,
-        at the full rate once they are not (then it is the position)."""
-        if not self.connected or self._streams_requested_s is not None:
-            return  # not yet asked, or the rate check is still to come
-        if now - self._global_paced_s < _GLOBAL_REPACE_S:
-            return
-        cross_hz = 1.0 / CROSS_CHECK_PERIOD_S
-        fresh = self.telemetry.local_fresh(now)
-        if fresh and self.global_rate_hz > cross_hz:
-            rate, why = cross_hz, "the cross-check, local positions fresh"
-        elif not fresh and self.global_rate_hz < self.requested_rate_hz:
-            rate, why = self.requested_rate_hz, "the position, local positions stale"
-        else:
-            return
-        self._send_interval("GLOBAL_POSITION_INT", rate)
-        self.global_rate_hz, self._global_paced_s = rate, now
-        self.events.emit(
-            EventKind.STREAMS_REQUESTED,
-            now,
-            f"GLOBAL_POSITION_INT at {rate:g} Hz ({why})",
-            rate_hz=rate,
-            stream="GLOBAL_POSITION_INT",
-        )
-
-    def _check_rates(self, now: float) -> None:
-        start = self._streams_requested_s
-        if start is None or now - start < _RATE_CHECK_AFTER_S:
-            return
-        self._streams_requested_s = None
-        elapsed = now - start
-        rate = max(
-            (self.received.get(n, 0) - self._counts_at_request.get(n, 0)) / elapsed
-            for n in POSITIONS
-        )
-        if rate < 0.5 * self.requested_rate_hz:
-            self.events.emit(
-                EventKind.RATE_LOW,
-                now,
-                f"position arrives at {rate:.1f} Hz, asked {self.requested_rate_hz:g} Hz",
-                rate_hz=rate,
-            )
-            if self._rate_checks == 0 and self.connected:
-                self.request_streams(now, groups=True)
-            self._rate_checks += 1
 
     def _engage(self, now: float) -> None:
         if not self.settings.engage or now < self._next_engage_s:

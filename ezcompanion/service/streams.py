@@ -1,0 +1,146 @@
+"""The telemetry a session asks for, and whether it comes (mixed into
+:class:`ezcompanion.service.session.VehicleSession`, which owns the state).
+
+Only what the state uses: LOCAL_POSITION_NED and GLOBAL_POSITION_INT at the configured rate
+(40 Hz at most on a fixed wing, which ArduPlane would deny), ATTITUDE at 10 Hz at most, by
+SET_MESSAGE_INTERVAL; ArduPilot's stream groups (REQUEST_DATA_STREAM) only on the one retry
+after a low rate. Two seconds after asking, the position must arrive at half the rate at
+least (else ``rate_low`` and one retry). While local positions are fresh, the global one
+is asked at the cross-check's rate only, and at the full rate again once they are stale.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from ezcompanion.records import EventKind
+from ezcompanion.service.events import EventLog
+from ezcompanion.service.settings import CompanionSettings
+from ezcompanion.service.state import CROSS_CHECK_PERIOD_S, TelemetryState
+from ezcompanion.wire import Link, Message, mavlink
+
+__all__ = ["POSITIONS", "StreamRequests"]
+
+_RATE_CHECK_AFTER_S = 2.0
+_PLANE_MAX_RATE_HZ = 40.0
+_ATTITUDE_RATE_HZ = 10.0  # ATTITUDE at most this often: yaw is used only when slow
+_GLOBAL_REPACE_S = 1.0  # the global position's rate changes at most this often
+# ArduPilot stream groups asked on the retry: positions, then attitude
+_GROUPS = (mavlink.MAV_DATA_STREAM_POSITION, mavlink.MAV_DATA_STREAM_EXTRA1)
+POSITIONS = frozenset({"LOCAL_POSITION_NED", "GLOBAL_POSITION_INT"})
+
+
+class StreamRequests:
+    """Asking for the streams and checking their rate (the session's state, declared)."""
+
+    settings: CompanionSettings
+    events: EventLog
+    telemetry: TelemetryState
+    target: tuple[int, int] | None
+    heartbeat: Message | None
+    fixed_wing: bool
+    connected: bool
+    received: dict[str, int]
+    requested_rate_hz: float
+    global_rate_hz: float
+    _link: Link
+    _send: Callable[[Message], object]
+    _streams_requested_s: float | None
+    _counts_at_request: dict[str, int]
+    _global_paced_s: float
+    _rate_checks: int
+
+    def request_streams(self, now: float, *, groups: bool = False) -> None:
+        """Ask for the telemetry the state uses at the configured rate (``groups``: also
+        ArduPilot's stream groups, first; see the module docstring)."""
+        assert self.target is not None
+        system, component = self.target
+        rate = self.settings.telemetry_rate_hz
+        if self.fixed_wing:
+            rate = min(rate, _PLANE_MAX_RATE_HZ)
+        attitude_hz = min(rate, _ATTITUDE_RATE_HZ)
+        heartbeat = self.heartbeat
+        ardupilot = (
+            heartbeat is not None and heartbeat.autopilot == mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
+        )
+        mav = self._link.mav
+        if groups and ardupilot:
+            for stream, hz in zip(_GROUPS, (rate, attitude_hz), strict=True):
+                self._send(mav.request_data_stream_encode(system, component, stream, round(hz), 1))
+        for name, hz in (
+            ("LOCAL_POSITION_NED", rate),
+            ("GLOBAL_POSITION_INT", rate),
+            ("ATTITUDE", attitude_hz),
+        ):
+            self._send_interval(name, hz)
+        self._streams_requested_s = now
+        self._counts_at_request = dict(self.received)
+        self.requested_rate_hz = self.global_rate_hz = rate
+        self._global_paced_s = now
+        self.events.emit(
+            EventKind.STREAMS_REQUESTED, now, f"telemetry at {rate:g} Hz", rate_hz=rate
+        )
+
+    def _send_interval(self, name: str, rate_hz: float) -> None:
+        assert self.target is not None
+        self._send(
+            self._link.mav.command_long_encode(
+                self.target[0],
+                self.target[1],
+                mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+                0,
+                float(getattr(mavlink, f"MAVLINK_MSG_ID_{name}")),
+                1e6 / rate_hz,
+                0,
+                0,
+                0,
+                0,
+                0,
+            )
+        )
+
+    def _pace_global(self, now: float) -> None:
+        """GLOBAL_POSITION_INT at the cross-check's rate while local positions are fresh,
+        at the full rate once they are not (then it is the position)."""
+        if not self.connected or self._streams_requested_s is not None:
+            return  # not yet asked, or the rate check is still to come
+        if now - self._global_paced_s < _GLOBAL_REPACE_S:
+            return
+        cross_hz = 1.0 / CROSS_CHECK_PERIOD_S
+        fresh = self.telemetry.local_fresh(now)
+        if fresh and self.global_rate_hz > cross_hz:
+            rate, why = cross_hz, "the cross-check, local positions fresh"
+        elif not fresh and self.global_rate_hz < self.requested_rate_hz:
+            rate, why = self.requested_rate_hz, "the position, local positions stale"
+        else:
+            return
+        self._send_interval("GLOBAL_POSITION_INT", rate)
+        self.global_rate_hz, self._global_paced_s = rate, now
+        self.events.emit(
+            EventKind.STREAMS_REQUESTED,
+            now,
+            f"GLOBAL_POSITION_INT at {rate:g} Hz ({why})",
+            rate_hz=rate,
+            stream="GLOBAL_POSITION_INT",
+        )
+
+    def _check_rates(self, now: float) -> None:
+        start = self._streams_requested_s
+        if start is None or now - start < _RATE_CHECK_AFTER_S:
+            return
+        self._streams_requested_s = None
+        elapsed = now - start
+        rate = max(
+            (self.received.get(n, 0) - self._counts_at_request.get(n, 0)) / elapsed
+            for n in POSITIONS
+        )
+        if rate < 0.5 * self.requested_rate_hz:
+            self.events.emit(
+                EventKind.RATE_LOW,
+                now,
+                f"position arrives at {rate:.1f} Hz, asked {self.requested_rate_hz:g} Hz",
+                rate_hz=rate,
+            )
+            if self._rate_checks == 0 and self.connected:
+                self.request_streams(now, groups=True)
+            self._rate_checks += 1

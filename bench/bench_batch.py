@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from ezcompanion.cli import CONFIG_DIR
+from ezcompanion.commands import CONFIG_DIR
 from ezcompanion.config import load_scenario
 from ezcompanion.guidance import GuidanceParams, LawName
 from ezcompanion.validation import (

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from ezcompanion.cli import CONFIG_DIR, PAPER_SCENARIOS
+from ezcompanion.commands import CONFIG_DIR, PAPER_SCENARIOS
 from ezcompanion.config import SimulationSettings, load_scenario
 from ezcompanion.guidance import (
     GuidanceController,

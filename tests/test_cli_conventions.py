@@ -18,7 +18,8 @@ import pytest
 import yaml
 
 from ezcompanion import __version__
-from ezcompanion.cli import _parser, main, output_directory
+from ezcompanion.cli import _parser, main
+from ezcompanion.commands import output_directory
 from ezcompanion.exit_codes import ExitCode
 from sitl_stub.cli import _parser as stub_parser
 from sitl_stub.cli import main as stub_main

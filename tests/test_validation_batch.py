@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from ezcompanion.cli import CONFIG_DIR, PAPER_SCENARIOS
+from ezcompanion.commands import CONFIG_DIR, PAPER_SCENARIOS
 from ezcompanion.config import Scenario, SimulationSettings, load_scenario
 from ezcompanion.guidance import Defender, GuidanceParams, LawName, Target
 from ezcompanion.sim.engine import simulate

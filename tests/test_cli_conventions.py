@@ -207,9 +207,9 @@ def test_a_binary_scenario_as_a_real_process(tool: str, tmp_path: Path) -> None:
     )  # fmt: skip
     assert done.returncode == ExitCode.BAD_INPUT, done.stderr
     prog = "ezcompanion" if tool == "ezcompanion" else "sitl-stub"
-    assert done.stderr.splitlines() == [
-        f"{prog}: error: scenario: is not UTF-8 text (byte 0x80 at offset 0) (got '{path}')"
-    ]
+    (line,) = done.stderr.splitlines()  # one line (a long path is elided in the middle)
+    assert line.startswith(f"{prog}: error: scenario: is not UTF-8 text (byte 0x80 at offset 0)")
+    assert line.endswith("scenario.yaml')")
 
 
 def test_a_bug_is_one_line_and_exit_70(

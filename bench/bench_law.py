@@ -22,13 +22,12 @@ beside the sum of its compiled parts timed alone in the same run (``--service``:
 from __future__ import annotations
 
 import argparse
-import statistics
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from _timing import per_call_s
 
 from ezcompanion.config import load_scenario
 from ezcompanion.guidance import (
@@ -59,18 +58,6 @@ def zones_ring(count: int) -> ZoneSet:
             for t in angles
         ]
     )
-
-
-def per_call_s(function: Callable[[], object], repeat: int, number: int) -> float:
-    """Median over ``repeat`` rounds of the mean time of ``number`` calls."""
-    function()  # compile or load from the cache outside the timing
-    rounds = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        for _ in range(number):
-            function()
-        rounds.append((time.perf_counter() - start) / number)
-    return statistics.median(rounds)
 
 
 def main() -> None:

@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+from _timing import per_call_s
 
 from ezcompanion.config import load_scenario, scenario_from_dict
 from ezcompanion.records import TickCommand, VehicleState
@@ -257,14 +258,7 @@ def _fly(port: int, rate_hz: float, seconds: float, pid: int, launched: float) -
 
 def per_call_us(function: Callable[[], object], number: int = 2000, repeat: int = 5) -> float:
     """Median over ``repeat`` rounds of the mean time of ``number`` calls (us)."""
-    function()
-    rounds = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        for _ in range(number):
-            function()
-        rounds.append((time.perf_counter() - start) / number)
-    return 1e6 * statistics.median(rounds)
+    return 1e6 * per_call_s(function, repeat, number)
 
 
 def parts(rate_hz: float, publish_rate_hz: float = 20.0) -> dict[str, float]:

@@ -458,6 +458,14 @@ def test_the_reference_simulator_flies_the_lag_the_law_is_told_and_stays_out(
             scenario.guidance, response_lag_s=0.0)), LawName.BACKUP)  # fmt: skip
         k = 5
         assert abs(run.accel_lat_m_s2[k]) < abs(ideal.accel_lat_m_s2[k])
+        # and it moves as a first-order lag can: |a - a_f| <= 2 a_max, so a step changes it
+        # by at most 2 a_max dt / tau (the actuator itself moves about five times as fast)
+        bound = 2.0 * scenario.guidance.accel_max_m_s2 * 0.02 / lag_s
+        assert np.abs(np.diff(run.accel_lat_m_s2)).max() <= bound
+        # what is recorded is what was flown: the course turns at a_f / v
+        turn = np.diff(np.unwrap(run.heading_rad)) / 0.02
+        mean = 0.5 * (run.accel_lat_m_s2[1:] + run.accel_lat_m_s2[:-1]) / scenario.start.speed_m_s
+        assert np.abs(turn - mean).max() < 0.01
 
 
 def test_the_controller_reports_the_shield() -> None:

@@ -38,7 +38,6 @@ from ezcompanion.errors import ConfigError
 from ezcompanion.field import VehiclePlacement, placement_warnings
 from ezcompanion.guidance import LawName
 from ezcompanion.records import EventKind, TickCommand
-from ezcompanion.service.autopilots import autopilot_profile
 from ezcompanion.service.clock import Clock, LockstepClock, ScaledClock
 from ezcompanion.service.ending import ExitReport, leave_vehicle
 from ezcompanion.service.engagement import Engagement, EngagementOutcome
@@ -389,8 +388,8 @@ class CompanionService:
         if self.phase is Phase.SEARCHING and session.connected:
             if self.engagement.setpoints is None:
                 self.engagement.setpoints = self._make_setpoints()
-                if session.heartbeat is not None:  # the autopilot's measured response
-                    profile = autopilot_profile(session.heartbeat)
+                profile = session.profile  # the autopilot's measured response
+                if profile is not None:
                     self.engagement.setpoints.use_profile(profile)
                     self.loop.assume_response_lag(profile.response_lag_s)
             self.phase = Phase.WAITING

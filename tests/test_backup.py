@@ -370,6 +370,65 @@ def test_along_its_own_flow_a_backup_certificate_never_drops_by_more_than_theta(
     assert min(flown.values()) > 20  # every policy was flown
 
 
+@pytest.mark.parametrize("dt", [0.002, 0.01, 0.02, 0.05, 0.1])
+def test_the_straightening_integral_bounds_the_actuator_as_flown(dt: float) -> None:
+    """STRAIGHT's closed-form tail rests on bounds (lo, hi) on the integral of |a| still to
+    come: the actuator as the service flies it (stepped by the integrator, linear between
+    control steps) must land between them, from near the turn's limit down to small a."""
+    s = settings_for(PARAMS)
+    amax = PARAMS.accel_max_m_s2
+    for a0 in (1e-4, 0.05, 0.3, 0.7, 0.9, 0.99, 0.995):
+        a, flown = a0 * amax, 0.0
+        for _ in range(int(20.0 / dt)):
+            a1 = bk._advance_straighten(a, dt, amax, PARAMS.actuator_p1_1_s,
+                                        PARAMS.actuator_n, PARAMS.command_limit_m_s3)  # fmt: skip
+            flown += 0.5 * (a + a1) * dt
+            a = a1
+        lo, hi = bk._straighten_integral(s, a0 * amax, dt)
+        assert lo <= flown <= hi, (a0, lo, flown, hi)
+        assert hi <= 1.35 * lo  # and tight: what lets the tail close early
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    zones=layouts(),
+    n0=st.floats(-8, 8), e0=st.floats(-8, 8), h0=st.floats(-math.pi, math.pi),
+    a0=st.floats(-0.99, 0.99), av0=st.floats(-0.99, 0.99),
+    tau=st.sampled_from([0.0, 0.3, 0.5, 1.2]), dt=st.sampled_from([0.01, 0.02, 0.05]),
+)  # fmt: skip
+def test_straights_closed_form_bounds_hold_along_its_flight(
+    zones: ZoneSet, n0: float, e0: float, h0: float, a0: float, av0: float, tau: float,
+    dt: float,
+) -> None:
+    """From any state, STRAIGHT flown step by step (the shield's own flight) keeps every
+    heading within delta of the start, ends within w of the predicted final heading, stays
+    within the drift of the line along it, and its least look-ahead gap lies between the
+    tube's lower bound (the tail) and its upper bound (the exit screen)."""
+    params = dataclasses.replace(PARAMS, response_lag_s=tau)
+    s = settings_for(params)
+    av0 = av0 if tau > 0.0 else a0
+    delta, mid, w, drift = bk._straight_to_come(s, a0, av0, 1.0, dt)
+    z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
+    n, e, h, a, av = n0, e0, h0, a0, av0
+    least = lk.lookahead_gap(*z[:4], n, e, h, PARAMS.shield_margin_m)
+    lateral = 0.0
+    for _ in range(int((12.0 * tau + 30.0) / dt)):  # past every zone
+        _, n, e, h, a, av = bk._fly_step(s, *z, bk.BACKUP_STRAIGHT, 0.0, n, e, h, a, av, 1.0, dt)
+        assert abs(h - h0) <= delta + 1e-9
+        least = min(least, lk.lookahead_gap(*z[:4], n, e, h, PARAMS.shield_margin_m))
+        final = h0 + mid
+        lateral = max(lateral, abs(-(n - n0) * math.sin(final) + (e - e0) * math.cos(final))
+                      - math.hypot(n - n0, e - e0) * math.sin(w))  # fmt: skip
+    assert abs(h - (h0 + mid)) <= w + 1e-6
+    assert lateral <= drift + 1e-6
+    lower = bk._tube_gap(s, *z, n0, e0, h0 + mid, w, delta, drift, False)
+    upper = bk._tube_gap(s, *z, n0, e0, h0 + mid, w, delta, drift, True)
+    assert lower <= least + 1e-6
+    # (the flight is sampled at its control steps: its least gap may sit between them, up
+    # to the look-ahead point's speed, at most 2 v, over half a step)
+    assert least <= upper + dt
+
+
 # 5. the law at scale -------------------------------------------------------------------
 
 

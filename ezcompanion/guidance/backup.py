@@ -23,7 +23,10 @@ assumptions named; tests/test_backup.py checks each step):
    ``prediction_step_ratio`` v / a_max), each sample less its inter-sample dip (a
    second-order bound on the gap between two samples); once the heading change still to
    come is bounded small, the rest in closed form: a circle's look-ahead points lie on a
-   circle about its centre, a straight line's on a ray, the bound subtracted as a widening.
+   circle about its centre, a straight line's on a ray, the bound subtracted as a widening
+   (for STRAIGHT, the larger of a cone about the present heading and a tube about the final
+   one, from the integral of the actuator still to come; also tried every few samples,
+   each try being a lower bound too).
    So a certificate >= 0 means that flight stays out of every zone by the margin for ever.
    A turn's exit sample is a control step, so flown by its rule it leaves there or earlier,
    and an earlier exit is itself certified (>= theta, the largest dip). Where an abandon
@@ -101,6 +104,12 @@ _EXIT_EVERY = 1
 _EXIT_SEARCH_RAD = math.pi
 # The nominal's weight looks this many samples ahead (a fixed time, whatever the step).
 _PREVIEW_SAMPLES = 4
+# STRAIGHT's certificate tries its closed-form tail every this many samples (four times
+# as seldom where the caller wants it exact).
+_TAIL_EVERY = 4
+# A turn's exit is screened out where an upper bound on its certificate is below the exit
+# level by this much (in units of v^2 / a_max: round-off in the bound, nothing more).
+_SCREEN_SLACK = 1e-6
 
 
 def pack_shield(params: GuidanceParams, **abandon: float) -> FloatArray:
@@ -249,56 +258,178 @@ def _residual_turn_rad(s: FloatArray, a: float, av: float, limit: float, speed: 
     return float((s[S_TAU] * abs(av - limit) + abs(a - limit) / rate) / speed)
 
 
+@jit_inline
+def _straighten_integral(s: FloatArray, a_abs: float, dt: float) -> tuple[float, float]:
+    """Bounds (lo, hi) on the integral of |a| over STRAIGHT's flight from |a| = ``a_abs``,
+    as flown: the actuator decays without changing sign under a_c = -(C / a_max) a, at the
+    rate r(a) = k (1 - (a / a_max)^n) + p1 (k = C / a_max), so the integral is
+    int_0^|a| dx / r(x): for n = 2 in closed form, k (c^2 - x^2) / a_max^2 with
+    c^2 = (k + p1) a_max^2 / k, giving a_max^2 / (2 k c) ln((c + |a|) / (c - |a|)). Flown,
+    a is linear between control steps: over a decay at rate r the trapezoid exceeds the
+    integral by at most (x / 2) coth(x / 2) with x = (k + p1) dt, and the integrator's own
+    error stays within 1% (tests/test_backup.py checks both against the flown sequence).
+    Other n: the cruder |a| / r(|a|), and |a| / (k + p1) below."""
+    amax, p1, nn = s[S_AMAX], s[S_P1], int(s[S_N])
+    k = s[S_CMD] / amax
+    x = (k + p1) * dt
+    trapezoid = 0.5 * x / math.tanh(0.5 * x) if x > 1e-9 else 1.0
+    if nn != 2:
+        return 0.99 * a_abs / (k + p1), trapezoid * a_abs / (k * (1.0 - (a_abs / amax) ** nn) + p1)
+    c = amax * math.sqrt((k + p1) / k)
+    exact = amax * amax / (2.0 * k * c) * math.log((c + a_abs) / (c - a_abs))
+    return 0.99 * exact, (trapezoid + 0.01) * exact
+
+
+@jit_inline
+def _straight_to_come(
+    s: FloatArray, a: float, av: float, speed: float, dt: float
+) -> tuple[float, float, float, float]:
+    """What is left of the turn once STRAIGHT is flown from (a, a_v): (delta, mid, w, drift).
+
+    The heading changes by the integral of a_v over v, and that integral is
+    tau a_v + the integral of a (the lag keeps the area); with the integral of |a| within
+    (lo, hi) (``_straighten_integral``), every heading to come stays within
+    delta = (tau |a_v| + hi) / v of h, the final one within w = (hi - lo) / 2v of
+    h + mid, mid = (tau a_v + sign(a) (lo + hi) / 2) / v, and the path within
+    drift = tau^2 |a_v| + tau hi + hi^2 / |a| of the line from here along the final heading
+    (the lateral drift is at most int (t' - t) |a_v(t')| dt', and the integral of t |a| is
+    at most hi^2 / |a| because a decays faster the smaller it is)."""
+    tau = s[S_TAU]
+    lo, hi = _straighten_integral(s, abs(a), dt)
+    sign = 1.0 if a >= 0.0 else -1.0
+    delta = (tau * abs(av) + hi) / speed
+    mid = (tau * av + sign * 0.5 * (lo + hi)) / speed
+    w = 0.5 * (hi - lo) / speed
+    drift = tau * tau * abs(av) + tau * hi + (hi * hi / abs(a) if a != 0.0 else 0.0)
+    return delta, mid, w, drift
+
+
+@jit_inline
+def _tube_gap(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, n: float, e: float, h_final: float, w: float, delta: float, drift: float,
+    upper: bool,
+) -> float:
+    """The look-ahead points of STRAIGHT's flight from here against the ray of look-ahead
+    points along the final heading (``_straight_to_come``): each lies within
+    rho_i = drift + (|d_i - p| + reach_i + mu_i R_i + drift) tan(w) + 2 mu_i R_i delta of
+    the ray from p + mu_i R_i u(h_final). ``upper`` False: the least gap of the ray less
+    rho_i, a lower bound on the flight's; True: the ray's gap at its point nearest each zone
+    plus rho_i, an upper bound (some look-ahead point of the flight passes that point). Only
+    where the headings stay within a right angle of the ray (else -inf, or inf)."""
+    if 2.0 * delta + w >= 1.2:
+        return math.inf if upper else -math.inf
+    ch, sh = math.cos(h_final), math.sin(h_final)
+    slope = math.tan(w)
+    best = math.inf
+    for i in range(zn.shape[1]):
+        mur = zmur[kz, i]
+        wn = zn[kz, i] - n
+        we = ze[kz, i] - e
+        along = max(wn * ch + we * sh, mur)
+        dn = wn - along * ch
+        de = we - along * sh
+        g = math.sqrt(dn * dn + de * de) - zreach[kz, i] - s[S_EPS]
+        rho = drift + (math.sqrt(wn * wn + we * we) + zreach[kz, i] + mur + drift) * slope
+        rho += 2.0 * mur * delta
+        best = min(best, g + rho if upper else g - rho)
+    return best
+
+
+@jit_inline
+def _straight_tail(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
+) -> float:
+    """The gap of all of STRAIGHT's flight from this state on, in closed form, from below:
+    its headings stay within delta of h (``_straight_to_come``), so its look-ahead points
+    lie in the cone of that half-angle about the ray from here, which ``segment_gap``
+    widens for; and (no abandon profile) within the tube about the ray along the final
+    heading (``_tube_gap``). The larger bound is taken. With an abandon profile, the cone
+    alone and from min(mu R, v hold) ahead: the abandon paths from points of the line are
+    parts of the line (used once the turn has died out)."""
+    delta, mid, w, drift = _straight_to_come(s, a, av, speed, dt)
+    hold = s[S_AB_HOLD]
+    start = speed * hold if hold > 0.0 else math.inf
+    cone = segment_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h), start,
+                       math.inf, True, s[S_EPS], delta)  # fmt: skip
+    if hold > 0.0:
+        return cone
+    tube = _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, h + mid, w, delta, drift, False)
+    return max(cone, tube)
+
+
 @jit
 def straight_certificate(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
-    stop_below: float,
+    stop_below: float, enough: float,
 ) -> float:
     """Certificate of STRAIGHT from this state: the turn dies out under a_c = -(C / a_max) a,
     then a straight line for ever. Flown control step by control step (``dt``, the actuator
-    linear over each, as the service flies it), sampled every ``sample_ticks`` steps until
-    the heading change still to come is below ``_RESIDUAL_RAD``; then the ray in closed
-    form, widened by that residual. Stops early, returning the running least gap, once that
-    is below ``stop_below``."""  # fmt: skip
+    linear over each, as the service flies it), sampled every ``sample_ticks`` steps; at
+    sample j the closed-form tail (``_straight_tail``) bounds everything after it, so
+    min(the samples before j, the tail at j) is a certificate for every j, and the largest
+    is returned. Sampling ends once the heading change still to come is below
+    ``_RESIDUAL_RAD``, once the samples alone fall below the best so far (no later j can
+    beat it), once a certificate reaches ``enough`` (the caller needs no more), or, returning
+    the running least gap, once that is below ``stop_below``. With an abandon profile the
+    tail is only taken at the end (the abandon paths of a turning flight are not in its
+    cone)."""  # fmt: skip
     amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
     rate = _av_rate_bound(s)
     ticks = sample_ticks(s, speed, dt)
     step = ticks * dt
+    early = s[S_AB_HOLD] <= 0.0
     best = math.inf
-    for _ in range(_MAX_SAMPLES):
+    certified = -math.inf
+    every = _TAIL_EVERY if enough < math.inf else 4 * _TAIL_EVERY
+    for j in range(_MAX_SAMPLES):
+        if early and j % every == 0:
+            tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt)
+            certified = max(certified, min(best, tail))
+            if certified >= enough:
+                return certified
         best = min(best, point_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h),
                                     eps, speed, amax, rate, step))  # fmt: skip
         best = min(best, _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, speed))
-        if best < stop_below or _residual_turn_rad(s, a, av, 0.0, speed) < _RESIDUAL_RAD:
+        if best < stop_below:
+            return best
+        if best <= certified:
+            return certified
+        if _straight_to_come(s, a, av, speed, dt)[0] < _RESIDUAL_RAD:
             break
         for _ in range(ticks):
             a1 = _advance_straighten(a, dt, amax, p1, int(s[S_N]), s[S_CMD])
             n, e, h, av = _fly(n, e, h, a, a1, av, speed, tau, dt)
             a = a1
-    if best < stop_below:
-        return best
-    widen = _residual_turn_rad(s, a, av, 0.0, speed)
-    hold = s[S_AB_HOLD]
-    # the look-ahead points of the line; with an abandon profile, from min(mu R, v hold)
-    # ahead: the abandon paths from points of the line are parts of the line
-    start = speed * hold if hold > 0.0 else math.inf
-    tail = segment_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h), start,
-                        math.inf, True, eps, widen)  # fmt: skip
-    return min(best, tail)
+    tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt)
+    return max(certified, min(best, tail))
+
+
+@jit_inline
+def _straight_upper_bound(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
+) -> float:
+    """An upper bound on the least gap of STRAIGHT's flight from this state, so on its
+    certificate (which is below that gap): cheap, to screen a turn's exits."""
+    delta, mid, w, drift = _straight_to_come(s, a, av, speed, dt)
+    return _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, h + mid, w, delta, drift, True)
 
 
 @jit
 def turn_certificate(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, policy: int, n: float, e: float, h: float, a: float, av: float, speed: float,
-    dt: float, exit_now: float, exit_level: float, stop_below: float,
+    dt: float, exit_now: float, exit_level: float, stop_below: float, enough: float,
 ) -> float:
     """Certificate of LEFT or RIGHT: turn hard (a_c = -+C held) until a sample where the
     STRAIGHT certificate is at least ``exit_level``, then STRAIGHT; with no such sample
     before it has turned half a revolution after converging, the circle for ever (closed form).
     Samples every ``sample_ticks`` control steps ``dt``, so every sample is a control step
-    (``exit_now``: the STRAIGHT certificate at this state, already known)."""  # fmt: skip
+    (``exit_now``: the STRAIGHT certificate at this state, already known); each exit's
+    certificate is exact up to ``enough`` (the caller needs no more)."""  # fmt: skip
     amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
     cmd = s[S_CMD] * (-1.0 if policy == BACKUP_LEFT else 1.0)
     ticks = sample_ticks(s, speed, dt)
@@ -316,9 +447,13 @@ def turn_certificate(
             return best
         if j == 0:
             leave = exit_now
-        elif j % _EXIT_EVERY == 0:  # (any subset of the samples keeps the argument)
+        elif j % _EXIT_EVERY == 0 and _straight_upper_bound(
+            s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt
+        ) >= exit_level - _SCREEN_SLACK * speed * speed / amax:
+            # (any subset of the samples keeps the argument; the screen drops only exits
+            # whose certificate is surely below the level)
             leave = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
-                                         dt, exit_level)  # fmt: skip
+                                         dt, exit_level, max(exit_level, enough))  # fmt: skip
         else:
             leave = -math.inf
         if leave >= exit_level:
@@ -368,7 +503,7 @@ def backup_certificates(
     to be lower)."""
     theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
     straight = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
-                                    -math.inf)  # fmt: skip
+                                    -math.inf, enough)  # fmt: skip
     out[BACKUP_STRAIGHT] = straight
     if straight >= theta:  # both turns leave at once: they are STRAIGHT
         out[BACKUP_LEFT] = out[BACKUP_RIGHT] = straight
@@ -379,7 +514,7 @@ def backup_certificates(
             out[policy] = -math.inf
             continue
         out[policy] = turn_certificate(s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av,
-                                       speed, dt, straight, theta, best)  # fmt: skip
+                                       speed, dt, straight, theta, best, enough)  # fmt: skip
         best = max(best, out[policy])
 
 

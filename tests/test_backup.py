@@ -111,6 +111,21 @@ def test_the_zone_is_the_reach_disc_seen_from_the_lookahead_point(
     assert (gap > 0.0) == (clearance > 0.0)
 
 
+@settings(max_examples=200, deadline=None)
+@given(
+    zones=layouts(), n=st.floats(-10, 10), e=st.floats(-10, 10), h=st.floats(-4, 4),
+    below=st.floats(-1.0, 3.0) | st.just(math.inf), step=st.sampled_from([0.0, 0.04, 0.2]),
+)  # fmt: skip
+def test_the_pruned_point_gap_is_the_point_gap(
+    zones: ZoneSet, n: float, e: float, h: float, below: float, step: float
+) -> None:
+    """The certificates' sampling skips zones that cannot beat the running least gap: the
+    value must be exactly min(that, the full point gap)."""
+    z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
+    args = (*z, n, e, math.cos(h), math.sin(h), 0.1, 1.0, 1.0, 21.0, step)
+    assert lk.point_gap_below(*args, below) == min(below, lk.point_gap(*args))
+
+
 def test_on_the_boundary_the_gap_is_zero() -> None:
     d = Defender(north_m=0.0, east_m=0.0, range_m=1.5, capture_radius_m=0.5, speed_ratio=0.7)
     zones = ZoneSet.from_defenders([d])

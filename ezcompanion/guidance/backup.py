@@ -59,7 +59,13 @@ import numpy.typing as npt
 from ezcompanion.guidance._jit import jit, jit_inline
 from ezcompanion.guidance.abandon import abandon_gap
 from ezcompanion.guidance.actuator import actuator_rate, advance_one
-from ezcompanion.guidance.lookahead import annulus_gap, dip, point_gap, segment_gap
+from ezcompanion.guidance.lookahead import (
+    annulus_gap,
+    dip,
+    point_gap,
+    point_gap_below,
+    segment_gap,
+)
 from ezcompanion.guidance.params import GuidanceParams
 
 __all__ = [
@@ -390,8 +396,8 @@ def straight_certificate(
             certified = max(certified, min(best, tail))
             if certified >= enough:
                 return certified
-        best = min(best, point_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h),
-                                    eps, speed, amax, rate, step))  # fmt: skip
+        best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h), eps,
+                               speed, amax, rate, step, best)  # fmt: skip
         best = min(best, _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, speed))
         if best < stop_below:
             return best
@@ -440,8 +446,8 @@ def turn_certificate(
     turned = 0.0
     converged = False
     for j in range(_MAX_SAMPLES):
-        best = min(best, point_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h),
-                                    eps, speed, amax, rate, step))  # fmt: skip
+        best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h), eps,
+                               speed, amax, rate, step, best)  # fmt: skip
         best = min(best, _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, speed))
         if best < stop_below:
             return best

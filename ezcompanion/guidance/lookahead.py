@@ -20,7 +20,9 @@ import numpy.typing as npt
 
 from ezcompanion.guidance._jit import jit, jit_inline
 
-__all__ = ["annulus_gap", "arc_end", "dip", "lookahead_gap", "point_gap", "segment_gap"]
+__all__ = [
+    "annulus_gap", "arc_end", "dip", "lookahead_gap", "point_gap", "point_gap_below", "segment_gap",
+]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -59,6 +61,33 @@ def point_gap(
         qn = n + mur * cos_h - zn[kz, i]
         qe = e + mur * sin_h - ze[kz, i]
         dist = math.sqrt(qn * qn + qe * qe)
+        g = dist - zreach[kz, i] - eps
+        if step > 0.0:
+            g -= dip(mur, dist, speed, amax, av_rate, step)
+        best = min(best, g)
+    return best
+
+
+@jit_inline
+def point_gap_below(
+    zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
+    n: float, e: float, cos_h: float, sin_h: float, eps: float, speed: float, amax: float,
+    av_rate: float, step: float, below: float,
+) -> float:
+    """min(``below``, ``point_gap``), skipping, on their squared distance alone, the zones
+    that cannot come below it (the dip is at most (v + mu R a_max / v) step / 2): the same
+    value, cheaper where many zones are far."""  # fmt: skip
+    best = below
+    for i in range(zn.shape[1]):
+        mur = zmur[kz, i]
+        qn = n + mur * cos_h - zn[kz, i]
+        qe = e + mur * sin_h - ze[kz, i]
+        d2 = qn * qn + qe * qe
+        reach = zreach[kz, i] + eps
+        far = best + reach + 0.5 * (speed + mur * amax / speed) * step
+        if far > 0.0 and d2 >= far * far:
+            continue
+        dist = math.sqrt(d2)
         g = dist - zreach[kz, i] - eps
         if step > 0.0:
             g -= dip(mur, dist, speed, amax, av_rate, step)

@@ -55,10 +55,10 @@ from typing import Any
 
 from ezcompanion.config import GeoOrigin, Scenario, VehicleStart, build_dataclass, load_scenario
 from ezcompanion.config_limits import POSITION_LIMIT_M
-from ezcompanion.endpoint import pymavlink_url
 from ezcompanion.errors import ConfigError
 from sitl_stub.mav import key_from_hex, key_from_passphrase
 from sitl_stub.profiles import Profile, ProfileSpec, profile_spec
+from sitl_stub.transport import check_stub_url
 
 __all__ = ["Faults", "StreamRates", "StubConfig", "StubSettings", "load_stub_config", "stub_config"]
 
@@ -176,7 +176,7 @@ class StubSettings:
     def __post_init__(self) -> None:
         if not isinstance(self.profile, str) or self.profile not in {p.value for p in Profile}:
             raise ConfigError("profile", self.profile, "must be copter, plane or px4")
-        object.__setattr__(self, "connect", pymavlink_url(self.connect, field="connect"))
+        object.__setattr__(self, "connect", check_stub_url(self.connect, field="connect"))
         for name in ("system_id", "component_id"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 255:

@@ -1,26 +1,21 @@
 """One MAVLink connection: non-blocking receive with the sender's address, a locked peer,
-signing, and a tcp: client that reconnects like MAVProxy."""
+signing, and a tcp: client that waits for its server and reconnects like MAVProxy
+(:mod:`ezcompanion.wire.tcp_client`)."""
 
 from __future__ import annotations
 
-import contextlib
-import math
-import os
 import select
-import socket
 import time
 from dataclasses import dataclass
 from typing import Any
 
-from ezcompanion.errors import ConfigError
+from ezcompanion.errors import ConfigError, LinkError
 from ezcompanion.wire.dialect import Address, Message, mavlink, mavutil
 from ezcompanion.wire.signing import SIGNING_EPOCH_S, check_signature_first
+from ezcompanion.wire.tcp_client import TcpClient
 
 URL_SCHEMES = ("udpin", "udpout", "udp", "tcpin", "tcp")
 _DEFAULT_BAUD = 57600
-_TCP_KINDS = ("tcpin", "tcp")
-_TCP_RECONNECT_S = 1.0  # a tcp: client tries its server again this often (MAVProxy: 1 s)
-_TCP_CONNECT_TIMEOUT_S = 0.2
 
 
 def is_serial_device(url: str) -> bool:
@@ -64,6 +59,11 @@ class Link:
     Not thread-safe: one thread owns a link. ``mav`` is pymavlink's encoder (its
     ``*_encode`` methods build messages); :meth:`pack` turns a message into bytes with this
     link's sequence number and signature, :meth:`write` sends bytes, :meth:`send` does both.
+
+    A ``tcp:`` client opens even when nothing listens yet: it tries again every second
+    (:mod:`ezcompanion.wire.tcp_client`), as it does after its server went away;
+    :attr:`connected` and :attr:`down_reason` say where it stands. An endpoint that cannot
+    be opened at all (a port taken, a missing serial device) is a :class:`LinkError`.
     """
 
     def __init__(self, url: str, *, system_id: int, component_id: int) -> None:
@@ -72,7 +72,7 @@ class Link:
                 raise ConfigError(name, value, "must be within [1, 255]")
         self.url = url
         scheme = url.split(":", 1)[0]
-        self._tcp = scheme in _TCP_KINDS
+        self._tcpin = scheme == "tcpin"
         options: dict[str, Any] = {}
         if is_serial_device(url):
             # a serial device, as MAVProxy writes it: /dev/ttyACM0,57600 (or COM3,115200)
@@ -87,46 +87,58 @@ class Link:
                 f"must be SCHEME:HOST:PORT with SCHEME one of {', '.join(URL_SCHEMES)}, "
                 "or a serial device such as /dev/ttyACM0,57600",
             )
+        # a tcp: client owns its socket (pymavlink's gives up when nothing listens, and its
+        # recv returns b"" both for "nothing yet" and for a closed socket); pymavlink's
+        # plain mavfile holds its parser, encoder and signing
+        self._tcp_client: TcpClient | None = None
         try:
-            self._conn: Any = mavutil.mavlink_connection(
-                url,
-                source_system=system_id,
-                source_component=component_id,
-                dialect="ardupilotmega",
-                autoreconnect=False,
-                **options,
-            )
-        except (OSError, ValueError, ImportError) as exc:
+            if scheme == "tcp":
+                host, _, port = url[len("tcp:") :].rpartition(":")
+                if not port.isdigit():
+                    raise ValueError(f"the port must be a number, not {port!r}")
+                self._conn: Any = mavutil.mavfile(
+                    None, url, source_system=system_id, source_component=component_id
+                )
+                self._tcp_client = TcpClient((host, int(port)), url=url)
+            else:
+                self._conn = mavutil.mavlink_connection(
+                    url,
+                    source_system=system_id,
+                    source_component=component_id,
+                    dialect="ardupilotmega",
+                    autoreconnect=False,
+                    **options,
+                )
+        except (ValueError, ImportError) as exc:
             raise ConfigError("connect", self.url, f"cannot be opened: {exc}") from exc
+        except OSError as exc:  # the port is taken, the device is missing or not ours
+            raise LinkError("connect", self.url, f"cannot be opened: {exc}") from exc
         self._conn.mav.robust_parsing = True
         self._udp = isinstance(self._conn, mavutil.mavudp)
-        # a tcp: client reads its socket itself and reconnects like MAVProxy (pymavlink's
-        # recv returns b"" both for "nothing yet" and for a closed socket)
-        self._tcp_client = isinstance(self._conn, mavutil.mavtcp)
-        self._tcp_address: tuple[str, int] | None = (
-            getattr(self._conn, "destination_addr", None) if self._tcp_client else None
-        )
-        self._reconnect_at_s = math.inf
-        self._idle_r, self._idle_w = os.pipe() if self._tcp_client else (-1, -1)
+        self._serial = isinstance(self._conn, mavutil.mavserial)
+        if self._serial:  # bytes the kernel kept from before this open are not ours to parse
+            self._conn.port.reset_input_buffer()
         self._peer: tuple[str, int] | None = None
         self._messages = 0
         self._bad = 0
 
     # lifecycle
     def close(self) -> None:
-        """Close the socket(s)."""
-        if self._tcp_client and self._conn.port is None:
-            self._conn.port = socket.socket()  # pymavlink's close() expects one
-        self._conn.close()
-        for fd in (self._idle_r, self._idle_w):
-            if fd >= 0:
-                os.close(fd)
-        self._idle_r = self._idle_w = -1
+        """Close the socket(s) or the device."""
+        if self._tcp_client is not None:
+            self._tcp_client.close()
+        else:
+            self._conn.close()
 
     @property
     def connected(self) -> bool:
-        """False while a tcp: client waits to reconnect; True otherwise."""
-        return not (self._tcp_client and self._conn.port is None)
+        """False while a tcp: client waits for its server; True otherwise."""
+        return self._tcp_client is None or self._tcp_client.connected
+
+    @property
+    def down_reason(self) -> str | None:
+        """Why a tcp: client is not connected (None when it is, and for other links)."""
+        return self._tcp_client.down_reason if self._tcp_client is not None else None
 
     def __enter__(self) -> Link:
         return self
@@ -150,8 +162,11 @@ class Link:
     @property
     def local_address(self) -> tuple[str, int] | None:
         """Host and port this link's socket is bound to (useful after ``udpin:HOST:0``)."""
-        sock = getattr(self._conn, "listen", None) or getattr(self._conn, "port", None)
-        if sock is None:
+        if self._tcp_client is not None:
+            sock: Any = self._tcp_client.socket
+        else:
+            sock = getattr(self._conn, "listen", None) or getattr(self._conn, "port", None)
+        if sock is None or self._serial:
             return None
         try:
             host, port = sock.getsockname()[:2]
@@ -162,9 +177,8 @@ class Link:
     def fileno(self) -> int:
         """The descriptor to wait on (for ``tcpin`` it changes once a client connects; a
         disconnected tcp: client waits on a pipe that never becomes readable)."""
-        if self._tcp_client:
-            port = self._conn.port
-            return int(port.fileno()) if port is not None else self._idle_r
+        if self._tcp_client is not None:
+            return self._tcp_client.fileno()
         return int(self._conn.fd)
 
     # signing
@@ -193,7 +207,10 @@ class Link:
 
     # receive
     def wait_readable(self, timeout_s: float, *extra_fds: int) -> list[int]:
-        """Wait until this link (or one of ``extra_fds``) is readable; the readable fds."""
+        """Wait until this link (or one of ``extra_fds``) is readable; the readable fds. A
+        tcp: client that is down waits no longer than its next attempt to connect."""
+        if self._tcp_client is not None:
+            timeout_s = min(timeout_s, self._tcp_client.retry_in_s())
         fds = [self.fileno(), *extra_fds]
         readable, _, _ = select.select(fds, [], [], max(timeout_s, 0.0))
         return list(readable)
@@ -229,45 +246,17 @@ class Link:
         """The locked peer, if any."""
         return self._peer
 
-    def _read_tcp_client(self) -> tuple[bytes, Address] | None:
-        conn = self._conn
-        if conn.port is None:
-            if time.monotonic() >= self._reconnect_at_s:
-                self._reconnect()
-            return None
-        try:
-            data = conn.port.recv(4096)
-        except (BlockingIOError, InterruptedError):
-            return None  # nothing waiting: an idle socket is not a closed one
-        except OSError:
-            data = b""
-        if not data:  # closed or reset by the peer: reconnect in a second
-            with contextlib.suppress(OSError):
-                conn.port.close()
-            conn.port = None
-            self._reconnect_at_s = time.monotonic() + _TCP_RECONNECT_S
-            return None
-        return bytes(data), None
-
-    def _reconnect(self) -> None:
-        """One short, non-blocking-enough attempt to reach the tcp: server again."""
-        assert self._tcp_address is not None
-        try:
-            sock = socket.create_connection(self._tcp_address, timeout=_TCP_CONNECT_TIMEOUT_S)
-        except OSError:
-            self._reconnect_at_s = time.monotonic() + _TCP_RECONNECT_S
-            return
-        sock.setblocking(False)
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self._conn.port = sock
-        self._conn.fd = sock.fileno()
-        self._reset_parser(count_partial=False)
-        self._reconnect_at_s = math.inf
+    def _read_tcp_client(self, client: TcpClient) -> tuple[bytes, Address] | None:
+        connections = client.connections
+        data = client.recv()
+        if client.connections != connections:  # a new connection: a fresh stream
+            self._reset_parser(count_partial=False)
+        return (data, None) if data else None
 
     def _read_chunk(self) -> tuple[bytes, Address] | None:
         conn = self._conn
-        if self._tcp_client:
-            return self._read_tcp_client()
+        if self._tcp_client is not None:
+            return self._read_tcp_client(self._tcp_client)
         if self._udp:
             try:
                 data, source = conn.port.recvfrom(65535)
@@ -289,7 +278,7 @@ class Link:
             data = conn.recv(4096)
         except OSError:
             return None
-        if isinstance(data, bytes) and not data and self._tcp and conn.port is not None:
+        if isinstance(data, bytes) and not data and self._tcpin and conn.port is not None:
             # orderly close by the peer: go back to waiting for a connection
             conn.port.close()
             conn.port = None
@@ -344,12 +333,12 @@ class Link:
         try:
             if self._udp and self._peer is not None:
                 self._conn.port.sendto(buf, self._peer)
-            elif self._tcp_client:
-                if self._conn.port is None:
-                    return False
-                self._conn.port.send(buf)
-            else:
-                self._conn.write(buf)
+            elif self._tcp_client is not None:
+                return self._tcp_client.send(buf)
+            elif self._tcpin and self._conn.port is None:
+                return False  # no client connected: nothing leaves
+            elif self._conn.write(buf) == -1:  # pymavlink's serial write reports a dead port so
+                return False
         except OSError:
             return False
         return True

@@ -42,6 +42,8 @@ from ezcompanion.service.demo import free_udp_port, judge_truth
 from ezcompanion.service.events import EventKind, EventLog
 from ezcompanion.service.runner import CompanionService, EngagementOutcome
 from ezcompanion.service.settings import companion_settings
+from ezcompanion.wire import Link
+from sitl_stub.mav import StubLink
 
 SCENARIO = Path(__file__).resolve().parents[1] / "config" / "paper_scenario1.yaml"
 _WALL_BUDGET_S = 90.0  # a stuck run fails here instead of hanging the suite
@@ -179,3 +181,52 @@ def test_paper_scenario_1_intercepts_outside_every_zone_over(
     if name == "tcp":  # the companion's client was up before the stub's server, and waited
         notices = [r.getMessage() for r in caplog.records if "cannot connect" in r.getMessage()]
         assert notices and "Connection refused" in notices[0]
+
+
+def _heartbeat(stub_link: StubLink) -> bytes:
+    return stub_link.pack(stub_link.mav.heartbeat_encode(2, 3, 0, 0, 4))
+
+
+def _until(link: Link, done: Callable[[list[str]], bool], send: Callable[[], object] = bool,
+           wall_s: float = 5.0) -> list[str]:
+    """Wait as the service does, ``send`` each round, until ``done(types received)``."""
+    got: list[str] = []
+    deadline = time.monotonic() + wall_s
+    while not done(got) and time.monotonic() < deadline:
+        send()
+        link.wait_readable(0.05)
+        got += [m.get_type() for m in link.recv_messages()]
+    return got
+
+
+def test_a_serial_port_that_goes_away_is_opened_again_from_its_path(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.WARNING, logger="ezcompanion.wire")
+    tty = str(tmp_path / "ttyFC")
+    vehicle = StubLink(f"pty:{tty}", system_id=1, component_id=1)  # the stub's own code
+    link = Link(f"{tty},115200", system_id=245, component_id=191)
+    try:
+        got = _until(link, lambda got: "HEARTBEAT" in got,
+                     lambda: vehicle.write(_heartbeat(vehicle)))  # fmt: skip
+        assert "HEARTBEAT" in got
+        assert link.send(link.mav.heartbeat_encode(18, 8, 0, 0, 0)) is True
+        vehicle.wait_readable(2.0)
+        assert [m.get_type() for m in vehicle.recv_messages()] == ["HEARTBEAT"]
+        # the vehicle goes away (its program ended, the device with it): noticed, one line
+        vehicle.close()
+        _until(link, lambda _: not link.connected, wall_s=3.0)
+        assert not link.connected and "went away" in (link.down_reason or "")
+        assert link.send(link.mav.heartbeat_encode(18, 8, 0, 0, 0)) is False
+        # ... and back behind the same path (a new /dev/pts/N): opened again within ~1 s
+        vehicle = StubLink(f"pty:{tty}", system_id=1, component_id=1)
+        _until(link, lambda _: link.connected, wall_s=5.0)
+        assert link.connected and link.down_reason is None
+        got = _until(link, lambda got: "HEARTBEAT" in got,
+                     lambda: vehicle.write(_heartbeat(vehicle)))  # fmt: skip
+        assert "HEARTBEAT" in got
+        assert all(r.exc_info is None for r in caplog.records)
+        assert any("open again after" in r.getMessage() for r in caplog.records)
+    finally:
+        link.close()
+        vehicle.close()

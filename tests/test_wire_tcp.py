@@ -108,7 +108,7 @@ def test_a_tcp_client_started_before_its_server_connects_once_the_server_listens
         assert receive(link, 1.3) == []  # an attempt a second: refused again
         assert re.search(r"Connection refused, [2-9] attempts", link.down_reason or "")
         # one notice so far (the next after 5 s), one line, no traceback
-        notices = [r for r in caplog.records if r.name == "ezcompanion.wire.tcp_client"]
+        notices = [r for r in caplog.records if r.name == "ezcompanion.wire.streams"]
         assert len(notices) == 1 and notices[0].exc_info is None
         assert notices[0].getMessage() == (
             f"tcp:127.0.0.1:{port}: cannot connect (Connection refused); trying again every 1 s"
@@ -150,7 +150,47 @@ def test_a_tcp_client_with_no_server_ends_in_one_line_when_its_budget_runs_out(
         error,
     ), error
     # the notice, the first time (then every 5 s), and never a traceback
-    notices = [r.getMessage() for r in caplog.records if r.name == "ezcompanion.wire.tcp_client"]
+    notices = [r.getMessage() for r in caplog.records if r.name == "ezcompanion.wire.streams"]
     assert notices[0] == f"{url}: cannot connect (Connection refused); trying again every 1 s"
     assert all(n.startswith(f"{url}: still cannot connect after ") for n in notices[1:])
     assert all(r.exc_info is None for r in caplog.records)
+
+
+def test_a_tcpin_link_serves_the_next_client_when_one_goes_away() -> None:
+    link = Link("tcpin:127.0.0.1:0", system_id=245, component_id=191)
+    try:
+        address = link.local_address
+        assert address is not None
+        assert link.send(link.mav.heartbeat_encode(18, 8, 0, 0, 0)) is False  # nobody yet
+        for sequence in range(2):  # a vehicle, then the same vehicle after a restart
+            with socket.create_connection(address, timeout=2.0) as vehicle:
+                vehicle.sendall(heartbeat_bytes(sequence))
+                assert "HEARTBEAT" in receive(link, 1.0)
+                assert link.send(link.mav.heartbeat_encode(18, 8, 0, 0, 0)) is True
+                assert vehicle.recv(4096)[:1] == b"\xfd"
+            receive(link, 0.3)  # the close is seen; the listener waits for the next
+        assert link.stats.bad_frames == 0
+    finally:
+        link.close()
+
+
+def test_the_stubs_tcp_client_waits_for_a_companion_that_listens_late() -> None:
+    from sitl_stub.mav import StubLink
+
+    port = _free_tcp_port()
+    stub = StubLink(f"tcp:127.0.0.1:{port}", system_id=1, component_id=1)  # nothing listens
+    companion = None
+    try:
+        assert stub.send(stub.mav.heartbeat_encode(2, 3, 0, 0, 4)) is False
+        companion = Link(f"tcpin:127.0.0.1:{port}", system_id=245, component_id=191)
+        got: list[str] = []
+        deadline = time.monotonic() + 5.0
+        while "HEARTBEAT" not in got and time.monotonic() < deadline:
+            stub.wait_readable(0.1)  # the stub's loop: a due attempt each second
+            stub.send(stub.mav.heartbeat_encode(2, 3, 0, 0, 4))
+            got += receive(companion, 0.1)
+        assert "HEARTBEAT" in got
+    finally:
+        stub.close()
+        if companion is not None:
+            companion.close()

@@ -1,6 +1,6 @@
 """One MAVLink connection: non-blocking receive with the sender's address, a locked peer,
-signing, and a tcp: client that waits for its server and reconnects like MAVProxy
-(:mod:`ezcompanion.wire.tcp_client`)."""
+signing, and a tcp: client and a serial port that wait for their peer and come back to it
+like MAVProxy (:mod:`ezcompanion.wire.streams`)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from typing import Any
 from ezcompanion.errors import ConfigError, LinkError
 from ezcompanion.wire.dialect import Address, Message, mavlink, mavutil
 from ezcompanion.wire.signing import SIGNING_EPOCH_S, check_signature_first
-from ezcompanion.wire.tcp_client import TcpClient
+from ezcompanion.wire.streams import SerialPort, Stream, TcpClient
 
 URL_SCHEMES = ("udpin", "udpout", "udp", "tcpin", "tcp")
 _DEFAULT_BAUD = 57600
@@ -61,9 +61,10 @@ class Link:
     link's sequence number and signature, :meth:`write` sends bytes, :meth:`send` does both.
 
     A ``tcp:`` client opens even when nothing listens yet: it tries again every second
-    (:mod:`ezcompanion.wire.tcp_client`), as it does after its server went away;
-    :attr:`connected` and :attr:`down_reason` say where it stands. An endpoint that cannot
-    be opened at all (a port taken, a missing serial device) is a :class:`LinkError`.
+    (:mod:`ezcompanion.wire.streams`), as it does after its server went away; a serial port
+    that goes away is opened again each second from the same path. :attr:`connected` and
+    :attr:`down_reason` say where they stand. An endpoint that cannot be opened at all (a
+    port taken, a missing serial device) is a :class:`LinkError`.
     """
 
     def __init__(self, url: str, *, system_id: int, component_id: int) -> None:
@@ -73,13 +74,13 @@ class Link:
         self.url = url
         scheme = url.split(":", 1)[0]
         self._tcpin = scheme == "tcpin"
-        options: dict[str, Any] = {}
+        device, baud_rate = "", 0
         if is_serial_device(url):
             # a serial device, as MAVProxy writes it: /dev/ttyACM0,57600 (or COM3,115200)
-            url, _, baud = url.partition(",")
+            device, _, baud = url.partition(",")
             if baud and not (baud.isdigit() and int(baud) > 0):
                 raise ConfigError("connect", self.url, "the baud rate after ',' must be a number")
-            options["baud"] = int(baud) if baud else _DEFAULT_BAUD
+            baud_rate = int(baud) if baud else _DEFAULT_BAUD
         elif scheme not in URL_SCHEMES or url.count(":") != 2:
             raise ConfigError(
                 "connect",
@@ -87,19 +88,23 @@ class Link:
                 f"must be SCHEME:HOST:PORT with SCHEME one of {', '.join(URL_SCHEMES)}, "
                 "or a serial device such as /dev/ttyACM0,57600",
             )
-        # a tcp: client owns its socket (pymavlink's gives up when nothing listens, and its
-        # recv returns b"" both for "nothing yet" and for a closed socket); pymavlink's
-        # plain mavfile holds its parser, encoder and signing
-        self._tcp_client: TcpClient | None = None
+        # a tcp: client and a serial port own their socket or port (pymavlink's tcp: gives
+        # up when nothing listens and takes an idle socket for a closed one; its serial
+        # port stays readable for ever once unplugged); pymavlink's plain mavfile holds
+        # their parser, encoder and signing
+        self._stream: Stream | None = None
         try:
-            if scheme == "tcp":
-                host, _, port = url[len("tcp:") :].rpartition(":")
-                if not port.isdigit():
-                    raise ValueError(f"the port must be a number, not {port!r}")
+            if scheme == "tcp" or device:
                 self._conn: Any = mavutil.mavfile(
                     None, url, source_system=system_id, source_component=component_id
                 )
-                self._tcp_client = TcpClient((host, int(port)), url=url)
+            if device:
+                self._stream = SerialPort(device, baud_rate, url=url)
+            elif scheme == "tcp":
+                host, _, port = url[len("tcp:") :].rpartition(":")
+                if not port.isdigit():
+                    raise ValueError(f"the port must be a number, not {port!r}")
+                self._stream = TcpClient((host, int(port)), url=url)
             else:
                 self._conn = mavutil.mavlink_connection(
                     url,
@@ -107,7 +112,6 @@ class Link:
                     source_component=component_id,
                     dialect="ardupilotmega",
                     autoreconnect=False,
-                    **options,
                 )
         except (ValueError, ImportError) as exc:
             raise ConfigError("connect", self.url, f"cannot be opened: {exc}") from exc
@@ -115,9 +119,7 @@ class Link:
             raise LinkError("connect", self.url, f"cannot be opened: {exc}") from exc
         self._conn.mav.robust_parsing = True
         self._udp = isinstance(self._conn, mavutil.mavudp)
-        self._serial = isinstance(self._conn, mavutil.mavserial)
-        if self._serial:  # bytes the kernel kept from before this open are not ours to parse
-            self._conn.port.reset_input_buffer()
+        self._connections = self._stream.connections if self._stream is not None else 0
         self._peer: tuple[str, int] | None = None
         self._messages = 0
         self._bad = 0
@@ -125,20 +127,20 @@ class Link:
     # lifecycle
     def close(self) -> None:
         """Close the socket(s) or the device."""
-        if self._tcp_client is not None:
-            self._tcp_client.close()
+        if self._stream is not None:
+            self._stream.close()
         else:
             self._conn.close()
 
     @property
     def connected(self) -> bool:
-        """False while a tcp: client waits for its server; True otherwise."""
-        return self._tcp_client is None or self._tcp_client.connected
+        """False while a tcp: client or a serial port waits for its peer; True otherwise."""
+        return self._stream is None or self._stream.connected
 
     @property
     def down_reason(self) -> str | None:
-        """Why a tcp: client is not connected (None when it is, and for other links)."""
-        return self._tcp_client.down_reason if self._tcp_client is not None else None
+        """Why a tcp: client or a serial port is down (None when up, and for the others)."""
+        return self._stream.down_reason if self._stream is not None else None
 
     def __enter__(self) -> Link:
         return self
@@ -162,11 +164,13 @@ class Link:
     @property
     def local_address(self) -> tuple[str, int] | None:
         """Host and port this link's socket is bound to (useful after ``udpin:HOST:0``)."""
-        if self._tcp_client is not None:
-            sock: Any = self._tcp_client.socket
+        if isinstance(self._stream, SerialPort):
+            return None
+        if isinstance(self._stream, TcpClient):
+            sock: Any = self._stream.socket
         else:
             sock = getattr(self._conn, "listen", None) or getattr(self._conn, "port", None)
-        if sock is None or self._serial:
+        if sock is None:
             return None
         try:
             host, port = sock.getsockname()[:2]
@@ -177,8 +181,8 @@ class Link:
     def fileno(self) -> int:
         """The descriptor to wait on (for ``tcpin`` it changes once a client connects; a
         disconnected tcp: client waits on a pipe that never becomes readable)."""
-        if self._tcp_client is not None:
-            return self._tcp_client.fileno()
+        if self._stream is not None:
+            return self._stream.fileno()
         return int(self._conn.fd)
 
     # signing
@@ -208,9 +212,9 @@ class Link:
     # receive
     def wait_readable(self, timeout_s: float, *extra_fds: int) -> list[int]:
         """Wait until this link (or one of ``extra_fds``) is readable; the readable fds. A
-        tcp: client that is down waits no longer than its next attempt to connect."""
-        if self._tcp_client is not None:
-            timeout_s = min(timeout_s, self._tcp_client.retry_in_s())
+        tcp: client or serial port that is down waits no longer than its next attempt."""
+        if self._stream is not None:
+            timeout_s = min(timeout_s, self._stream.retry_in_s())
         fds = [self.fileno(), *extra_fds]
         readable, _, _ = select.select(fds, [], [], max(timeout_s, 0.0))
         return list(readable)
@@ -246,17 +250,17 @@ class Link:
         """The locked peer, if any."""
         return self._peer
 
-    def _read_tcp_client(self, client: TcpClient) -> tuple[bytes, Address] | None:
-        connections = client.connections
-        data = client.recv()
-        if client.connections != connections:  # a new connection: a fresh stream
+    def _read_stream(self, stream: Stream) -> tuple[bytes, Address] | None:
+        data = stream.recv()
+        if stream.connections != self._connections:  # connected again: a fresh byte stream
+            self._connections = stream.connections
             self._reset_parser(count_partial=False)
         return (data, None) if data else None
 
     def _read_chunk(self) -> tuple[bytes, Address] | None:
         conn = self._conn
-        if self._tcp_client is not None:
-            return self._read_tcp_client(self._tcp_client)
+        if self._stream is not None:
+            return self._read_stream(self._stream)
         if self._udp:
             try:
                 data, source = conn.port.recvfrom(65535)
@@ -333,12 +337,12 @@ class Link:
         try:
             if self._udp and self._peer is not None:
                 self._conn.port.sendto(buf, self._peer)
-            elif self._tcp_client is not None:
-                return self._tcp_client.send(buf)
+            elif self._stream is not None:
+                return self._stream.send(buf)
             elif self._tcpin and self._conn.port is None:
                 return False  # no client connected: nothing leaves
-            elif self._conn.write(buf) == -1:  # pymavlink's serial write reports a dead port so
-                return False
+            else:
+                self._conn.write(buf)
         except OSError:
             return False
         return True

@@ -43,6 +43,7 @@ from ezcompanion.service.events import EventKind, EventLog
 from ezcompanion.service.runner import CompanionService, EngagementOutcome
 from ezcompanion.service.settings import companion_settings
 from ezcompanion.wire import Link
+from sitl_stub import SitlStub, stub_config
 from sitl_stub.mav import StubLink
 
 SCENARIO = Path(__file__).resolve().parents[1] / "config" / "paper_scenario1.yaml"
@@ -230,3 +231,75 @@ def test_a_serial_port_that_goes_away_is_opened_again_from_its_path(
     finally:
         link.close()
         vehicle.close()
+
+
+def test_a_tcp_vehicle_that_restarts_is_reached_again_and_guided_again(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """ArduPilot SITL restarted under a companion on its TCP port: the connection closes, the
+    companion says so, stops guiding (link lost), connects again within its retry period
+    once the new vehicle listens, and guides it to the target. As the UDP test of link loss
+    (test_service_loopback.py), the first vehicle dies at the engagement, still holding: one
+    killed at speed comes back with a velocity the estimate gate refuses, which is the gate's
+    business, not the link's. Vehicle clocks at 5x, not lockstep (a vehicle that dies
+    cannot answer a lockstep request)."""
+    caplog.set_level(logging.WARNING, logger="ezcompanion.wire")
+    speedup = 5.0
+    scenario = load_scenario(SCENARIO)
+    port = _free_tcp_port()
+    settings = companion_settings(scenario, connect=f"tcp:127.0.0.1:{port}", engage=True,
+                                  speedup=speedup, loop_rate_hz=20.0,
+                                  telemetry_rate_hz=20.0)  # fmt: skip
+    events = EventLog(lambda e: print(e.line()))
+    kinds: list[EventKind] = []
+    seen = threading.Condition()
+
+    def note(event: object) -> None:
+        with seen:
+            kinds.append(event.kind)  # type: ignore[attr-defined]
+            seen.notify_all()
+
+    events.add_sink(note)
+
+    def wait_for(kind: EventKind, count: int = 1) -> None:
+        with seen:
+            assert seen.wait_for(lambda: kinds.count(kind) >= count, timeout=30.0), kinds
+
+    service = CompanionService(scenario, settings, events=events, telemetry=None)
+    outcome: list[EngagementOutcome] = []
+    thread = threading.Thread(
+        target=lambda: outcome.append(service.run(max_time_s=60.0)), daemon=True
+    )
+
+    def vehicle(n: int) -> SitlStub:  # in this process: no interpreter to start twice
+        config = stub_config(scenario, connect=f"tcpin:127.0.0.1:{port}", speedup=speedup,
+                             profile="copter", initial_mode="GUIDED")  # fmt: skip
+        return SitlStub(config, truth_out=tmp_path / f"truth{n}.csv").start()
+
+    first = vehicle(1)
+    second: SitlStub | None = None
+    thread.start()
+    try:
+        wait_for(EventKind.ENGAGED)
+        first.stop()  # the vehicle goes away, its socket closed
+        wait_for(EventKind.LINK_LOST)
+        assert not service.session.connected
+        second = vehicle(2)
+        wait_for(EventKind.LINK_RESTORED)
+        wait_for(EventKind.ENGAGED, 2)
+        thread.join(timeout=60.0)  # guided to the end over the new connection
+    finally:
+        service.stop()
+        thread.join(timeout=20.0)
+        first.stop()
+        if second is not None:
+            second.stop()
+            assert second.error is None
+    assert outcome and outcome[0].intercepted, outcome
+    assert judge_truth(scenario, tmp_path / "truth2.csv")[0]  # by the second vehicle's truth
+    notices = [r.getMessage() for r in caplog.records if r.name == "ezcompanion.wire.streams"]
+    url = f"tcp:127.0.0.1:{port}"
+    assert any(n.startswith(f"{url}: the server closed the connection; ") or n.startswith(
+        f"{url}: the server reset the connection") for n in notices), notices  # fmt: skip
+    assert any(n.startswith(f"{url}: connected after ") for n in notices), notices
+    assert all(r.exc_info is None for r in caplog.records)

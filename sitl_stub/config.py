@@ -4,7 +4,7 @@ Layout (every key optional; see ``docs/sitl_stub.md``)::
 
     sitl_stub:
       profile: copter | plane | px4
-      connect: udpout:127.0.0.1:14550   # or udpout://..., tcp://..., serial:///dev/ttyS0:57600
+      connect: udpout:127.0.0.1:14550   # or udpout://..., tcp://..., /dev/ttyS0,57600, pty:PATH
       system_id: 1
       component_id: 1
       speedup: 1.0
@@ -41,7 +41,8 @@ Layout (every key optional; see ``docs/sitl_stub.md``)::
 Every number has a stated range (the error gives it); positions and offsets are held to the
 scenario's limit (``ezcompanion.config_limits.POSITION_LIMIT_M``, 100 km), so that what the
 stub sends fits MAVLink's fields. ``connect`` takes MAVProxy's and MAVSDK's spellings
-(``ezcompanion.endpoint``) and is kept as the pymavlink string.
+(``ezcompanion.endpoint``) and is kept as the pymavlink string, or ``pty``/``pty:PATH``: a
+pseudo-terminal the stub serves as its serial port (``sitl_stub.transport``).
 """
 
 from __future__ import annotations

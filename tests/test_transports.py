@@ -303,3 +303,18 @@ def test_a_tcp_vehicle_that_restarts_is_reached_again_and_guided_again(
         f"{url}: the server reset the connection") for n in notices), notices  # fmt: skip
     assert any(n.startswith(f"{url}: connected after ") for n in notices), notices
     assert all(r.exc_info is None for r in caplog.records)
+
+
+@pytest.mark.parametrize(
+    ("url", "reason"),
+    [("pty:ttyFC", "absolute PATH"), ("pty:/no/such/dir/ttyFC", "absolute PATH"),
+     ("tcp:127.0.0.1", "tcp:HOST:PORT")],
+)  # fmt: skip
+def test_a_bad_stub_endpoint_is_one_line_naming_the_flag(
+    url: str, reason: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from sitl_stub.cli import main as stub_main
+
+    assert stub_main(["--config", str(SCENARIO), "--connect", url]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert "argument --connect" in line and reason in line and repr(url) in line, line

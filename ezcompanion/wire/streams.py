@@ -49,7 +49,7 @@ class Stream:
 
     def __init__(self, *, url: str) -> None:
         self.url = url
-        self.attempts = 0  # attempts to open so far
+        self.attempts = 0  # attempts to open since it was last up
         self.connections = 0  # of which succeeded (a new one: a fresh byte stream)
         self.down_reason: str | None = "not open yet"  # why it is down (None: up)
         self._up = False
@@ -100,9 +100,9 @@ class Stream:
         self.attempts += 1
         try:
             self._open()
-        except OSError as exc:  # refused, unreachable, timed out, no such device (yet)
+        except (OSError, ValueError) as exc:  # refused, unreachable, no such device (yet)
             self._next_attempt_s = time.monotonic() + RECONNECT_PERIOD_S
-            self._waiting(_why(exc))
+            self._waiting(_why(exc) if isinstance(exc, OSError) else str(exc))
             return False
         self._up = True
         self._pending = b""
@@ -155,6 +155,7 @@ class Stream:
             self._close()
         self._up = False
         self._pending = b""
+        self.attempts = 0
         now = time.monotonic()
         self._down_since_s = now
         self._next_attempt_s = now + RECONNECT_PERIOD_S

@@ -172,7 +172,9 @@ def run_service(
         print("ezcompanion: interrupted before the engagement ended", file=sys.stderr)
         return ExitCode.INTERRUPTED
     if not events.of_kind(EventKind.VEHICLE_FOUND):
-        raise LinkError("connect", settings.connect, f"no vehicle heard in {outcome.time_s:.1f} s")
+        down = service.session.link_down_reason  # a tcp: client that never reached a server
+        why = f"no vehicle heard in {outcome.time_s:.1f} s" + (f": {down}" if down else "")
+        raise LinkError("connect", settings.connect, why)
     lost, restored = events.of_kind(EventKind.LINK_LOST), events.of_kind(EventKind.LINK_RESTORED)
     if lost and (not restored or restored[-1].time_s < lost[-1].time_s):
         raise LinkError(

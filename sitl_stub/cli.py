@@ -23,14 +23,15 @@ from ezcompanion.cli_args import (
     OneLineParser,
     add_common_flags,
     configure_logging,
-    endpoint,
     guarded,
     number_within,
 )
+from ezcompanion.errors import ConfigError, shown
 from ezcompanion.exit_codes import ExitCode
 from sitl_stub.config import load_stub_config
 from sitl_stub.profiles import Profile
 from sitl_stub.server import SitlStub
+from sitl_stub.transport import check_stub_url
 
 __all__ = ["main", "parse_args", "run"]
 
@@ -38,6 +39,14 @@ __all__ = ["main", "parse_args", "run"]
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     """The command line, parsed (a usage error exits 2 with one line on stderr)."""
     return _parser().parse_args(argv)
+
+
+def _endpoint(text: str) -> str:
+    """``--connect``: a MAVLink endpoint as the companion takes it, or ``pty[:PATH]``."""
+    try:
+        return check_stub_url(text, field="--connect")
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(f"{exc.reason} (got {shown(text)})") from None
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -48,10 +57,12 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--config", required=True, type=Path, help="scenario YAML file")
     parser.add_argument(
         "--connect",
-        type=endpoint,
+        type=_endpoint,
         metavar="URL",
         help="MAVLink endpoint, pymavlink or MAVSDK form: udpout:127.0.0.1:14550 (the "
-        "default), udpout://127.0.0.1:14550, tcpin://0.0.0.0:5760",
+        "default), udpout://127.0.0.1:14550, tcpin://0.0.0.0:5760, tcp:127.0.0.1:5760; or "
+        "pty[:PATH]: serve a pseudo-terminal as the vehicle's serial port (its device is "
+        "printed, and linked from PATH if given)",
     )
     parser.add_argument(
         "--speedup", type=number_within(0.0, 1000.0), help="simulated seconds per wall second"
@@ -103,6 +114,8 @@ def run(args: argparse.Namespace) -> int:
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         with stub:
+            if stub.serial_device is not None:
+                print(f"sitl-stub: serial port {stub.serial_device}", flush=True)
             while stub.running and not done.wait(0.2):
                 pass
     finally:

@@ -4,7 +4,7 @@ Layout (every key optional; see ``docs/sitl_stub.md``)::
 
     sitl_stub:
       profile: copter | plane | px4
-      connect: udpout:127.0.0.1:14550   # or udpout://..., tcp://..., serial:///dev/ttyS0:57600
+      connect: udpout:127.0.0.1:14550   # or udpout://..., tcp://..., /dev/ttyS0,57600, pty:PATH
       system_id: 1
       component_id: 1
       speedup: 1.0
@@ -41,7 +41,8 @@ Layout (every key optional; see ``docs/sitl_stub.md``)::
 Every number has a stated range (the error gives it); positions and offsets are held to the
 scenario's limit (``ezcompanion.config_limits.POSITION_LIMIT_M``, 100 km), so that what the
 stub sends fits MAVLink's fields. ``connect`` takes MAVProxy's and MAVSDK's spellings
-(``ezcompanion.endpoint``) and is kept as the pymavlink string.
+(``ezcompanion.endpoint``) and is kept as the pymavlink string, or ``pty``/``pty:PATH``: a
+pseudo-terminal the stub serves as its serial port (``sitl_stub.transport``).
 """
 
 from __future__ import annotations
@@ -55,10 +56,10 @@ from typing import Any
 
 from ezcompanion.config import GeoOrigin, Scenario, VehicleStart, build_dataclass, load_scenario
 from ezcompanion.config_limits import POSITION_LIMIT_M
-from ezcompanion.endpoint import pymavlink_url
 from ezcompanion.errors import ConfigError
 from sitl_stub.mav import key_from_hex, key_from_passphrase
 from sitl_stub.profiles import Profile, ProfileSpec, profile_spec
+from sitl_stub.transport import check_stub_url
 
 __all__ = ["Faults", "StreamRates", "StubConfig", "StubSettings", "load_stub_config", "stub_config"]
 
@@ -176,7 +177,7 @@ class StubSettings:
     def __post_init__(self) -> None:
         if not isinstance(self.profile, str) or self.profile not in {p.value for p in Profile}:
             raise ConfigError("profile", self.profile, "must be copter, plane or px4")
-        object.__setattr__(self, "connect", pymavlink_url(self.connect, field="connect"))
+        object.__setattr__(self, "connect", check_stub_url(self.connect, field="connect"))
         for name in ("system_id", "component_id"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 255:

@@ -5,8 +5,9 @@ companion's wire code (``ezcompanion.wire``): a wrong unit or a wrong frame ther
 made on both sides and cancel out. Everything MAVLink the stub speaks is written here, on
 pymavlink directly: the ``ardupilotmega`` dialect over MAVLink 2 (as ArduPilot and PX4
 speak it), a non-blocking link on a pymavlink URL (``udpout:``, ``udpin:``, ``tcpin:``,
-``tcp:`` or a serial device ``/dev/ttyX,BAUD``), MAVLink 2 signing that verifies before it
-stores a timestamp, and the conversions from the stub's SI state to wire integers.
+``tcp:``, a serial device ``/dev/ttyX,BAUD``, or ``pty``/``pty:PATH``: a pseudo-terminal the
+stub serves as its serial port; :mod:`sitl_stub.transport`), MAVLink 2 signing that verifies
+before it stores a timestamp, and the conversions from the stub's SI state to wire integers.
 """
 
 from __future__ import annotations
@@ -22,7 +23,8 @@ from typing import Any
 
 import pymap3d
 
-from ezcompanion.errors import ConfigError
+from ezcompanion.errors import ConfigError, LinkError
+from sitl_stub.transport import PtyStream, TcpClientStream, is_pty_url
 
 os.environ.setdefault("MAVLINK20", "1")
 os.environ.setdefault("MAVLINK_DIALECT", "ardupilotmega")
@@ -168,21 +170,40 @@ class StubLinkStats:
 
 
 class StubLink:
-    """One MAVLink connection of the stub (one thread owns it); never raises on input."""
+    """One MAVLink connection of the stub (one thread owns it); never raises on input.
+
+    A ``tcp:`` client and a pseudo-terminal are the stub's own streams
+    (:mod:`sitl_stub.transport`) under pymavlink's plain parser; :attr:`serial_device` is
+    the pseudo-terminal's device for the companion to open.
+    """
 
     def __init__(self, url: str, *, system_id: int, component_id: int) -> None:
         options: dict[str, Any] = {}
+        self._stream: TcpClientStream | PtyStream | None = None
+        given = url
         if url.startswith("/") or url.upper().startswith("COM"):
             url, _, baud = url.partition(",")
             options["baud"] = int(baud) if baud.isdigit() else _DEFAULT_BAUD
         try:
-            self._conn: Any = mavutil.mavlink_connection(
-                url, source_system=system_id, source_component=component_id,
-                dialect="ardupilotmega", autoreconnect=False, **options)
-        except (OSError, ValueError, ImportError) as exc:
-            raise ConfigError("connect", url, f"cannot be opened: {exc}") from exc
+            if is_pty_url(url) or url.startswith("tcp:"):
+                self._conn: Any = mavutil.mavfile(
+                    None, url, source_system=system_id, source_component=component_id)
+                if url.startswith("tcp:"):
+                    host, _, port = url[len("tcp:"):].rpartition(":")
+                    self._stream = TcpClientStream((host, int(port)), url=url)
+                else:
+                    self._stream = PtyStream(url[len("pty:"):])
+            else:
+                self._conn = mavutil.mavlink_connection(
+                    url, source_system=system_id, source_component=component_id,
+                    dialect="ardupilotmega", autoreconnect=False, **options)
+        except (ValueError, ImportError) as exc:
+            raise ConfigError("connect", given, f"cannot be opened: {exc}") from exc
+        except OSError as exc:
+            raise LinkError("connect", given, f"cannot be opened: {exc}") from exc
         self._conn.mav.robust_parsing = True
         self._udp = isinstance(self._conn, mavutil.mavudp)
+        self._connections = getattr(self._stream, "connections", 0)
         self._messages = 0
         self._bad = 0
 
@@ -198,8 +219,15 @@ class StubLink:
                              int(signing.badsig_count))
 
     @property
+    def serial_device(self) -> str | None:
+        """The pseudo-terminal's device (``pty`` links), for the companion to open."""
+        return self._stream.device if isinstance(self._stream, PtyStream) else None
+
+    @property
     def local_address(self) -> tuple[str, int] | None:
         """Where the socket is bound (after ``udpin:127.0.0.1:0``)."""
+        if self._stream is not None:
+            return self._stream.local_address
         sock: Any = getattr(self._conn, "listen", None) or getattr(self._conn, "port", None)
         try:
             host, port = sock.getsockname()[:2]
@@ -208,10 +236,15 @@ class StubLink:
         return str(host), int(port)
 
     def fileno(self) -> int:
+        if self._stream is not None:
+            return self._stream.fileno()
         return int(self._conn.fd)
 
     def close(self) -> None:
-        self._conn.close()
+        if self._stream is not None:
+            self._stream.close()
+        else:
+            self._conn.close()
 
     def enable_signing(self, key: bytes) -> None:
         """Sign every frame sent; drop unsigned or badly signed input."""
@@ -221,6 +254,8 @@ class StubLink:
         parser.check_signature = lambda buf, s, c: _verify_then_store(parser, buf, s, c)
 
     def wait_readable(self, timeout_s: float, *extra_fds: int) -> list[int]:
+        if self._stream is not None:
+            self._stream.poll()  # a tcp: client that is down tries its server when due
         readable, _, _ = select.select([self.fileno(), *extra_fds], [], [], max(timeout_s, 0.0))
         return list(readable)
 
@@ -236,6 +271,13 @@ class StubLink:
 
     def _read(self) -> bytes | None:
         conn = self._conn
+        if self._stream is not None:
+            data = self._stream.read()
+            connections = getattr(self._stream, "connections", 0)
+            if connections != self._connections:  # a new connection: a fresh stream
+                self._connections = connections
+                self._drop_partial(count=False)
+            return data
         try:
             if self._udp:
                 data, source = conn.port.recvfrom(65535)
@@ -290,6 +332,8 @@ class StubLink:
         return buf
 
     def write(self, buf: bytes) -> bool:
+        if self._stream is not None:
+            return self._stream.write(buf)
         try:
             self._conn.write(buf)
         except OSError:

@@ -159,6 +159,11 @@ class SitlStub:
         return self._link.local_address if self._link is not None else None
 
     @property
+    def serial_device(self) -> str | None:
+        """The pseudo-terminal the stub serves (``connect: pty``), for the companion."""
+        return self._link.serial_device if self._link is not None else None
+
+    @property
     def mode_name(self) -> str:
         """The current flight mode's name."""
         assert self.autopilot is not None

@@ -29,6 +29,7 @@ engagement with a ``vehicle_refused`` event instead of guiding on a clock that i
 from __future__ import annotations
 
 import ipaddress
+import os
 
 from ezcompanion.errors import ConfigError
 from ezcompanion.service.clock import LockstepClock
@@ -48,7 +49,11 @@ _OVERRUN_S = 0.5
 
 
 def check_loopback_url(url: str) -> None:
-    """Refuse lockstep on anything but a loopback UDP or TCP address (ConfigError)."""
+    """Refuse lockstep on anything but a loopback UDP or TCP address, or a pseudo-terminal
+    (a program on this machine, as ``sitl-stub --connect pty``, never a flight controller's
+    port) (ConfigError)."""
+    if url.startswith("/") and os.path.realpath(url.partition(",")[0]).startswith("/dev/pts/"):
+        return
     scheme, _, rest = url.partition(":")
     host = rest.rsplit(":", 1)[0].strip("/[]") if ":" in rest else ""
     loopback = host == "localhost"

@@ -133,6 +133,11 @@ class VehicleSession(StreamRequests):
         return kind
 
     @property
+    def link_down_reason(self) -> str | None:
+        """Why the link is down (a tcp: client waiting for its server), or None."""
+        return self._link.down_reason
+
+    @property
     def in_guided(self) -> bool:
         """The vehicle reports the mode in which it follows a companion."""
         return self.guided_mode is not None and self.mode == self.guided_mode[0]

@@ -1,26 +1,21 @@
 """One MAVLink connection: non-blocking receive with the sender's address, a locked peer,
-signing, and a tcp: client that reconnects like MAVProxy."""
+signing, and a tcp: client and a serial port that wait for their peer and come back to it
+like MAVProxy (:mod:`ezcompanion.wire.streams`)."""
 
 from __future__ import annotations
 
-import contextlib
-import math
-import os
 import select
-import socket
 import time
 from dataclasses import dataclass
 from typing import Any
 
-from ezcompanion.errors import ConfigError
+from ezcompanion.errors import ConfigError, LinkError
 from ezcompanion.wire.dialect import Address, Message, mavlink, mavutil
 from ezcompanion.wire.signing import SIGNING_EPOCH_S, check_signature_first
+from ezcompanion.wire.streams import SerialPort, Stream, TcpClient
 
 URL_SCHEMES = ("udpin", "udpout", "udp", "tcpin", "tcp")
 _DEFAULT_BAUD = 57600
-_TCP_KINDS = ("tcpin", "tcp")
-_TCP_RECONNECT_S = 1.0  # a tcp: client tries its server again this often (MAVProxy: 1 s)
-_TCP_CONNECT_TIMEOUT_S = 0.2
 
 
 def is_serial_device(url: str) -> bool:
@@ -64,6 +59,12 @@ class Link:
     Not thread-safe: one thread owns a link. ``mav`` is pymavlink's encoder (its
     ``*_encode`` methods build messages); :meth:`pack` turns a message into bytes with this
     link's sequence number and signature, :meth:`write` sends bytes, :meth:`send` does both.
+
+    A ``tcp:`` client opens even when nothing listens yet: it tries again every second
+    (:mod:`ezcompanion.wire.streams`), as it does after its server went away; a serial port
+    that goes away is opened again each second from the same path. :attr:`connected` and
+    :attr:`down_reason` say where they stand. An endpoint that cannot be opened at all (a
+    port taken, a missing serial device) is a :class:`LinkError`.
     """
 
     def __init__(self, url: str, *, system_id: int, component_id: int) -> None:
@@ -72,14 +73,14 @@ class Link:
                 raise ConfigError(name, value, "must be within [1, 255]")
         self.url = url
         scheme = url.split(":", 1)[0]
-        self._tcp = scheme in _TCP_KINDS
-        options: dict[str, Any] = {}
+        self._tcpin = scheme == "tcpin"
+        device, baud_rate = "", 0
         if is_serial_device(url):
             # a serial device, as MAVProxy writes it: /dev/ttyACM0,57600 (or COM3,115200)
-            url, _, baud = url.partition(",")
+            device, _, baud = url.partition(",")
             if baud and not (baud.isdigit() and int(baud) > 0):
                 raise ConfigError("connect", self.url, "the baud rate after ',' must be a number")
-            options["baud"] = int(baud) if baud else _DEFAULT_BAUD
+            baud_rate = int(baud) if baud else _DEFAULT_BAUD
         elif scheme not in URL_SCHEMES or url.count(":") != 2:
             raise ConfigError(
                 "connect",
@@ -87,46 +88,59 @@ class Link:
                 f"must be SCHEME:HOST:PORT with SCHEME one of {', '.join(URL_SCHEMES)}, "
                 "or a serial device such as /dev/ttyACM0,57600",
             )
+        # a tcp: client and a serial port own their socket or port (pymavlink's tcp: gives
+        # up when nothing listens and takes an idle socket for a closed one; its serial
+        # port stays readable for ever once unplugged); pymavlink's plain mavfile holds
+        # their parser, encoder and signing
+        self._stream: Stream | None = None
         try:
-            self._conn: Any = mavutil.mavlink_connection(
-                url,
-                source_system=system_id,
-                source_component=component_id,
-                dialect="ardupilotmega",
-                autoreconnect=False,
-                **options,
-            )
-        except (OSError, ValueError, ImportError) as exc:
+            if scheme == "tcp" or device:
+                self._conn: Any = mavutil.mavfile(
+                    None, url, source_system=system_id, source_component=component_id
+                )
+            if device:
+                self._stream = SerialPort(device, baud_rate, url=url)
+            elif scheme == "tcp":
+                host, _, port = url[len("tcp:") :].rpartition(":")
+                if not port.isdigit():
+                    raise ValueError(f"the port must be a number, not {port!r}")
+                self._stream = TcpClient((host, int(port)), url=url)
+            else:
+                self._conn = mavutil.mavlink_connection(
+                    url,
+                    source_system=system_id,
+                    source_component=component_id,
+                    dialect="ardupilotmega",
+                    autoreconnect=False,
+                )
+        except (ValueError, ImportError) as exc:
             raise ConfigError("connect", self.url, f"cannot be opened: {exc}") from exc
+        except OSError as exc:  # the port is taken, the device is missing or not ours
+            raise LinkError("connect", self.url, f"cannot be opened: {exc}") from exc
         self._conn.mav.robust_parsing = True
         self._udp = isinstance(self._conn, mavutil.mavudp)
-        # a tcp: client reads its socket itself and reconnects like MAVProxy (pymavlink's
-        # recv returns b"" both for "nothing yet" and for a closed socket)
-        self._tcp_client = isinstance(self._conn, mavutil.mavtcp)
-        self._tcp_address: tuple[str, int] | None = (
-            getattr(self._conn, "destination_addr", None) if self._tcp_client else None
-        )
-        self._reconnect_at_s = math.inf
-        self._idle_r, self._idle_w = os.pipe() if self._tcp_client else (-1, -1)
+        self._connections = self._stream.connections if self._stream is not None else 0
         self._peer: tuple[str, int] | None = None
         self._messages = 0
         self._bad = 0
 
     # lifecycle
     def close(self) -> None:
-        """Close the socket(s)."""
-        if self._tcp_client and self._conn.port is None:
-            self._conn.port = socket.socket()  # pymavlink's close() expects one
-        self._conn.close()
-        for fd in (self._idle_r, self._idle_w):
-            if fd >= 0:
-                os.close(fd)
-        self._idle_r = self._idle_w = -1
+        """Close the socket(s) or the device."""
+        if self._stream is not None:
+            self._stream.close()
+        else:
+            self._conn.close()
 
     @property
     def connected(self) -> bool:
-        """False while a tcp: client waits to reconnect; True otherwise."""
-        return not (self._tcp_client and self._conn.port is None)
+        """False while a tcp: client or a serial port waits for its peer; True otherwise."""
+        return self._stream is None or self._stream.connected
+
+    @property
+    def down_reason(self) -> str | None:
+        """Why a tcp: client or a serial port is down (None when up, and for the others)."""
+        return self._stream.down_reason if self._stream is not None else None
 
     def __enter__(self) -> Link:
         return self
@@ -150,7 +164,12 @@ class Link:
     @property
     def local_address(self) -> tuple[str, int] | None:
         """Host and port this link's socket is bound to (useful after ``udpin:HOST:0``)."""
-        sock = getattr(self._conn, "listen", None) or getattr(self._conn, "port", None)
+        if isinstance(self._stream, SerialPort):
+            return None
+        if isinstance(self._stream, TcpClient):
+            sock: Any = self._stream.socket
+        else:
+            sock = getattr(self._conn, "listen", None) or getattr(self._conn, "port", None)
         if sock is None:
             return None
         try:
@@ -162,9 +181,8 @@ class Link:
     def fileno(self) -> int:
         """The descriptor to wait on (for ``tcpin`` it changes once a client connects; a
         disconnected tcp: client waits on a pipe that never becomes readable)."""
-        if self._tcp_client:
-            port = self._conn.port
-            return int(port.fileno()) if port is not None else self._idle_r
+        if self._stream is not None:
+            return self._stream.fileno()
         return int(self._conn.fd)
 
     # signing
@@ -193,7 +211,10 @@ class Link:
 
     # receive
     def wait_readable(self, timeout_s: float, *extra_fds: int) -> list[int]:
-        """Wait until this link (or one of ``extra_fds``) is readable; the readable fds."""
+        """Wait until this link (or one of ``extra_fds``) is readable; the readable fds. A
+        tcp: client or serial port that is down waits no longer than its next attempt."""
+        if self._stream is not None:
+            timeout_s = min(timeout_s, self._stream.retry_in_s())
         fds = [self.fileno(), *extra_fds]
         readable, _, _ = select.select(fds, [], [], max(timeout_s, 0.0))
         return list(readable)
@@ -229,45 +250,17 @@ class Link:
         """The locked peer, if any."""
         return self._peer
 
-    def _read_tcp_client(self) -> tuple[bytes, Address] | None:
-        conn = self._conn
-        if conn.port is None:
-            if time.monotonic() >= self._reconnect_at_s:
-                self._reconnect()
-            return None
-        try:
-            data = conn.port.recv(4096)
-        except (BlockingIOError, InterruptedError):
-            return None  # nothing waiting: an idle socket is not a closed one
-        except OSError:
-            data = b""
-        if not data:  # closed or reset by the peer: reconnect in a second
-            with contextlib.suppress(OSError):
-                conn.port.close()
-            conn.port = None
-            self._reconnect_at_s = time.monotonic() + _TCP_RECONNECT_S
-            return None
-        return bytes(data), None
-
-    def _reconnect(self) -> None:
-        """One short, non-blocking-enough attempt to reach the tcp: server again."""
-        assert self._tcp_address is not None
-        try:
-            sock = socket.create_connection(self._tcp_address, timeout=_TCP_CONNECT_TIMEOUT_S)
-        except OSError:
-            self._reconnect_at_s = time.monotonic() + _TCP_RECONNECT_S
-            return
-        sock.setblocking(False)
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self._conn.port = sock
-        self._conn.fd = sock.fileno()
-        self._reset_parser(count_partial=False)
-        self._reconnect_at_s = math.inf
+    def _read_stream(self, stream: Stream) -> tuple[bytes, Address] | None:
+        data = stream.recv()
+        if stream.connections != self._connections:  # connected again: a fresh byte stream
+            self._connections = stream.connections
+            self._reset_parser(count_partial=False)
+        return (data, None) if data else None
 
     def _read_chunk(self) -> tuple[bytes, Address] | None:
         conn = self._conn
-        if self._tcp_client:
-            return self._read_tcp_client()
+        if self._stream is not None:
+            return self._read_stream(self._stream)
         if self._udp:
             try:
                 data, source = conn.port.recvfrom(65535)
@@ -289,7 +282,7 @@ class Link:
             data = conn.recv(4096)
         except OSError:
             return None
-        if isinstance(data, bytes) and not data and self._tcp and conn.port is not None:
+        if isinstance(data, bytes) and not data and self._tcpin and conn.port is not None:
             # orderly close by the peer: go back to waiting for a connection
             conn.port.close()
             conn.port = None
@@ -344,10 +337,10 @@ class Link:
         try:
             if self._udp and self._peer is not None:
                 self._conn.port.sendto(buf, self._peer)
-            elif self._tcp_client:
-                if self._conn.port is None:
-                    return False
-                self._conn.port.send(buf)
+            elif self._stream is not None:
+                return self._stream.send(buf)
+            elif self._tcpin and self._conn.port is None:
+                return False  # no client connected: nothing leaves
             else:
                 self._conn.write(buf)
         except OSError:

@@ -76,6 +76,27 @@ def test_a_jump_stays_refused_however_long_it_lasts(
     assert t.update(local(2000 + 20 * after, north + DT_S, east, 1.0, 0.0), 9.0)
 
 
+def test_after_a_lost_link_the_vehicle_is_judged_afresh() -> None:
+    """A vehicle that comes back after a lost link (restarted: its clock from zero, its
+    velocity whatever it is now) is not judged against the track before the loss: the
+    same samples are refused without the reset and taken with it."""
+    for forget in (False, True):
+        t = known_origin()
+        _, (north, east, _course) = fly_track(t, [0.0] * 50)
+        if forget:
+            t.forget_motion()
+        back = local(500, north + 4.0, east - 2.0, 0.0, -1.0)  # earlier clock, new velocity
+        taken = t.update(back, 9.0)
+        assert (taken == "LOCAL_POSITION_NED") is forget
+        state = t.snapshot(0.25, now_s=9.05)
+        assert state is not None and t.origin_known  # the frame stays
+        if forget:  # the new position, and no attitude until one arrives after the loss
+            assert state.north_m == pytest.approx(north + 4.0)
+            assert state.attitude_time_s == -math.inf
+        else:
+            assert state.north_m == pytest.approx(north - DT_S)
+
+
 def test_local_and_global_are_cross_checked() -> None:
     o = known_origin().origin
     for east, taken in ((5.2, True), (7.0, False)):  # 0.2 m apart is noise; 2 m is not

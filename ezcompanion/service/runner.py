@@ -28,6 +28,7 @@ import contextlib
 import dataclasses
 import math
 import threading
+import time
 from enum import Enum, StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -131,6 +132,7 @@ class CompanionService:
         self._tlog: TlogWriter | None = None
         self._session: VehicleSession | None = None
         self._next_heartbeat_s = 0.0
+        self._beacon_wall_s = 0.0  # lockstep, no vehicle heard: next heartbeat (wall time)
         self.schedule = TickSchedule(self.loop.period_s)
         self._engaged_at_s: float | None = None  # clock time the engagement first started
         self._abandon_said = False
@@ -320,7 +322,7 @@ class CompanionService:
         the answer to the vehicle."""
         if self.phase is Phase.DONE:
             return
-        if now + EPSILON_S >= self._next_heartbeat_s:
+        if now + EPSILON_S >= self._next_heartbeat_s or self._beacon_due():
             self._send_heartbeat(now)
         self.session.periodic(now, waiting=self.phase is Phase.WAITING)
         self._follow_session(now)
@@ -328,6 +330,18 @@ class CompanionService:
         if self._ticking() and self.schedule.is_due(now):
             self._tick(now)
         self._answer_lockstep(now)
+
+    def _beacon_due(self) -> bool:
+        """In lockstep the clock waits for the vehicle's time, so until a vehicle is heard
+        the heartbeat goes out every wall second instead (with ``udpout:`` the vehicle first
+        hears of the companion from one, whenever it starts)."""
+        if not self.clock.lockstep or self.session.connected:
+            return False
+        wall_s = time.monotonic()
+        if wall_s < self._beacon_wall_s:
+            return False
+        self._beacon_wall_s = wall_s + _HEARTBEAT_PERIOD_S
+        return True
 
     def _due_s(self, now: float) -> float:
         """Clock time of the next thing due (heartbeat, tick, the session's checks)."""

@@ -436,6 +436,7 @@ class VehicleSession(StreamRequests):
             self.address, self.locked = None, False
             self._link.lock_peer(None)
             self._discovery_until_s = None
+            self.telemetry.forget_motion()
 
 
 def _address(address: Address) -> str:

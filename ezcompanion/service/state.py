@@ -185,6 +185,15 @@ class TelemetryState:
         refusal, self._refusal = self._refusal, None
         return refusal
 
+    def forget_motion(self) -> None:
+        """After a lost link: what the vehicle did meanwhile is unknown, so its position,
+        velocity and attitude start afresh (judged from the next samples on, as at the
+        start; a restarted vehicle's clock may have gone back). The origin and its latch
+        stay: a vehicle that comes back in another frame is still refused."""
+        self._tracks.clear()
+        self._attitude_s = self._attitude_boot_s = -math.inf
+        self._refusal = None
+
     def latch_origin(self) -> None:
         """Fix the frame for the engagement: a different origin from now on is refused."""
         self._latched = True

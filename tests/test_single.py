@@ -20,8 +20,11 @@ from ezcompanion.guidance import (
     KinematicState,
     LawName,
     Target,
+    _jit,
 )
+from ezcompanion.guidance._jit import JIT_ENABLED, cache_dir, kernel_fingerprint
 from ezcompanion.guidance.backup import BACKUP_NONE
+from ezcompanion.guidance.single import step_one
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
 SCENARIO = load_scenario(CONFIG / "paper_scenario1.yaml")
@@ -185,3 +188,28 @@ def test_unshielded_laws_report_no_backup() -> None:
                           course_rate_rad_s=0.3)  # fmt: skip
         assert int(step.backup) == BACKUP_NONE
         assert math.isnan(float(step.shield_weight)) and math.isnan(float(step.certificate_m))
+
+
+def test_the_kernel_cache_is_named_by_every_kernel_source(tmp_path: Path) -> None:
+    """numba invalidates a cached kernel only when its own file changes; the one-vehicle
+    step carries the shield's code from backup.py, so the cache directory is named by a
+    digest of every source of the package: any edit there compiles afresh."""
+    for name, text in (("law.py", "a = 1\n"), ("backup.py", "b = 2\n")):
+        (tmp_path / name).write_text(text)
+    before = kernel_fingerprint(tmp_path.glob("*.py"))
+    assert kernel_fingerprint(tmp_path.glob("*.py")) == before
+    (tmp_path / "backup.py").write_text("b = 3\n")
+    changed = kernel_fingerprint(tmp_path.glob("*.py"))
+    assert changed != before
+    (tmp_path / "backup.py").write_text("b = 2\n")
+    assert kernel_fingerprint(tmp_path.glob("*.py")) == before
+    if not JIT_ENABLED:
+        return
+    from numba.core import config
+
+    package = Path(_jit.__file__).parent
+    here = kernel_fingerprint(package.glob("*.py"))
+    assert config.CACHE_DIR.endswith(f"numba-{here}")
+    assert cache_dir("/elsewhere") == f"/elsewhere/numba-{here}"
+    cache_path = step_one._cache._impl.locator.get_cache_path()  # type: ignore[attr-defined]
+    assert cache_path.startswith(config.CACHE_DIR)

@@ -14,9 +14,10 @@ ratio to the robust law's (issue targets: backup <= 100 us at 3 zones, <= 1 ms a
 <= 5x robust).
 
 Last, each law's tick as the service calls it (``GuidanceLoop.tick``, 3 and 300 zones,
-each tick timed, median and p99) beside its compiled parts timed alone on the same inputs
-in the same run: the one-vehicle kernel the tick calls, and the batch path's kernels (law,
-actuator, shield) summed (``--service``: only that).
+each tick timed, median and p99), the same tick through the batch kernels as it ran before
+``guidance.single`` (timed in turn with it), and its compiled parts timed alone on the same
+inputs in the same run: the one-vehicle kernel the tick calls, and the batch path's kernels
+(law, actuator, shield) summed (``--service``: only that).
 
     python bench/bench_law.py [--repeat N] [--service]
 """
@@ -36,6 +37,7 @@ from ezcompanion.config import load_scenario
 from ezcompanion.guidance import (
     Defender,
     GuidanceController,
+    GuidanceStep,
     KinematicState,
     LawName,
     Target,
@@ -177,8 +179,8 @@ def service_tick(repeat: int) -> None:
     scenario = load_scenario(CONFIG / "paper_scenario1.yaml")
     print(
         f"{'the law as the service calls it':28s} {'tick p50':>9s} {'p99':>8s} "
-        f"{'kernel':>8s} {'p99':>8s} {'parts':>8s} {'p99':>8s} {'tick/kernel':>11s} "
-        f"{'tick/parts':>10s}"
+        f"{'batch path':>9s} {'p99':>8s} {'kernel':>9s} {'p99':>8s} {'parts':>9s} {'p99':>8s} "
+        f"{'tick/kernel':>11s} {'tick/parts':>10s}"
     )
     print("  (targets: paper, robust <= 20 us at 3 zones, <= 200 us at 300; backup <= 100 us "
           "at 3 zones, <= 1 ms at 30, <= 5x robust)")  # fmt: skip
@@ -202,16 +204,21 @@ def service_tick(repeat: int) -> None:
             loop.controller = GuidanceController(
                 zones=zones, target=target, params=scenario.guidance, law=law
             )
+            before = GuidanceLoop(scenario, law=law, loop_rate_hz=50.0, stale_after_s=1.0)
+            before.controller = _BatchPath(
+                zones=zones, target=target, params=scenario.guidance, law=law
+            )
             inputs = _record(loop, states)
-            tick = _timed_ticks(loop, states, passes)
+            _record(before, states)
+            tick, batch = _timed_ticks((loop, before), states, passes)
             kernel, parts = _timed_parts(loop.controller, inputs, passes)
             ticks[(count, law)] = float(np.median(tick))
             vs = ""
             if law is LawName.BACKUP:
                 vs = f"   backup / robust {ticks[count, law] / ticks[count, LawName.ROBUST]:.1f}x"
             print(
-                f"{f'{count} zones, {law.value}':28s} {_us(tick)} {_us(kernel)} {_us(parts)} "
-                f"{np.median(tick) / np.median(kernel):10.2f}x "
+                f"{f'{count} zones, {law.value}':28s} {_us(tick)} {_us(batch)} {_us(kernel)} "
+                f"{_us(parts)} {np.median(tick) / np.median(kernel):10.2f}x "
                 f"{np.median(tick) / np.median(parts):9.2f}x{vs}"
             )
 
@@ -242,18 +249,34 @@ def _record(loop: GuidanceLoop, states: list[VehicleState]) -> list[_Inputs]:
     return inputs
 
 
-def _timed_ticks(loop: GuidanceLoop, states: list[VehicleState], passes: int) -> list[float]:
-    times = []
+class _BatchPath(GuidanceController):
+    """The service's step through the batch kernels, as it ran before the one-vehicle
+    kernel (``guidance.single``): for the comparison in the same run."""
+
+    def step_one(
+        self, *, north_m: float, east_m: float, course_rad: float, speed_m_s: float,
+        dt_s: float, course_rate_rad_s: float | None = None,
+    ) -> GuidanceStep:  # fmt: skip
+        state = KinematicState(north_m, east_m, course_rad, speed_m_s, course_rate_rad_s)
+        return self._step_batch(state, dt_s)
+
+
+def _timed_ticks(
+    loops: tuple[GuidanceLoop, ...], states: list[VehicleState], passes: int
+) -> list[list[float]]:
+    """Each tick of each loop timed, the loops' passes taken in turn (the first untimed)."""
+    times: list[list[float]] = [[] for _ in loops]
     clock = time.perf_counter
-    for index in range(passes + 1):  # a first pass untimed, to warm the caches
-        if index == 1:
-            times.clear()
-        loop.reset()
-        for k, state in enumerate(states):
-            now = 0.02 * k
-            start = clock()
-            loop.tick(state, now)
-            times.append(clock() - start)
+    for index in range(passes + 1):
+        for loop, kept in zip(loops, times, strict=True):
+            if index == 1:
+                kept.clear()
+            loop.reset()
+            for k, state in enumerate(states):
+                now = 0.02 * k
+                start = clock()
+                loop.tick(state, now)
+                kept.append(clock() - start)
     return times
 
 

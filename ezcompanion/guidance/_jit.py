@@ -70,7 +70,7 @@ if JIT_ENABLED:
     from numba import config as _numba_config
     from numba import get_num_threads, njit, prange
 
-    _numba_config.CACHE_DIR = cache_dir(os.environ.get("NUMBA_CACHE_DIR", ""))
+    _numba_config.CACHE_DIR = cache_dir(os.environ.get("NUMBA_CACHE_DIR", ""))  # type: ignore[attr-defined]
 else:
     prange = range  # type: ignore[misc]  # a plain loop when nothing is compiled
 

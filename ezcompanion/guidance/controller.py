@@ -44,7 +44,14 @@ from ezcompanion.guidance.law import (
     run_kernel,
 )
 from ezcompanion.guidance.params import GuidanceParams, LawName, Target
-from ezcompanion.guidance.single import MODE_PURE, pack_single, stack_zones, step_one
+from ezcompanion.guidance.single import (
+    MODE_PURE,
+    check_state,
+    checked_rate,
+    pack_single,
+    stack_zones,
+    step_one,
+)
 from ezcompanion.guidance.zones import ZoneSet
 
 __all__ = ["GuidanceController", "GuidanceMode", "GuidanceStep", "KinematicState"]
@@ -195,6 +202,11 @@ class GuidanceController:
                 north_m=north, east_m=east, course_rad=course, speed_m_s=speed, dt_s=dt_s,
                 course_rate_rad_s=state.course_rate_rad_s,  # type: ignore[arg-type]
             )  # fmt: skip
+        return self._step_batch(state, dt_s)
+
+    def _step_batch(self, state: KinematicState, dt_s: float) -> GuidanceStep:
+        """``step`` through the batch kernels (the law, the actuator, the shield), for any
+        shape, one vehicle included."""
         rows = self._state_rows(state)
         out, out_zone = self._run_law(rows)
         accel = self._accel
@@ -240,14 +252,14 @@ class GuidanceController:
         if type(north_m) is type(east_m) is type(course_rad) is type(speed_m_s) is float:
             # a sum of finite numbers is finite, or overflowed: then the field is checked
             if not (math.isfinite(north_m + east_m + course_rad + speed_m_s) and speed_m_s > 0.0):
-                _check((north_m, east_m, course_rad, speed_m_s))
+                check_state((north_m, east_m, course_rad, speed_m_s))
         else:
             north_m, east_m, course_rad, speed_m_s = _numbers(
                 KinematicState(north_m, east_m, course_rad, speed_m_s)
             )
         rate_1_s = math.nan  # none: the model's own flown acceleration
         if self._shielded and course_rate_rad_s is not None:
-            rate_1_s = _finite_rate(course_rate_rad_s)
+            rate_1_s = checked_rate(course_rate_rad_s)
         zones = self._single_zones
         if zones is None:
             zones = self._single_zones = stack_zones(self.zones)
@@ -379,32 +391,8 @@ def _numbers(state: KinematicState) -> tuple[float, float, float, float]:
                 raise StateError(name, value, f"must fit the batch: {exc}") from None
         values.append(value)
     north, east, course, speed = values
-    _check((north, east, course, speed))
+    check_state((north, east, course, speed))
     return north, east, course, speed
-
-
-def _check(values: tuple[float, float, float, float]) -> None:
-    """A ``StateError`` for the first of four numbers that is not finite, or the speed if
-    it is not > 0."""
-    for name, value in zip(_STATE_FIELDS, values, strict=True):
-        if not math.isfinite(value):
-            raise StateError(name, value, "must be finite")
-    if not values[3] > 0.0:
-        raise StateError("speed_m_s", values[3], "must be > 0")
-
-
-def _finite_rate(rate: float | FloatArray) -> float:
-    """The measured course rate as a finite number, or a ``StateError``."""
-    if type(rate) is float:
-        value = rate
-    else:
-        try:
-            value = float(np.asarray(rate, dtype=np.float64).reshape(()))
-        except (TypeError, ValueError):
-            raise StateError("course_rate_rad_s", rate, "must be a number") from None
-    if not math.isfinite(value):
-        raise StateError("course_rate_rad_s", rate, "must be finite")
-    return value
 
 
 # GuidanceStep's backup, shield_weight, certificate_m and certificate_ahead_m

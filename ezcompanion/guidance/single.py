@@ -9,7 +9,8 @@ and the actuator (as ``controller._advance_batch``), and for the backup law the 
 (``backup.shield_one``) and the mode from the safety share of what is flown.
 
 Its results equal the batch path's for the same vehicle, to round-off
-(tests/test_single.py compares them on random states for every law).
+(tests/test_single.py compares them on random states for every law). ``check_state`` and
+``checked_rate`` are the checks its Python caller makes first, on plain numbers.
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ from ezcompanion.guidance.law import (
 )
 from ezcompanion.guidance.zones import ZoneSet
 
-__all__ = ["MODE_PURE", "pack_single", "stack_zones", "step_one"]
+__all__ = ["MODE_PURE", "check_state", "checked_rate", "pack_single", "stack_zones", "step_one"]
 
 FloatArray = npt.NDArray[np.float64]
 Int8Array = npt.NDArray[np.int8]
@@ -60,6 +61,30 @@ def _mode_of(share: float) -> int:
     if share <= MODE_PURE:
         return _INTERCEPT
     return _BLEND
+
+
+def check_state(values: tuple[float, float, float, float]) -> None:
+    """A ``StateError`` for the first of four numbers that is not finite, or the speed if
+    it is not > 0."""
+    for name, value in zip(("north_m", "east_m", "course_rad", "speed_m_s"), values, strict=True):
+        if not math.isfinite(value):
+            raise StateError(name, value, "must be finite")
+    if not values[3] > 0.0:
+        raise StateError("speed_m_s", values[3], "must be > 0")
+
+
+def checked_rate(rate: float | FloatArray) -> float:
+    """The measured course rate as a finite number, or a ``StateError``."""
+    if type(rate) is float:
+        value = rate
+    else:
+        try:
+            value = float(np.asarray(rate, dtype=np.float64).reshape(()))
+        except (TypeError, ValueError):
+            raise StateError("course_rate_rad_s", rate, "must be a number") from None
+    if not math.isfinite(value):
+        raise StateError("course_rate_rad_s", rate, "must be finite")
+    return value
 
 
 def pack_single(

@@ -267,7 +267,6 @@ from ezcompanion.service.runner import CompanionService
 imported = time.perf_counter()
 from ezcompanion.service.loop import GuidanceLoop
 loop = GuidanceLoop(load_scenario({config!r}), loop_rate_hz=50.0, stale_after_s=1.0)
-loop.wait_ready()
 ready = time.perf_counter()
 print(imported - started, ready - imported)
 """
@@ -275,8 +274,8 @@ print(imported - started, ready - imported)
 
 def startup(runs: int, rate_hz: float) -> None:
     """Launch to first setpoint of the service (telemetry off), ``runs`` times, with where
-    the time goes: the imports and the law's load from numba's cache, timed in their own
-    process (the kernel is loaded on a thread beside the link's start; this times it alone)."""
+    the time goes: the imports and the law's load from numba's cache (``GuidanceLoop``
+    runs the law once when made), timed in their own process."""
     print(f"start-up, {runs} launches (numba's cache warm: one launch first, untimed)")
     first = []
     for index in range(runs + 1):

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import threading
 
 from ezcompanion.config import Scenario
 from ezcompanion.guidance import GuidanceController, KinematicState, LawName
@@ -50,17 +49,15 @@ class GuidanceLoop:
         self.miss_distance_m = math.inf
         self._last_tick_s: float | None = None
         self._assumed: dict[str, float] = {}  # guidance fields found from the vehicle
-        # Run the law once now, on a controller of its own and on a thread: compiled, this
-        # loads its kernel from numba's disk cache (or compiles it on a first run) beside the
-        # link's start and the vehicle's handshake. The first tick waits for it.
-        self._warm_up: _WarmUp | None = _WarmUp(self.controller)
-
-    def wait_ready(self) -> None:
-        """Wait until the law's kernel is loaded (re-raising what loading it raised)."""
-        warm_up = self._warm_up
-        if warm_up is not None:
-            warm_up.wait()
-            self._warm_up = None
+        # Run the law once now: compiled, this loads it from numba's disk cache (or compiles
+        # it on a first run), which must not happen on the first tick and stall the link.
+        start = scenario.start
+        self.controller.reset()
+        self.controller.step(
+            KinematicState(start.north_m, start.east_m, start.course_rad, start.speed_m_s),
+            self.period_s,
+        )
+        self.controller.reset()
 
     def assume_response_lag(self, lag_s: float) -> None:
         """Give the law the vehicle's response lag ``lag_s`` (its autopilot's measured
@@ -130,8 +127,6 @@ class GuidanceLoop:
 
     def tick(self, state: VehicleState | None, now_s: float) -> TickCommand | Hold:
         """One law step on ``state`` at clock time ``now_s``."""
-        if self._warm_up is not None:
-            self.wait_ready()
         if self.captured:
             return Hold.CAPTURED
         if state is None:
@@ -162,28 +157,3 @@ class GuidanceLoop:
             accel_lat_m_s2=float(step.accel_lat_cmd_m_s2),
             step=step,
         )
-
-
-class _WarmUp:
-    """One step of a copy of ``controller`` (same zones, target, law) on a daemon thread."""
-
-    def __init__(self, controller: GuidanceController) -> None:
-        self._copy = GuidanceController(
-            zones=controller.zones, target=controller.targets, params=controller.params,
-            law=controller.law,
-        )  # fmt: skip
-        self._error: BaseException | None = None
-        self._thread = threading.Thread(target=self._run, name="law-warm-up", daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        try:
-            self._copy.reset()
-            self._copy.step(KinematicState(0.0, 0.0, 0.0, 1.0), 0.02)
-        except BaseException as exc:  # handed to the tick that waits
-            self._error = exc
-
-    def wait(self) -> None:
-        self._thread.join()
-        if self._error is not None:
-            raise self._error

@@ -13,8 +13,11 @@ work depends on where the vehicle is: median and 99th percentile, with the backu
 ratio to the robust law's (issue targets: backup <= 100 us at 3 zones, <= 1 ms at 30, and
 <= 5x robust).
 
-Last, each law's tick as the service calls it (``GuidanceLoop.tick``, 3 and 300 zones)
-beside the sum of its compiled parts timed alone in the same run (``--service``: only that).
+Last, each law's tick as the service calls it (``GuidanceLoop.tick``, 3 and 300 zones,
+each tick timed, median and p99), the same tick through the batch kernels as it ran before
+``guidance.single`` (timed in turn with it), and its compiled parts timed alone on the same
+inputs in the same run: the one-vehicle kernel the tick calls, and the batch path's kernels
+(law, actuator, shield) summed (``--service``: only that).
 
     python bench/bench_law.py [--repeat N] [--service]
 """
@@ -22,6 +25,7 @@ beside the sum of its compiled parts timed alone in the same run (``--service``:
 from __future__ import annotations
 
 import argparse
+import math
 import time
 from pathlib import Path
 from typing import Any
@@ -33,12 +37,18 @@ from ezcompanion.config import load_scenario
 from ezcompanion.guidance import (
     Defender,
     GuidanceController,
+    GuidanceStep,
     KinematicState,
     LawName,
     Target,
     ZoneSet,
 )
+from ezcompanion.guidance.backup import shield_batch
+from ezcompanion.guidance.controller import _advance_batch
 from ezcompanion.guidance.law import O_AC, O_SIZE, Z_SIZE, evaluate_batch
+from ezcompanion.guidance.single import stack_zones, step_one
+from ezcompanion.records import TickCommand, VehicleState
+from ezcompanion.service.loop import GuidanceLoop
 from ezcompanion.sim.engine import simulate
 
 
@@ -161,82 +171,159 @@ def _laws(
 
 
 def service_tick(repeat: int) -> None:
-    """Each law's step as the service calls it (``GuidanceLoop.tick`` on a measured state),
-    next to the sum of its compiled parts timed alone in the same run: the law's kernel,
-    the actuator update and, for the backup law, the shield."""
-    from ezcompanion.guidance.backup import BACKUP_NONE, shield_batch
-    from ezcompanion.guidance.controller import _advance_batch
-    from ezcompanion.records import VehicleState
-    from ezcompanion.service.loop import GuidanceLoop
-
+    """Each law's step as the service calls it (``GuidanceLoop.tick`` on the measured states
+    of a straight flight), next to its compiled parts timed alone on the same inputs in
+    the same run: the one-vehicle kernel the tick calls (``guidance.single.step_one``), and
+    the batch path's kernels (the law, the actuator and, for the backup law, the shield).
+    Each call timed on its own: median and 99th percentile."""
     scenario = load_scenario(CONFIG / "paper_scenario1.yaml")
     print(
-        f"{'the law as the service calls it':32s} {'tick':>10s} {'parts':>10s} {'ratio':>7s}   "
-        "kernel + actuator + shield (targets: paper, robust <= 20 us at 3 zones, <= 200 at 300)"
+        f"{'the law as the service calls it':28s} {'tick p50':>9s} {'p99':>8s} "
+        f"{'batch path':>9s} {'p99':>8s} {'kernel':>9s} {'p99':>8s} {'parts':>9s} {'p99':>8s} "
+        f"{'tick/kernel':>11s} {'tick/parts':>10s}"
     )
-    steps: dict[tuple[int, LawName], float] = {}
+    print("  (targets: paper, robust <= 20 us at 3 zones, <= 200 us at 300; backup <= 100 us "
+          "at 3 zones, <= 1 ms at 30, <= 5x robust)")  # fmt: skip
+    ticks: dict[tuple[int, LawName], float] = {}
     for count in (3, 300):
         zones = scenario.zones() if count == 3 else zones_ring(count)
         target = Target(north_m=-5000.0, east_m=3000.0)  # far: never captured here
+        size = 250 if count < 300 else 40
+        states = [
+            VehicleState(
+                north_m=8.0 - 0.832 * 0.02 * k, east_m=-4.0 + 0.555 * 0.02 * k, down_m=-20.0,
+                velocity_north_m_s=-0.832, velocity_east_m_s=0.555, yaw_rad=2.55,
+                position_time_s=0.02 * k, attitude_time_s=0.02 * k, position_source="local",
+                course_rate_rad_s=0.0,
+            )
+            for k in range(size)
+        ]  # fmt: skip
+        passes = max(2, repeat if count < 300 else repeat // 3)
         for law in (LawName.PAPER, LawName.ROBUST, LawName.BACKUP):
             loop = GuidanceLoop(scenario, law=law, loop_rate_hz=50.0, stale_after_s=1.0)
             loop.controller = GuidanceController(
                 zones=zones, target=target, params=scenario.guidance, law=law
             )
-            clock = iter(range(10**9))
-
-            def tick(loop: GuidanceLoop = loop, clock: Any = clock) -> None:
-                t = 0.02 * next(clock)
-                loop.tick(
-                    VehicleState(
-                        north_m=8.0 - 0.832 * t, east_m=-4.0 + 0.555 * t, down_m=-20.0,
-                        velocity_north_m_s=-0.832, velocity_east_m_s=0.555, yaw_rad=2.55,
-                        position_time_s=t, attitude_time_s=t, position_source="local",
-                        course_rate_rad_s=0.0,
-                    ),
-                    t,
-                )  # fmt: skip
-
-            number = 1000 if count < 300 else 200
-            ticked = per_call_s(tick, repeat, number)
-            c = loop.controller
-            p = c._packed
-            one = (np.array([8.0]), np.array([-4.0]), np.array([2.55]), np.array([1.0]))
-            accel = np.array([0.1])
-            out = np.empty((1, O_SIZE))
-            out_zone = np.empty((1, Z_SIZE, count))
-            kargs = (
-                p, zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_term,
-                np.array([target.north_m]), np.array([target.east_m]), *one, accel, out,
-                out_zone,
-            )  # fmt: skip
-            kernel = per_call_s(lambda a=kargs: evaluate_batch(*a), repeat, number)
-            a_next = np.empty(1)
-            mode = np.empty(1, dtype=np.int8)
-            actuator = per_call_s(
-                lambda a=(p, out, accel, 0.02, a_next, mode): _advance_batch(*a),
-                repeat,
-                number,
+            before = GuidanceLoop(scenario, law=law, loop_rate_hz=50.0, stale_after_s=1.0)
+            before.controller = _BatchPath(
+                zones=zones, target=target, params=scenario.guidance, law=law
             )
-            shield = 0.0
+            inputs = _record(loop, states)
+            _record(before, states)
+            tick, batch = _timed_ticks((loop, before), states, passes)
+            kernel, parts = _timed_parts(loop.controller, inputs, passes)
+            ticks[(count, law)] = float(np.median(tick))
+            vs = ""
             if law is LawName.BACKUP:
-                held = np.full(1, BACKUP_NONE, dtype=np.int8)
-                sout = np.full((1, 6), np.nan)
-                sargs = (
-                    c._shield, zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m,
-                    *one[:3], accel, accel.copy(), one[3], out[:, O_AC].copy(),
-                    np.ones(1, dtype=np.bool_), 0.02, held, sout,
-                )  # fmt: skip
-                shield = per_call_s(lambda a=sargs: shield_batch(*a), repeat, number)
-            total = kernel + actuator + shield
-            steps[(count, law)] = ticked
-            ratio = ticked / steps[(count, LawName.ROBUST)] if law is LawName.BACKUP else None
-            vs = f"   backup / robust {ratio:.1f}x (<= 5x)" if ratio is not None else ""
+                vs = f"   backup / robust {ticks[count, law] / ticks[count, LawName.ROBUST]:.1f}x"
             print(
-                f"{f'{count} zones, {law.value}':32s} {ticked * 1e6:8.1f}us {total * 1e6:8.1f}us "
-                f"{ticked / total:6.2f}x   {kernel * 1e6:.1f} + {actuator * 1e6:.1f} + "
-                f"{shield * 1e6:.1f} us{vs}"
+                f"{f'{count} zones, {law.value}':28s} {_us(tick)} {_us(batch)} {_us(kernel)} "
+                f"{_us(parts)} {np.median(tick) / np.median(kernel):10.2f}x "
+                f"{np.median(tick) / np.median(parts):9.2f}x{vs}"
             )
+
+
+def _us(times: list[float]) -> str:
+    return f"{np.median(times) * 1e6:7.1f}us {np.percentile(times, 99) * 1e6:6.1f}us"
+
+
+# one tick's inputs to the compiled step: the state as the law sees it and the
+# controller's own state (actuator, model's flown acceleration, held backup) before it
+_Inputs = tuple[float, float, float, float, float, float, Any, Any, Any]
+
+
+def _record(loop: GuidanceLoop, states: list[VehicleState]) -> list[_Inputs]:
+    """One pass of ticks (compiling or loading the kernels), recording each one's inputs."""
+    loop.reset()
+    inputs: list[_Inputs] = []
+    for k, state in enumerate(states):
+        c = loop.controller
+        before = (c._accel.copy(), c._flown.copy(), c._backup.copy())
+        command = loop.tick(state, 0.02 * k)
+        assert isinstance(command, TickCommand)
+        rate = math.nan if state.course_rate_rad_s is None else state.course_rate_rad_s
+        if k == 0:  # the first tick starts the actuator from the measured turn
+            before = (np.array([float(command.step.accel_lat_m_s2)]), *before[1:])
+        inputs.append((state.north_m, state.east_m, command.course_rad, command.speed_m_s,
+                       rate, command.dt_s, *before))  # fmt: skip
+    return inputs
+
+
+class _BatchPath(GuidanceController):
+    """The service's step through the batch kernels, as it ran before the one-vehicle
+    kernel (``guidance.single``): for the comparison in the same run."""
+
+    def step_one(
+        self, *, north_m: float, east_m: float, course_rad: float, speed_m_s: float,
+        dt_s: float, course_rate_rad_s: float | None = None,
+    ) -> GuidanceStep:  # fmt: skip
+        state = KinematicState(north_m, east_m, course_rad, speed_m_s, course_rate_rad_s)
+        return self._step_batch(state, dt_s)
+
+
+def _timed_ticks(
+    loops: tuple[GuidanceLoop, ...], states: list[VehicleState], passes: int
+) -> list[list[float]]:
+    """Each tick of each loop timed, the loops' passes taken in turn (the first untimed)."""
+    times: list[list[float]] = [[] for _ in loops]
+    clock = time.perf_counter
+    for index in range(passes + 1):
+        for loop, kept in zip(loops, times, strict=True):
+            if index == 1:
+                kept.clear()
+            loop.reset()
+            for k, state in enumerate(states):
+                now = 0.02 * k
+                start = clock()
+                loop.tick(state, now)
+                kept.append(clock() - start)
+    return times
+
+
+def _timed_parts(
+    c: GuidanceController, inputs: list[_Inputs], passes: int
+) -> tuple[list[float], list[float]]:
+    """Per input: the one-vehicle kernel alone, and the batch kernels back to back."""
+    zones = c.zones
+    zn, ze, zmur, zterm, zreach = (zones.north_m, zones.east_m, zones.mu_range_m,
+                                   zones.reach_term, zones.reach_m)  # fmt: skip
+    shielded = c.law is LawName.BACKUP
+    single_zones = stack_zones(zones)
+    out = np.empty((1, O_SIZE))
+    out_zone = np.empty((1, Z_SIZE, zn.shape[1]))
+    scratch = np.empty((6, max(zn.shape[1], 6)))
+    result, flags, captured = np.empty(4), np.empty(2, np.int8), np.empty(1, np.bool_)
+    a_next, mode = np.empty(1), np.empty(1, np.int8)
+    sout = np.empty((1, 6))
+    nominal = out[:, O_AC]
+    active = np.ones(1, dtype=np.bool_)
+    bound = c.params.accel_max_m_s2
+    rows = [
+        (np.array([n]), np.array([e]), np.array([h]), np.array([v]),
+         np.array([min(max(v * r, -bound), bound) if math.isfinite(r) else flown[0]]))
+        for n, e, h, v, r, _, _, flown, _ in inputs
+    ]  # fmt: skip
+    tn1, te1 = c._target_n, c._target_e
+    clock = time.perf_counter
+    kernel, parts = [], []
+    for _ in range(passes):
+        for (n, e, h, v, r, dt, accel, flown, held), (n1, e1, h1, v1, av1) in zip(
+            inputs, rows, strict=True
+        ):
+            flown_k = flown.copy()
+            start = clock()
+            step_one(c._single, single_zones, n, e, h, v, r, dt, accel, flown_k, held, out,
+                     out_zone, scratch, result, flags, captured)  # fmt: skip
+            kernel.append(clock() - start)
+            start = clock()
+            evaluate_batch(c._packed, zn, ze, zmur, zterm, tn1, te1, n1, e1, h1, v1, accel, out,
+                           out_zone)  # fmt: skip
+            _advance_batch(c._packed, out, accel, dt, a_next, mode)
+            if shielded:
+                shield_batch(c._shield, zn, ze, zmur, zreach, n1, e1, h1, accel, av1, v1,
+                             nominal, active, dt, held, sout)  # fmt: skip
+            parts.append(clock() - start)
+    return kernel, parts
 
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"

@@ -19,7 +19,11 @@ of one tick, each timed warm and alone in this process, their sum, and the ratio
 sets targets for (issue 13): service tick CPU <= 2x the sum of its parts, telemetry on <=
 1.2x off, round trip p99 <= 2x the echo loop's, start-up <= 1 s, memory <= 200 MB.
 
+``--startup N`` instead launches the service N times and prints only its start-up, with
+the imports and the law's load from numba's cache timed apart.
+
     python bench/bench_service.py [--seconds S] [--rate 50] [--rates 50,200,1000]
+    python bench/bench_service.py --startup 5
 """
 
 from __future__ import annotations
@@ -253,6 +257,100 @@ def _fly(port: int, rate_hz: float, seconds: float, pid: int, launched: float) -
     }
 
 
+# --- start-up ----------------------------------------------------------------------------
+
+_SPLIT = """
+import time
+started = time.perf_counter()
+from ezcompanion.config import load_scenario
+from ezcompanion.service.runner import CompanionService
+imported = time.perf_counter()
+from ezcompanion.service.loop import GuidanceLoop
+loop = GuidanceLoop(load_scenario({config!r}), loop_rate_hz=50.0, stale_after_s=1.0)
+ready = time.perf_counter()
+print(imported - started, ready - imported)
+"""
+
+
+def startup(runs: int, rate_hz: float) -> None:
+    """Launch to first setpoint of the service (telemetry off), ``runs`` times, with where
+    the time goes: the imports and the law's load from numba's cache (``GuidanceLoop``
+    runs the law once when made), timed in their own process."""
+    print(f"start-up, {runs} launches (numba's cache warm: one launch first, untimed)")
+    first = []
+    for index in range(runs + 1):
+        port = free_udp_port()
+        url = f"udpin:127.0.0.1:{port}"
+        with tempfile.TemporaryDirectory() as tmp:
+            config = Path(tmp) / "bench.yaml"
+            config.write_text(yaml.safe_dump(bench_scenario(rate_hz)))
+            launched = time.perf_counter()
+            companion = subprocess.Popen(
+                [sys.executable, str(TIMED), str(config), url, "30"], stdout=subprocess.PIPE,
+                text=True,
+            )  # fmt: skip
+            assert companion.stdout is not None
+            try:
+                wait_for_line(companion.stdout, "listening:")
+                listening = time.perf_counter() - launched
+                arrived = _first_setpoint(port, rate_hz) - launched
+            finally:
+                companion.terminate()
+                companion.wait(timeout=10)
+        if index:
+            first.append(arrived)
+            print(f"  launch to listening {listening:.2f} s, to first setpoint {arrived:.2f} s")
+    split = [
+        [float(x) for x in subprocess.run(
+            [sys.executable, "-c", _SPLIT.format(config=str(CONFIG))], capture_output=True,
+            text=True, check=True,
+        ).stdout.split()]
+        for _ in range(runs)
+    ]  # fmt: skip
+    imports = statistics.median(s[0] for s in split)
+    load = statistics.median(s[1] for s in split)
+    print(
+        f"launch to first setpoint: median {statistics.median(first):.2f} s, "
+        f"min {min(first):.2f} s, max {max(first):.2f} s (target <= 1 s warm)\n"
+        f"  of which, alone: imports {imports:.2f} s, the law's kernel from the cache "
+        f"{load:.2f} s"
+    )
+
+
+def _first_setpoint(port: int, rate_hz: float, timeout_s: float = 20.0) -> float:
+    """Play the vehicle until the companion's first setpoint: its arrival time."""
+    origin = load_scenario(CONFIG).origin
+    period = 1.0 / rate_hz
+    with open_link(f"udpout:127.0.0.1:{port}", system_id=1, component_id=1) as link:
+        mav = link.mav
+        start = next_pos = next_hb = time.perf_counter()
+        boot_ms = 0
+        while time.perf_counter() - start < timeout_s:
+            now = time.perf_counter()
+            if now >= next_hb:
+                link.send(mav.heartbeat_encode(
+                    mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                    mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4, mavlink.MAV_STATE_ACTIVE,
+                ))  # fmt: skip
+                link.send(mav.gps_global_origin_encode(
+                    deg_to_e7(origin.lat_deg), deg_to_e7(origin.lon_deg),
+                    m_to_mm(origin.alt_m), 0,
+                ))  # fmt: skip
+                next_hb += 1.0
+            if now >= next_pos:
+                boot_ms += round(period * 1000) or 1
+                t = boot_ms / 1000.0
+                link.send(mav.local_position_ned_encode(
+                    boot_ms, 8.0 - 0.832 * t, -4.0 + 0.555 * t, -20.0, -0.832, 0.555, 0.0
+                ))  # fmt: skip
+                next_pos += period
+            link.wait_readable(max(0.0, min(next_pos, next_hb) - time.perf_counter()))
+            for msg in link.recv_messages():
+                if msg.get_type() == "SET_POSITION_TARGET_LOCAL_NED":
+                    return time.perf_counter()
+    return math.nan
+
+
 # --- the parts of a tick, warm and alone --------------------------------------------------
 
 
@@ -348,8 +446,14 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--rate", type=float, default=50.0)
     parser.add_argument("--rates", default="", help="also the service alone at these rates")
+    parser.add_argument(
+        "--startup", type=int, default=0, metavar="N", help="only the start-up, N launches"
+    )
     args = parser.parse_args()
     rate = args.rate
+    if args.startup:
+        startup(args.startup, rate)
+        return
     print(f"vehicle at {rate:g} Hz, {args.seconds:g} s per companion, on loopback UDP")
     header = (
         f"{'companion':10s} {'setpts/s':>9s} {'in p50':>8s} {'in p99':>8s} {'rt p50':>8s} "

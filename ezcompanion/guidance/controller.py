@@ -7,7 +7,10 @@ a_c held (:mod:`ezcompanion.guidance.actuator`), and returns the lateral acceler
 
 One vehicle or a batch: ``reset(0.0)`` starts one vehicle, ``reset(np.zeros(B))`` a batch of
 B, and the state's fields are then floats or arrays broadcastable to that shape. The same
-compiled kernel serves the simulator, the service and the Monte-Carlo batch.
+compiled law serves the simulator, the service and the Monte-Carlo batch: a batch through
+three kernels (the law, the actuator, the shield), one vehicle through one
+(:mod:`ezcompanion.guidance.single`), with the same results. ``step_one`` takes one
+vehicle's state as numbers, for the service.
 """
 
 from __future__ import annotations
@@ -28,17 +31,27 @@ from ezcompanion.guidance.law import (
     O_AC,
     O_ALPHA,
     O_RT,
+    O_SIZE,
     P_AMAX,
     P_CMD_LIM,
     P_INTERCEPT_R,
     P_LAW_ROBUST,
     P_N,
     P_P1,
+    Z_SIZE,
     LawOutput,
     pack_params,
     run_kernel,
 )
 from ezcompanion.guidance.params import GuidanceParams, LawName, Target
+from ezcompanion.guidance.single import (
+    MODE_PURE,
+    check_state,
+    checked_rate,
+    pack_single,
+    stack_zones,
+    step_one,
+)
 from ezcompanion.guidance.zones import ZoneSet
 
 __all__ = ["GuidanceController", "GuidanceMode", "GuidanceStep", "KinematicState"]
@@ -46,7 +59,7 @@ __all__ = ["GuidanceController", "GuidanceMode", "GuidanceStep", "KinematicState
 FloatArray = npt.NDArray[np.float64]
 
 # alpha within this of 0 or 1 counts as one law acting alone in the reported mode
-_MODE_PURE = 0.01
+_MODE_PURE = MODE_PURE
 
 
 class GuidanceMode(IntEnum):
@@ -135,6 +148,14 @@ class GuidanceController:
         self._backup = np.full(1, BACKUP_NONE, dtype=np.int8)
         self._shield = pack_shield(self.params)
         self._no_shield: _ShieldViews | None = None
+        # one vehicle's path (``step_one``): its constants, zones and work space
+        self._shielded = self.law is LawName.BACKUP
+        self._single = pack_single(self._packed, self._shield, float(self._target_n[0]),
+                                   float(self._target_e[0]), shielded=self._shielded)  # fmt: skip
+        self._single_zones: FloatArray | None = None  # stacked on the first step_one
+        zone_count = zones.north_m.shape[1]
+        self._scratch = np.empty((6, max(zone_count, 6)))
+        self._zone_shape = (1, Z_SIZE, zone_count)
 
     @property
     def accel_m_s2(self) -> FloatArray:
@@ -175,6 +196,17 @@ class GuidanceController:
         """Evaluate the law, advance the actuator by ``dt_s`` and return the command."""
         if not (math.isfinite(dt_s) and dt_s > 0.0):
             raise StateError("dt_s", dt_s, "must be a finite number > 0")
+        if not self._shape:
+            north, east, course, speed = _numbers(state)
+            return self.step_one(
+                north_m=north, east_m=east, course_rad=course, speed_m_s=speed, dt_s=dt_s,
+                course_rate_rad_s=state.course_rate_rad_s,  # type: ignore[arg-type]
+            )  # fmt: skip
+        return self._step_batch(state, dt_s)
+
+    def _step_batch(self, state: KinematicState, dt_s: float) -> GuidanceStep:
+        """``step`` through the batch kernels (the law, the actuator, the shield), for any
+        shape, one vehicle included."""
         rows = self._state_rows(state)
         out, out_zone = self._run_law(rows)
         accel = self._accel
@@ -200,6 +232,60 @@ class GuidanceController:
             certificate_m=views[2],
             certificate_ahead_m=views[3],
         )
+
+    def step_one(
+        self,
+        *,
+        north_m: float,
+        east_m: float,
+        course_rad: float,
+        speed_m_s: float,
+        dt_s: float,
+        course_rate_rad_s: float | None = None,
+    ) -> GuidanceStep:
+        """``step`` for one vehicle (``reset()`` without a batch) given as numbers: the
+        service's path, one compiled call. Same checks and results as ``step``."""
+        if self._shape:
+            raise StateError("batch", self._shape, "step_one steps one vehicle: reset() it so")
+        if not (math.isfinite(dt_s) and dt_s > 0.0):
+            raise StateError("dt_s", dt_s, "must be a finite number > 0")
+        if type(north_m) is type(east_m) is type(course_rad) is type(speed_m_s) is float:
+            # a sum of finite numbers is finite, or overflowed: then the field is checked
+            if not (math.isfinite(north_m + east_m + course_rad + speed_m_s) and speed_m_s > 0.0):
+                check_state((north_m, east_m, course_rad, speed_m_s))
+        else:
+            north_m, east_m, course_rad, speed_m_s = _numbers(
+                KinematicState(north_m, east_m, course_rad, speed_m_s)
+            )
+        rate_1_s = math.nan  # none: the model's own flown acceleration
+        if self._shielded and course_rate_rad_s is not None:
+            rate_1_s = checked_rate(course_rate_rad_s)
+        zones = self._single_zones
+        if zones is None:
+            zones = self._single_zones = stack_zones(self.zones)
+        accel = self._accel
+        out = np.empty((1, O_SIZE))
+        out_zone = np.empty(self._zone_shape)
+        result = np.empty(4)
+        flags = np.empty(2, dtype=np.int8)
+        captured = np.empty(1, dtype=np.bool_)
+        step_one(
+            self._single, zones, north_m, east_m, course_rad, speed_m_s, rate_1_s, dt_s, accel,
+            self._flown, self._backup, out, out_zone, self._scratch, result, flags, captured,
+        )  # fmt: skip
+        self._accel = result[:1]
+        if self._shielded:
+            self._backup = flags[1:]
+        # The fields as 0-d views, set straight into the new step's __dict__: a frozen
+        # dataclass's __init__ sets each through object.__setattr__, which costs twice this.
+        step = _new_step(GuidanceStep)
+        step.__dict__.update(
+            law=LawOutput(out, out_zone, ()), accel_lat_m_s2=accel[0, ...],
+            accel_lat_cmd_m_s2=result[0, ...], mode=flags[0, ...], captured=captured[0, ...],
+            backup=flags[1, ...], shield_weight=result[1, ...], certificate_m=result[2, ...],
+            certificate_ahead_m=result[3, ...],
+        )  # fmt: skip
+        return step
 
     def _unshielded(self, size: int, shape: tuple[int, ...]) -> _ShieldViews:
         """No backup and NaN shield outputs for ``size`` vehicles (shaped ``shape``):
@@ -289,6 +375,25 @@ class GuidanceController:
 
 
 _STATE_FIELDS = ("north_m", "east_m", "course_rad", "speed_m_s")
+_new_step = object.__new__
+
+
+def _numbers(state: KinematicState) -> tuple[float, float, float, float]:
+    """One vehicle's state as four checked numbers: each a number (or one-element array),
+    finite, the speed > 0; else a ``StateError`` naming the first field that is not."""
+    values = []
+    for name in _STATE_FIELDS:
+        value = getattr(state, name)
+        if type(value) is not float:
+            try:
+                value = float(np.asarray(value, dtype=np.float64).reshape(()))
+            except (ValueError, TypeError) as exc:
+                raise StateError(name, value, f"must fit the batch: {exc}") from None
+        values.append(value)
+    north, east, course, speed = values
+    check_state((north, east, course, speed))
+    return north, east, course, speed
+
 
 # GuidanceStep's backup, shield_weight, certificate_m and certificate_ahead_m
 _ShieldViews = tuple[npt.NDArray[np.int8], FloatArray, FloatArray, FloatArray]

@@ -141,16 +141,10 @@ class GuidanceLoop:
             self._resume_from(state, minimum)
         dt = self.period_s if last is None else min(max(now_s - last, 1e-4), 5.0 * self.period_s)
         self._last_tick_s = now_s
-        step = self.controller.step(
-            KinematicState(
-                state.north_m,
-                state.east_m,
-                course,
-                speed,
-                course_rate_rad_s=state.course_rate_rad_s,
-            ),
-            dt,
-        )
+        step = self.controller.step_one(
+            north_m=state.north_m, east_m=state.east_m, course_rad=course, speed_m_s=speed,
+            dt_s=dt, course_rate_rad_s=state.course_rate_rad_s,
+        )  # fmt: skip
         self.miss_distance_m = min(self.miss_distance_m, float(step.law.range_to_target_m))
         self.captured = bool(step.captured)
         return TickCommand(

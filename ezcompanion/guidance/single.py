@@ -1,0 +1,181 @@
+"""One vehicle's controller step in one compiled call: the path the service runs.
+
+``GuidanceController.step`` on a batch runs three kernels (the law, the actuator and mode,
+and for the backup law the shield) with numpy between them: a dozen array operations that
+cost 1-2 us each, several times what the kernels cost for one vehicle. ``step_one`` does
+the same for ONE vehicle in a single dispatch, with the state as scalars, writing into
+arrays the caller allocates: the law's kernel (``law._evaluate_one``), the capture check
+and the actuator (as ``controller._advance_batch``), and for the backup law the shield
+(``backup.shield_one``) and the mode from the safety share of what is flown.
+
+Its results equal the batch path's for the same vehicle, to round-off
+(tests/test_single.py compares them on random states for every law). ``check_state`` and
+``checked_rate`` are the checks its Python caller makes first, on plain numbers.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+
+from ezcompanion.errors import StateError
+from ezcompanion.guidance._jit import jit
+from ezcompanion.guidance.actuator import advance_one
+from ezcompanion.guidance.backup import BACKUP_NONE, S_SIZE, shield_one
+from ezcompanion.guidance.law import (
+    O_AC,
+    O_ALPHA,
+    O_RT,
+    P_AMAX,
+    P_CMD_LIM,
+    P_INTERCEPT_R,
+    P_LAW_ROBUST,
+    P_N,
+    P_P1,
+    P_SIZE,
+    _evaluate_one,
+)
+from ezcompanion.guidance.zones import ZoneSet
+
+__all__ = ["MODE_PURE", "check_state", "checked_rate", "pack_single", "stack_zones", "step_one"]
+
+FloatArray = npt.NDArray[np.float64]
+Int8Array = npt.NDArray[np.int8]
+BoolArray = npt.NDArray[np.bool_]
+
+# alpha (or the safety share) within this of 0 or 1 counts as one law acting alone
+MODE_PURE = 0.01
+# GuidanceMode's values, as plain ints for the kernel
+_INTERCEPT, _BLEND, _SAFETY, _CAPTURED = 0, 1, 2, 3
+# where the shield's settings end in ``pack_single``'s vector (then the target, the switch)
+_S_END = P_SIZE + S_SIZE
+
+
+@jit
+def _mode_of(share: float) -> int:
+    """The reported mode for the safety law's share ``share`` of the command."""
+    if share >= 1.0 - MODE_PURE:
+        return _SAFETY
+    if share <= MODE_PURE:
+        return _INTERCEPT
+    return _BLEND
+
+
+def check_state(values: tuple[float, float, float, float]) -> None:
+    """A ``StateError`` for the first of four numbers that is not finite, or the speed if
+    it is not > 0."""
+    for name, value in zip(("north_m", "east_m", "course_rad", "speed_m_s"), values, strict=True):
+        if not math.isfinite(value):
+            raise StateError(name, value, "must be finite")
+    if not values[3] > 0.0:
+        raise StateError("speed_m_s", values[3], "must be > 0")
+
+
+def checked_rate(rate: float | FloatArray) -> float:
+    """The measured course rate as a finite number, or a ``StateError``."""
+    if type(rate) is float:
+        value = rate
+    else:
+        try:
+            value = float(np.asarray(rate, dtype=np.float64).reshape(()))
+        except (TypeError, ValueError):
+            raise StateError("course_rate_rad_s", rate, "must be a number") from None
+    if not math.isfinite(value):
+        raise StateError("course_rate_rad_s", rate, "must be finite")
+    return value
+
+
+def pack_single(
+    law_params: FloatArray, shield_params: FloatArray, target_north_m: float,
+    target_east_m: float, *, shielded: bool,
+) -> FloatArray:  # fmt: skip
+    """``step_one``'s constants in one vector: the law's packed parameters, the shield's,
+    the target and whether the shield acts (the backup law)."""
+    return np.concatenate(
+        (law_params, shield_params, (target_north_m, target_east_m, 1.0 if shielded else 0.0))
+    )
+
+
+def stack_zones(zones: ZoneSet) -> FloatArray:
+    """The zones' rows as one (5, 1, zones) array, for ``step_one``."""
+    if zones.north_m.shape[0] != 1:
+        raise StateError("zones", zones.north_m.shape[0], "must have 1 row for one vehicle")
+    return np.stack(
+        (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_term, zones.reach_m)
+    )
+
+
+@jit
+def step_one(
+    k: FloatArray,
+    zones: FloatArray,
+    n: float,
+    e: float,
+    course: float,
+    v: float,
+    rate: float,
+    dt: float,
+    accel: FloatArray,
+    flown: FloatArray,
+    held: Int8Array,
+    out: FloatArray,
+    out_zone: FloatArray,
+    scratch: FloatArray,
+    result: FloatArray,
+    flags: Int8Array,
+    captured_out: BoolArray,
+) -> None:
+    """One step of one vehicle.
+
+    Inputs: ``k`` from ``pack_single`` and ``zones`` from ``stack_zones``; the state
+    ``n, e, course, v`` (checked finite, v > 0); ``rate``, the measured course rate or NaN
+    for none (the model's ``flown`` is then used); ``dt``. State: ``accel[0]`` (a, read),
+    ``flown[0]`` (the model's a_v, updated) and ``held[0]`` (the held backup, read).
+    Outputs: the law's ``out[0, O_*]`` and ``out_zone[0, Z_*, i]``; ``result`` = (a after
+    the step, the nominal's weight, the held backup's certificate at the start, the
+    certificate one step ahead), NaN where unshielded; ``flags`` = (mode, the backup held
+    after the step: -1 unshielded); ``captured_out[0]``. ``scratch`` is
+    (5 + 1, max(zones, 6)) of work space. (Few arguments: each costs the dispatch some
+    70 ns.)
+    """
+    p = k[:P_SIZE]
+    s = k[P_SIZE:_S_END]
+    zn, ze, zmur, zterm, zreach = zones[0], zones[1], zones[2], zones[3], zones[4]
+    a = accel[0]
+    _evaluate_one(p, zn, ze, zmur, zterm, 0, k[_S_END], k[_S_END + 1], n, e, course, v, a,
+                  out, out_zone, 0, scratch)  # fmt: skip
+    captured = out[0, O_RT] <= p[P_INTERCEPT_R]
+    command = out[0, O_AC]
+    if captured and p[P_LAW_ROBUST] > 0.5:
+        command = 0.0  # inside the capture radius the actuator relaxes (as the batch)
+    a_next = advance_one(a, command, dt, p[P_AMAX], p[P_P1], int(p[P_N]), p[P_CMD_LIM])
+    alpha = out[0, O_ALPHA]
+    mode = _CAPTURED if captured else _mode_of(alpha)
+    backup = BACKUP_NONE
+    weight = cert = cert_ahead = math.nan
+    if k[_S_END + 2] > 0.5:  # shielded
+        if captured:
+            flown[0] = a_next
+        else:
+            bound = p[P_AMAX]
+            av = flown[0] if math.isnan(rate) else min(max(v * rate, -bound), bound)
+            shield = scratch[5:6]
+            shield_one(s, zn, ze, zmur, zreach, 0, n, e, course, a, av, v, out[0, O_AC], dt,
+                       int(held[0]), shield, 0)  # fmt: skip
+            a_next = shield[0, 0]
+            flown[0] = shield[0, 1]
+            backup = int(shield[0, 2])
+            weight = shield[0, 3]
+            cert = shield[0, 4]
+            cert_ahead = shield[0, 5]
+            # the safety share of what is flown: the backup's, plus the nominal's own alpha
+            mode = _mode_of(1.0 - weight * (1.0 - alpha))
+    result[0] = a_next
+    result[1] = weight
+    result[2] = cert
+    result[3] = cert_ahead
+    flags[0] = mode
+    flags[1] = backup
+    captured_out[0] = captured

@@ -1,0 +1,215 @@
+"""One vehicle's compiled step (``guidance.single``, the service's path) against the batch
+path: the same law, actuator, shield and modes, to round-off, for every law."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from ezcompanion.config import load_scenario
+from ezcompanion.errors import StateError
+from ezcompanion.guidance import (
+    GuidanceController,
+    GuidanceStep,
+    KinematicState,
+    LawName,
+    Target,
+    _jit,
+)
+from ezcompanion.guidance._jit import JIT_ENABLED, cache_dir, kernel_fingerprint
+from ezcompanion.guidance.backup import BACKUP_NONE
+from ezcompanion.guidance.single import step_one
+
+CONFIG = Path(__file__).resolve().parents[1] / "config"
+SCENARIO = load_scenario(CONFIG / "paper_scenario1.yaml")
+LAWS = (LawName.PAPER, LawName.ROBUST, LawName.BACKUP)
+STEP_FIELDS = [f.name for f in dataclasses.fields(GuidanceStep) if f.name != "law"]
+LAW_FIELDS = ("h_m", "h_rate_m_s", "alpha", "accel_safety_m_s2", "accel_intercept_m_s2",
+              "accel_desired_m_s2", "accel_desired_rate_m_s3", "accel_command_m_s2",
+              "range_to_target_m", "lead_angle_target_rad", "bearing_to_target_rad",
+              "margin_m", "clearance_m", "softmin_weight")  # fmt: skip
+
+
+def random_states(rng: np.random.Generator, size: int, target: Target) -> KinematicState:
+    """States all over the paper's layout, some inside the capture radius of the target."""
+    north = rng.uniform(-4.0, 10.0, size)
+    east = rng.uniform(-6.0, 6.0, size)
+    near = rng.random(size) < 0.15
+    north[near] = target.north_m + rng.uniform(-0.05, 0.05, near.sum())
+    east[near] = target.east_m + rng.uniform(-0.05, 0.05, near.sum())
+    return KinematicState(
+        north_m=north,
+        east_m=east,
+        course_rad=rng.uniform(-math.pi, math.pi, size),
+        speed_m_s=rng.uniform(0.5, 1.5, size),
+        course_rate_rad_s=rng.uniform(-1.0, 1.0, size),
+    )
+
+
+def assert_same(single: GuidanceStep, batch: GuidanceStep, k: int) -> None:
+    for name in STEP_FIELDS:
+        one, many = getattr(single, name), getattr(batch, name)
+        assert one.shape == () and one.dtype == many.dtype, name
+        np.testing.assert_allclose(one, many[k], rtol=1e-12, atol=1e-12, err_msg=name)
+    for name in LAW_FIELDS:
+        one, many = getattr(single.law, name), getattr(batch.law, name)
+        np.testing.assert_allclose(one, many[k], rtol=1e-12, atol=1e-12, err_msg=name)
+    for name in ("reference_saturated", "command_limited"):
+        assert getattr(single.law, name) == getattr(batch.law, name)[k], name
+
+
+@pytest.mark.parametrize("law", LAWS)
+@pytest.mark.parametrize("with_rate", [True, False])
+def test_one_vehicle_steps_like_its_row_of_a_batch(law: LawName, with_rate: bool) -> None:
+    """Ten steps of 24 vehicles: the actuator, the model's flown acceleration and the held
+    backup carried from step to step in both paths."""
+    rng = np.random.default_rng(13 + int(with_rate))
+    size = 24
+    zones, target, params = SCENARIO.zones(), SCENARIO.target, SCENARIO.guidance
+    bound = params.accel_max_m_s2
+    start = rng.uniform(-0.9 * bound, 0.9 * bound, size)
+    batch = GuidanceController(zones=zones, target=target, params=params, law=law)
+    batch.reset(start)
+    singles = [GuidanceController(zones=zones, target=target, params=params, law=law)
+               for _ in range(size)]  # fmt: skip
+    for k, one in enumerate(singles):
+        one.reset(float(start[k]))
+    seen_modes: set[int] = set()
+    for step in range(10):
+        state = random_states(rng, size, target)
+        if not with_rate:
+            state = dataclasses.replace(state, course_rate_rad_s=None)
+        dt_s = 0.02 if step % 3 else 0.05
+        stepped = batch.step(state, dt_s)
+        for k, one in enumerate(singles):
+            rate = None if state.course_rate_rad_s is None else float(state.course_rate_rad_s[k])  # type: ignore[index]
+            single = one.step_one(
+                north_m=float(state.north_m[k]),  # type: ignore[index]
+                east_m=float(state.east_m[k]),  # type: ignore[index]
+                course_rad=float(state.course_rad[k]),  # type: ignore[index]
+                speed_m_s=float(state.speed_m_s[k]),  # type: ignore[index]
+                dt_s=dt_s,
+                course_rate_rad_s=rate,
+            )
+            assert_same(single, stepped, k)
+            seen_modes.add(int(single.mode))
+        np.testing.assert_allclose(
+            [one.accel_m_s2 for one in singles], batch.accel_m_s2, rtol=1e-12, atol=1e-12
+        )
+    assert len(seen_modes) >= 3  # the states reach capture, safety and interception alike
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    north_m=st.floats(-6.0, 12.0),
+    east_m=st.floats(-8.0, 8.0),
+    course_rad=st.floats(-math.pi, math.pi),
+    speed_m_s=st.floats(0.2, 3.0),
+    accel_ratio=st.floats(-0.95, 0.95),
+    law=st.sampled_from(LAWS),
+)
+def test_step_and_step_one_agree_with_a_batch_of_one(
+    north_m: float, east_m: float, course_rad: float, speed_m_s: float, accel_ratio: float,
+    law: LawName,
+) -> None:  # fmt: skip
+    """``step`` (one vehicle), ``step_one`` and a batch of one: the same step."""
+    made = [GuidanceController(zones=SCENARIO.zones(), target=SCENARIO.target,
+                               params=SCENARIO.guidance, law=law) for _ in range(3)]  # fmt: skip
+    accel = accel_ratio * SCENARIO.guidance.accel_max_m_s2
+    made[0].reset(accel)
+    made[1].reset(accel)
+    made[2].reset(np.array([accel]))
+    by_step = made[0].step(KinematicState(north_m, east_m, course_rad, speed_m_s), 0.02)
+    by_one = made[1].step_one(north_m=north_m, east_m=east_m, course_rad=course_rad,
+                              speed_m_s=speed_m_s, dt_s=0.02)  # fmt: skip
+    batch = made[2].step(KinematicState(north_m, east_m, course_rad, speed_m_s), 0.02)
+    assert_same(by_step, batch, 0)
+    assert_same(by_one, batch, 0)
+
+
+def test_a_step_keeps_its_results_when_the_next_is_taken() -> None:
+    c = GuidanceController(zones=SCENARIO.zones(), target=SCENARIO.target,
+                           params=SCENARIO.guidance)  # fmt: skip
+    c.reset()
+    first = c.step_one(north_m=8.0, east_m=-4.0, course_rad=2.5, speed_m_s=1.0, dt_s=0.02)
+    kept = {name: np.array(getattr(first, name)) for name in STEP_FIELDS}
+    kept_h = float(first.law.h_m)
+    second = c.step_one(north_m=2.3, east_m=2.0, course_rad=0.4, speed_m_s=1.0, dt_s=0.02)
+    for name in STEP_FIELDS:
+        np.testing.assert_array_equal(getattr(first, name), kept[name], err_msg=name)
+    assert float(first.law.h_m) == kept_h != float(second.law.h_m)
+    assert float(second.accel_lat_m_s2) == float(first.accel_lat_cmd_m_s2)
+
+
+@pytest.mark.parametrize("field", ["north_m", "east_m", "course_rad", "speed_m_s"])
+def test_step_one_refuses_a_non_finite_state_naming_the_field(field: str) -> None:
+    values = {"north_m": 8.0, "east_m": -4.0, "course_rad": 2.5, "speed_m_s": 1.0,
+              field: math.nan}  # fmt: skip
+    c = GuidanceController(zones=SCENARIO.zones(), target=SCENARIO.target)
+    c.reset(0.1)
+    with pytest.raises(StateError) as caught:
+        c.step_one(**values, dt_s=0.02)
+    assert caught.value.field == field
+    assert float(c.accel_m_s2) == 0.1  # nothing advanced
+
+
+def test_step_one_refuses_what_step_refuses() -> None:
+    c = GuidanceController(zones=SCENARIO.zones(), target=SCENARIO.target)
+    c.reset()
+    good = {"north_m": 8.0, "east_m": -4.0, "course_rad": 2.5}
+    with pytest.raises(StateError, match="speed_m_s"):
+        c.step_one(**good, speed_m_s=-1.0, dt_s=0.02)
+    with pytest.raises(StateError, match="dt_s"):
+        c.step_one(**good, speed_m_s=1.0, dt_s=math.inf)
+    with pytest.raises(StateError, match="course_rate_rad_s"):
+        c.step_one(**good, speed_m_s=1.0, dt_s=0.02, course_rate_rad_s=math.nan)
+    with pytest.raises(StateError, match="north_m"):
+        c.step_one(**{**good, "north_m": [8.0, 9.0]}, speed_m_s=1.0, dt_s=0.02)  # type: ignore[arg-type]
+    # numbers that are not floats are taken as such
+    as_int = c.step_one(north_m=8, east_m=-4, course_rad=2.5, speed_m_s=1, dt_s=0.02)
+    assert math.isfinite(float(as_int.accel_lat_cmd_m_s2))
+    batch = GuidanceController(zones=SCENARIO.zones(), target=SCENARIO.target)
+    batch.reset(np.zeros(2))
+    with pytest.raises(StateError, match="batch"):
+        batch.step_one(**good, speed_m_s=1.0, dt_s=0.02)
+
+
+def test_unshielded_laws_report_no_backup() -> None:
+    for law in (LawName.PAPER, LawName.ROBUST):
+        c = GuidanceController(zones=SCENARIO.zones(), target=SCENARIO.target, law=law)
+        c.reset()
+        step = c.step_one(north_m=8.0, east_m=-4.0, course_rad=2.5, speed_m_s=1.0, dt_s=0.02,
+                          course_rate_rad_s=0.3)  # fmt: skip
+        assert int(step.backup) == BACKUP_NONE
+        assert math.isnan(float(step.shield_weight)) and math.isnan(float(step.certificate_m))
+
+
+def test_the_kernel_cache_is_named_by_every_kernel_source(tmp_path: Path) -> None:
+    """numba invalidates a cached kernel only when its own file changes; the one-vehicle
+    step carries the shield's code from backup.py, so the cache directory is named by a
+    digest of every source of the package: any edit there compiles afresh."""
+    for name, text in (("law.py", "a = 1\n"), ("backup.py", "b = 2\n")):
+        (tmp_path / name).write_text(text)
+    before = kernel_fingerprint(tmp_path.glob("*.py"))
+    assert kernel_fingerprint(tmp_path.glob("*.py")) == before
+    (tmp_path / "backup.py").write_text("b = 3\n")
+    changed = kernel_fingerprint(tmp_path.glob("*.py"))
+    assert changed != before
+    (tmp_path / "backup.py").write_text("b = 2\n")
+    assert kernel_fingerprint(tmp_path.glob("*.py")) == before
+    if not JIT_ENABLED:
+        return
+    from numba.core import config
+
+    package = Path(_jit.__file__).parent
+    here = kernel_fingerprint(package.glob("*.py"))
+    assert config.CACHE_DIR.endswith(f"numba-{here}")
+    assert cache_dir("/elsewhere") == f"/elsewhere/numba-{here}"
+    cache_path = step_one._cache._impl.locator.get_cache_path()  # type: ignore[attr-defined]
+    assert cache_path.startswith(config.CACHE_DIR)

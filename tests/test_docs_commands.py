@@ -249,7 +249,8 @@ CHECKS: dict[str, Check] = {
     "--out field-out/copter_5ms.yaml": Check.RUN,
     "ezcompanion scale config/paper_scenario1.yaml --speed-m-s 22 --bank-deg 24.6 "
     "--out field-out/plane_22ms.yaml": Check.RUN,
-    # docs/service.md (the demo flies for a minute; tests/test_demo_figures.py flies it)
+    # docs/service.md (the demo flies both scenarios for a minute; its engine, run_loopback,
+    # is flown by tests/test_service_loopback.py and tests/test_lockstep.py)
     "ezcompanion demo": Check.PARSE,  # also docs/telemetry.md
     "ezcompanion demo --profile plane": Check.PARSE,
     "ezcompanion demo --profile px4": Check.PARSE,
@@ -283,8 +284,8 @@ CHECKS: dict[str, Check] = {
     "--map-runs 500 --chatter-runs 50 --abandon px4 --no-figures "
     "--out validation-out-backup": Check.PARSE,
 }
-# Python blocks, by doc and first line of code: run, or (needing certificates, a router and a
-# scenario to send) only compiled.
+# Python blocks, by doc: run, or (needing certificates, a router and a scenario to send)
+# only compiled.
 PYTHON_BLOCKS: dict[str, str] = {
     "README.md": "run",
     "docs/sitl_stub.md": "run",

@@ -25,6 +25,9 @@ from sitl_stub import SitlStub, StubConfig, stub_config
 
 SCENARIO = Path(__file__).resolve().parents[1] / "config" / "paper_scenario1.yaml"
 M = mavutil.mavlink
+# the wall time an answer (an ACK, the first heartbeat) may take: it returns as soon as the
+# answer is in, so it is generous for a loaded machine (was 3 s: issue 12)
+ANSWER_WAIT_S = 10.0
 
 Msg = Any
 
@@ -78,7 +81,7 @@ class Gcs:
             pass
 
     def command(self, command: int, *params: float, target_system: int = 1,
-                timeout_s: float = 3.0) -> Msg | None:
+                timeout_s: float = ANSWER_WAIT_S) -> Msg | None:
         """Send COMMAND_LONG and wait for its COMMAND_ACK."""
         p = [*params, *([0.0] * (7 - len(params)))]
         self.drain()
@@ -87,7 +90,7 @@ class Gcs:
 
     def command_int(self, command: int, p1: float = 0.0, p2: float = 0.0, p3: float = 0.0,
                     p4: float = 0.0, *, target_system: int = 1,
-                    timeout_s: float = 3.0) -> Msg | None:
+                    timeout_s: float = ANSWER_WAIT_S) -> Msg | None:
         """Send COMMAND_INT and wait for its COMMAND_ACK."""
         self.drain()
         self.mav.command_int_send(target_system, 1, M.MAV_FRAME_GLOBAL, command, 0, 0,
@@ -129,7 +132,7 @@ def running_stub(gcs: Gcs, *, record_truth: bool = True, **settings: Any) -> Ite
     """A started stub talking to ``gcs``; waits for its first heartbeat."""
     stub = SitlStub(make_config(gcs.port, **settings), record_truth=record_truth)
     with stub:
-        assert gcs.recv("HEARTBEAT", 3.0) is not None, "no heartbeat from the stub"
+        assert gcs.recv("HEARTBEAT", ANSWER_WAIT_S) is not None, "no heartbeat from the stub"
         yield stub
     assert stub.error is None, stub.error
     assert stub.handler_errors == 0

@@ -67,7 +67,7 @@ def test_sigint_leaves_the_copter_braking_and_exits_130(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(
     ("profile", "start_mode", "on_exit", "mode_number"),
-    [("px4", "AUTO.LOITER", None, PX4_LOITER)],  # the copter's: tests/test_field_docs.py
+    [("px4", "AUTO.LOITER", None, PX4_LOITER)],  # the copter's: tests/test_docs_commands.py
 )
 def test_after_an_intercept_the_vehicle_reports_the_chosen_mode(
     profile: str, start_mode: str, on_exit: str | None, mode_number: int, tmp_path: Path

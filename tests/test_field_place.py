@@ -1,6 +1,6 @@
 """Placing an engagement on a field: in latitude/longitude, and relative to the vehicle at
 engage. Both fly end to end over real UDP with the loopback vehicle, judged by its truth
-(the latitude/longitude one is docs/field.md's `run` command, in tests/test_field_docs.py)."""
+(the latitude/longitude one is docs/field.md's `run` command, in tests/test_docs_commands.py)."""
 
 from __future__ import annotations
 

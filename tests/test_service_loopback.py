@@ -8,6 +8,7 @@ vehicle's own track (``--truth-out``), not by what the companion believed.
 from __future__ import annotations
 
 import math
+import socket
 import subprocess
 import sys
 import threading
@@ -130,12 +131,17 @@ def fly(
     stub_port: int | None = None,
     stub_config: Path | None = None,
     lockstep: bool = False,
+    vehicle_first: bool = True,
     **companion: Any,
 ) -> Flight:
     """The companion in a thread, the vehicle in a process, until the engagement ends.
 
     The companion listens on ``port`` (default: a free one); the vehicle sends to
-    ``stub_port`` (default: the companion's; a relay's, to sit in between). With
+    ``stub_port`` (default: the companion's; a relay's, to sit in between). The vehicle
+    starts first and the companion once its first datagram has reached ``port``
+    (``vehicle_first``): a process start-up is seconds of wall time on a loaded machine,
+    and at 5x each one is five of the companion's seconds, which its budgets (no vehicle
+    heard, ``max_time_s``) would count. With
     ``lockstep`` both run in lockstep (``--lockstep``): the vehicle's time waits for the
     companion and every budget is in vehicle time, whatever the load of the machine; for
     every test that does not test timing or time stamps itself (hostile input may forge
@@ -162,24 +168,42 @@ def fly(
     )
     result: list[EngagementOutcome] = []
     thread = threading.Thread(target=lambda: result.append(service.run(max_time_s=max_time_s)))
-    thread.start()
     truth = tmp_path / "truth.csv"
     try:
-        assert listening.wait(30.0), "the companion never opened its link"
+        if not vehicle_first:
+            thread.start()
+            assert listening.wait(30.0), "the companion never opened its link"
         mode = ["--initial-mode", start_mode] if start_mode else []
         mode += ["--lockstep"] if lockstep else []
         to = port if stub_port is None else stub_port
         vehicle = config if stub_config is None else stub_config  # the vehicle's own file
         with stub_process(vehicle, to, truth, "--profile", profile, *mode) as stub:
+            if vehicle_first:
+                wait_for_vehicle(port)
+                thread.start()
+                assert listening.wait(30.0), "the companion never opened its link"
             if during is not None:
                 during(service, stub, port, truth)
             # in lockstep the wall time is the machine's: as long as it takes, within reason
             thread.join(timeout=max_time_s * (10.0 if lockstep else 1.0 / SPEEDUP) + 30.0)
     finally:
         service.stop()
-        thread.join(timeout=10.0)
+        if thread.ident is not None:
+            thread.join(timeout=10.0)
     assert result, "the companion did not finish"
     return Flight(service, events, result[0], truth)
+
+
+def wait_for_vehicle(port: int, timeout_s: float = 120.0) -> None:
+    """Until a datagram reaches ``port`` on 127.0.0.1 (the loopback vehicle's process is up
+    and sending; at once on an idle machine, many seconds on a loaded one)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", port))
+        sock.settimeout(timeout_s)
+        try:
+            sock.recv(65535)
+        except TimeoutError:
+            pytest.fail(f"the loopback vehicle sent nothing to port {port} in {timeout_s:g} s")
 
 
 @pytest.mark.parametrize("number", [1, 2])

@@ -57,7 +57,9 @@ def peer(connect: str) -> zenoh.Config:
     return session_config(TelemetrySettings(listen=(), connect=(connect,)))
 
 
-def wait_for(condition: Callable[[], bool], timeout_s: float = 5.0) -> bool:
+def wait_for(condition: Callable[[], bool], timeout_s: float = 30.0) -> bool:
+    """Until ``condition()`` holds (True) or ``timeout_s`` of wall time have passed (False):
+    it returns as soon as it holds, so the default is generous for a loaded machine."""
     deadline = time.monotonic() + timeout_s
     while not condition():
         if time.monotonic() > deadline:

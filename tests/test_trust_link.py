@@ -233,7 +233,9 @@ def test_an_autopilot_heard_first_is_refused_with_the_vehicle_both_named(
     thread = threading.Thread(target=beat)
     thread.start()
     try:
-        flight = fly(SCENARIO, tmp_path, port=port, max_time_s=20.0, **LIGHT)
+        # the stranger is heard first: the companion listens before the vehicle starts
+        flight = fly(SCENARIO, tmp_path, port=port, max_time_s=20.0, vehicle_first=False,
+                     **LIGHT)  # fmt: skip
     finally:
         stop.set()
         thread.join()

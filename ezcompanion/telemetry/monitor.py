@@ -2,7 +2,12 @@
 
 zenoh's threads only put what arrives on a queue; this module's one thread decodes it,
 updates the view (``MonitorView``, pure), redraws at most ``refresh_hz`` times a second and
-writes JSON lines (``--json``) and the recording (``--record``). Both are the same lines::
+writes JSON lines (``--json``) and the recording (``--record``). On a terminal the table is
+drawn with rich and fits the terminal's width (``MonitorView.table``: the vehicle id, mode, h,
+the least clearance and the outcome always; the accelerations, range and the rest as the
+width allows); into a pipe or a file it is the plain fixed-column text of
+``MonitorView.render``, one redraw after another. JSON lines and recordings are the same
+lines::
 
     {"key": "ezcompanion/vehicle1/guidance", "encoding": "application/json;...",
      "received_unix_s": 1718000000.123, "payload": {...}}
@@ -30,13 +35,15 @@ from pathlib import Path
 from typing import Any, Protocol, TextIO
 
 import zenoh
+from rich.console import Console, Group
+from rich.live import Live
 
+from ezcompanion.telemetry.monitor_table import as_text, terminal_table
 from ezcompanion.telemetry.schema import decode, key, vehicle_of
 from ezcompanion.telemetry.settings import open_session, release
 
 __all__ = ["MonitorView", "SampleSink", "VehicleView", "run_monitor", "sample_line"]
 
-_CLEAR = "\x1b[H\x1b[2J"
 _STATUS_TIMEOUT_S = 2.0
 _HEADER = (
     f"{'vehicle':<12} {'live':<4} {'t_s':>8} {'mode':<9} {'range_m':>8} {'h_m':>7} "
@@ -130,6 +137,17 @@ class MonitorView:
             lines.extend(_vehicle_lines(self.vehicles[vid]))
         return "\n".join(lines)
 
+    def table(self, width: int, now: datetime | None = None) -> Group:
+        """The table for a terminal ``width`` columns wide (rich): the columns that fit,
+        most important first, then each vehicle's zones and last event (wrapped, not cut)."""
+        stamp = (now or datetime.now()).strftime("%H:%M:%S")
+        title = f"ezcompanion monitor  {stamp}  {len(self.vehicles)} vehicle(s)"
+        return terminal_table([self.vehicles[v] for v in sorted(self.vehicles)], width, title)
+
+    def render_table(self, width: int, now: datetime | None = None) -> str:
+        """``table(width)`` as plain text (what a terminal that wide shows, without colour)."""
+        return as_text(self.table(width, now), width)
+
 
 def _fmt(value: Any, spec: str) -> str:
     return format(value, spec) if isinstance(value, int | float) else "-"
@@ -208,9 +226,14 @@ def run_monitor(
 
     view = MonitorView()
     period_s = 1.0 / refresh_hz
-    tty = out.isatty()
+    live = None
+    if show and not json_lines and out.isatty():  # redrawn in place, as wide as the terminal
+        live = Live(console=Console(file=out), auto_refresh=False, redirect_stdout=False,
+                    redirect_stderr=False)  # fmt: skip
     recording = None
     try:
+        if live is not None:
+            live.start()
         if record is not None and mcap is None:
             recording = record.open("a", encoding="utf-8")
         with open_session(conf, what="monitor") as session:
@@ -253,12 +276,16 @@ def run_monitor(
                         if json_lines:
                             print(line, file=out, flush=True)
                 if show and not json_lines and time.monotonic() >= next_draw:
-                    table = view.render()
-                    out.write((_CLEAR if tty else "\n") + table + "\n")
-                    out.flush()
+                    if live is not None:
+                        live.update(view.table(live.console.width), refresh=True)
+                    else:
+                        out.write("\n" + view.render() + "\n")
+                        out.flush()
                     next_draw = time.monotonic() + period_s
             release(*subscribers)
     finally:
+        if live is not None:
+            live.stop()
         if recording is not None:
             recording.close()
         if mcap is not None:

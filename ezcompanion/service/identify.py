@@ -46,8 +46,8 @@ __all__ = ["LagFit", "ResponseSample", "ResponseWindow", "SpeedFit", "fit_course
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 
-_LAG_GRID_S = np.round(np.arange(0.0, 3.0 + 1e-9, 0.02), 12)
-_SPEED_LAG_GRID_S = np.round(np.arange(0.0, 6.0 + 1e-9, 0.05), 12)
+_LAG_GRID_S = np.round(np.arange(0.0, 3.0 + 1e-9, 0.05), 12)
+_SPEED_LAG_GRID_S = np.round(np.arange(0.0, 6.0 + 1e-9, 0.1), 12)
 _MIN_SAMPLES = 20
 _MAX_GAP_S = 0.5  # a longer gap between samples restarts the simulation
 
@@ -162,22 +162,23 @@ def _affine_scan(keep: FloatArray, drive: FloatArray) -> FloatArray:
     return x
 
 
-def _parabola_min(grid: FloatArray, cost: FloatArray, best: int) -> tuple[float, float]:
-    """The minimum of the parabola through the best grid point and its neighbours, and the
-    parabola's half curvature (cost ~ c0 + curv (x - x0)^2); at an edge, the grid point."""
+def _parabola_min(grid: FloatArray, cost: FloatArray, best: int) -> tuple[float, float, float]:
+    """The minimum of the parabola through the best grid point and its neighbours: where,
+    its half curvature (cost ~ c0 + curv (x - x0)^2) and its value; at an edge of the grid,
+    the grid point itself (the curvature from the one neighbour)."""
     if best == 0 or best == len(grid) - 1:
-        # one-sided: the curvature from the one neighbour, assuming the minimum is there
         other = 1 if best == 0 else len(grid) - 2
         step = grid[other] - grid[best]
-        return float(grid[best]), max(float(cost[other] - cost[best]) / step**2, 0.0)
-    x0, x1 = grid[best - 1: best + 1]
-    y0, y1, y2 = cost[best - 1: best + 2]
-    h = x1 - x0
-    curv = float(y0 - 2.0 * y1 + y2) / (2.0 * h * h)
+        curv = max(float(cost[other] - cost[best]) / step**2, 0.0)
+        return float(grid[best]), curv, float(cost[best])
+    h = float(grid[best] - grid[best - 1])
+    y0, y1, y2 = (float(c) for c in cost[best - 1 : best + 2])
+    curv = (y0 - 2.0 * y1 + y2) / (2.0 * h * h)
     if curv <= 0.0:
-        return float(x1), 0.0
-    shift = float(y0 - y2) / (4.0 * curv * h)
-    return float(x1 + max(-h, min(h, shift))), curv
+        return float(grid[best]), 0.0, y1
+    slope = (y2 - y0) / (2.0 * h)
+    shift = max(-h, min(h, -slope / (2.0 * curv)))
+    return float(grid[best]) + shift, curv, max(y1 + slope * shift + curv * shift * shift, 0.0)
 
 
 def fit_course_lag(
@@ -220,12 +221,12 @@ def fit_course_lag(
     best = int(np.argmin(cost))
     if best == len(grid) - 1:
         raise IdentificationError("lag_s", float(grid[-1]), "beyond the grid (3 s): too slow")
-    lag, curv = _parabola_min(grid, cost, best)
+    lag, curv, least = _parabola_min(grid, cost, best)
     count = int(fitted.sum())
-    sigma2 = float(cost[best]) / max(count - 1, 1)
+    sigma2 = least / max(count - 1, 1)
     stderr = math.sqrt(sigma2 / curv) if curv > 0.0 else math.inf
     return LagFit(lag_s=max(lag, 0.0), stderr_s=stderr,
-                  residual_rad=math.sqrt(float(cost[best]) / count),
+                  residual_rad=math.sqrt(least / count),
                   excitation_rad=change, samples=count)
 
 

@@ -31,8 +31,8 @@ from ezcompanion.service.settings import companion_settings
 from sitl_stub import SitlStub, stub_config
 
 # the service's estimate against the stub's truth (docs/field.md)
-LAG_BOUND_S = 0.1
-SPEED_FACTOR_BOUND = 0.03
+LAG_BOUND_S = 0.06
+SPEED_FACTOR_BOUND = 0.01
 
 
 @dataclass
@@ -123,7 +123,7 @@ def test_a_vehicle_slower_than_its_profile_makes_the_law_take_the_measured_lag(
     # the companion says "intercepted" only if the truth agrees
     intercepted, _, miss, clearance, _ = judge_truth(run.service.scenario, tmp_path / "truth.csv")
     assert min(clearance) > 0.0, clearance
-    assert run.outcome.intercepted == intercepted, miss
+    assert intercepted or not run.outcome.intercepted, miss
 
 
 def _stating(lag_s: float) -> Scenario:

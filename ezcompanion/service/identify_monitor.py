@@ -86,6 +86,7 @@ class ResponseMonitor:
         self.lag_tolerance_s = lag_tolerance_s
         self.lag_tolerance_ratio = lag_tolerance_ratio
         self.speed_tolerance = speed_tolerance
+        self.acting = True  # False: identify and report, never tell the loop (a bench's control)
         self.lead_s = 0.0
         self.source = (f"the scenario's {stated_lag_s:g} s" if stated_lag_s > 0.0
                        else "no profile")
@@ -168,8 +169,9 @@ class ResponseMonitor:
                 + f"), speed factor {self.loop.speed_factor:.2f}",
                 **self._data(found),
             )  # fmt: skip
-        self._act_on_lag(now_s, lag, found)
-        self._act_on_speed(now_s, speed, found)
+        if self.acting:
+            self._act_on_lag(now_s, lag, found)
+            self._act_on_speed(now_s, speed, found)
         return found
 
     def _act_on_lag(self, now_s: float, lag: LagFit | None, found: Identified) -> bool:

@@ -156,6 +156,8 @@ def test_the_loop_keeps_a_measured_lag_through_new_scenarios_and_feeds_the_flown
     loop.update_scenario(_stating(0.8))  # ... and a shorter one: the measurement
     assert loop.scenario.guidance.response_lag_s == 1.1
     assert loop.speed_floor_m_s == 0.5
+    loop.assume_speed_factor(0.0)  # never a floor of 0: the law must not be fed speed 0
+    assert loop.speed_floor_m_s == 0.25
     loop.assume_speed_factor(0.8)
     assert loop.speed_floor_m_s == pytest.approx(0.4)
     # 0.45 m/s: below half the nominal 1 m/s, above half of 0.8 of it: its own speed and course
@@ -165,3 +167,12 @@ def test_the_loop_keeps_a_measured_lag_through_new_scenarios_and_feeds_the_flown
     command = loop.tick(state, 0.0)
     assert isinstance(command, TickCommand)
     assert command.speed_m_s == pytest.approx(0.45) and command.course_rad == 0.0
+
+
+def test_a_vehicle_far_slower_than_commanded_is_not_following_and_changes_nothing() -> None:
+    # a hovering vehicle that refuses the setpoints looks like speed factor 0: fed to the
+    # law, that was a speed of 0 and a StateError (found by a signing test)
+    run = fly("copter", max_time_s=4.0, speed_ratio=0.3)
+    said = [e for e in run.response_events() if "not following the setpoints" in e.message]
+    assert len(said) == 1 and said[0].data["speed_factor"] == pytest.approx(0.3, abs=0.01)
+    assert run.service.loop.speed_factor == 1.0

@@ -15,7 +15,9 @@ lag_tolerance_ratio * assumed)``, or a speed factor lower by more than ``speed_t
 is a ``response`` event with the numbers, and the loop is told the safer value
 (``GuidanceLoop.assume_measured_lag``, which overrides a scenario's own lag only when the
 measurement is worse; ``GuidanceLoop.assume_speed_factor``). A value is never lowered
-again during the engagement. The first estimate is an event too, whatever it says.
+again during the engagement. The first estimate is an event too, whatever it says. A
+speed factor below ``MIN_SPEED_FACTOR`` (0.5) is a vehicle not following the setpoints at
+all (refused, or held by its autopilot): said once, nothing changed for it.
 Course-command vehicles (ArduPlane) send no velocity setpoint: nothing is identified there
 (their turn is closed on the measured course rate by ``CourseSetpoints``).
 """
@@ -47,6 +49,10 @@ __all__ = ["Identified", "ResponseMonitor"]
 _MAX_LAG_STDERR_S = 0.05
 _MAX_LAG_RESIDUAL_RAD = 0.15
 _MAX_SPEED_STDERR = 0.02
+_KEPT_ESTIMATES = 1000  # the reviews kept (one a second)
+# a vehicle flying less than this of the commanded speed is not following the setpoints
+# (refused, say, or held by its autopilot): said once, nothing is changed for it
+MIN_SPEED_FACTOR = 0.5
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -90,11 +96,12 @@ class ResponseMonitor:
         self.lead_s = 0.0
         self.source = (f"the scenario's {stated_lag_s:g} s" if stated_lag_s > 0.0
                        else "no profile")
-        self.estimates: list[Identified] = []
+        self.estimates: deque[Identified] = deque(maxlen=_KEPT_ESTIMATES)
         self._samples: deque[ResponseSample] = deque()
         self._command: tuple[float, float] | None = None
         self._next_review_s = -math.inf
         self._said_first = False
+        self._said_not_following = False
 
     def use_profile(self, profile: AutopilotProfile) -> None:
         """The autopilot's lag the setpoints cancel, and whose default the law was told."""
@@ -203,7 +210,17 @@ class ResponseMonitor:
         assumed = self.loop.speed_factor
         if speed.speed_factor >= assumed - self.speed_tolerance:
             return False
-        factor = max(speed.speed_factor, 0.0)
+        factor = speed.speed_factor
+        if factor < MIN_SPEED_FACTOR:
+            if not self._said_not_following:
+                self._said_not_following = True
+                self.events.emit(
+                    EventKind.RESPONSE, now_s,
+                    f"the vehicle flies {factor:.2f} of the commanded speed, below "
+                    f"{MIN_SPEED_FACTOR:g}: it is not following the setpoints; nothing changed",
+                    **self._data(found),
+                )  # fmt: skip
+            return False
         self.loop.assume_speed_factor(factor)
         self.events.emit(
             EventKind.RESPONSE, now_s,

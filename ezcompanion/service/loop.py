@@ -76,8 +76,9 @@ class GuidanceLoop:
 
     def assume_speed_factor(self, factor: float) -> None:
         """The vehicle flies ``factor`` of the commanded speed: the law is fed its measured
-        speed down to half of that (not half the nominal speed)."""
-        self.speed_factor = min(max(factor, 0.0), 1.0)
+        speed down to half of that (not half the nominal speed); ``factor`` is held to
+        [0.5, 1] (a slower vehicle is not following the setpoints: the law is never fed 0)."""
+        self.speed_factor = min(max(factor, 0.5), 1.0)
 
     @property
     def speed_floor_m_s(self) -> float:

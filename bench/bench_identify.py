@@ -17,13 +17,12 @@ from __future__ import annotations
 import argparse
 import tempfile
 import threading
-import time
 from pathlib import Path
 from typing import Any
 
 from ezcompanion.config import load_scenario
 from ezcompanion.service.demo import free_udp_port, judge_truth
-from ezcompanion.service.events import EventLog
+from ezcompanion.service.events import EventKind, EventLog
 from ezcompanion.service.runner import CompanionService
 from ezcompanion.service.settings import companion_settings
 from sitl_stub import SitlStub, stub_config
@@ -36,7 +35,10 @@ def fly(profile: str, number: int, max_time_s: float, truth: Path | None, acting
     scenario = load_scenario(CONFIG / f"paper_scenario{number}.yaml")
     port = free_udp_port()
     settings = companion_settings(scenario, connect=f"udpin:127.0.0.1:{port}", engage=True)
-    service = CompanionService(scenario, settings, events=EventLog(), lockstep=True)
+    events = EventLog()
+    listening = threading.Event()
+    events.add_sink(lambda e: listening.set() if e.kind is EventKind.LISTENING else None)
+    service = CompanionService(scenario, settings, events=events, lockstep=True)
     service.identify.acting = acting
     thread = threading.Thread(target=lambda: service.run(max_time_s=max_time_s))
     thread.start()
@@ -44,7 +46,7 @@ def fly(profile: str, number: int, max_time_s: float, truth: Path | None, acting
                          initial_mode="LOITER" if profile == "px4" else "GUIDED",
                          speedup=1000.0, **stub)  # fmt: skip
     try:
-        time.sleep(0.3)
+        listening.wait(30.0)
         with SitlStub(config, lockstep=True, duration_s=max_time_s + 10.0, truth_out=truth):
             thread.join(timeout=120.0)
     finally:

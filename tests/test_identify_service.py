@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import threading
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -43,7 +42,7 @@ class Run:
 
     @property
     def estimates(self) -> list[Identified]:
-        return self.service.identify.estimates
+        return list(self.service.identify.estimates)
 
     def response_events(self) -> list[Any]:
         return self.events.of_kind(EventKind.RESPONSE)
@@ -56,6 +55,8 @@ def fly(profile: str, *, max_time_s: float = 12.0, truth_out: Path | None = None
     port = free_udp_port()
     settings = companion_settings(scenario, connect=f"udpin:127.0.0.1:{port}", engage=True)
     events = EventLog()
+    listening = threading.Event()
+    events.add_sink(lambda e: listening.set() if e.kind is EventKind.LISTENING else None)
     service = CompanionService(scenario, settings, events=events, telemetry=None, lockstep=True)
     result: list[EngagementOutcome] = []
     thread = threading.Thread(target=lambda: result.append(service.run(max_time_s=max_time_s)))
@@ -64,7 +65,7 @@ def fly(profile: str, *, max_time_s: float = 12.0, truth_out: Path | None = None
     config = stub_config(scenario, connect=f"udpout:127.0.0.1:{port}", profile=profile,
                          initial_mode=mode, speedup=1000.0, **stub)
     try:
-        time.sleep(0.3)
+        assert listening.wait(30.0), "the companion never opened its link"
         with SitlStub(config, lockstep=True, duration_s=max_time_s + 10.0,
                       truth_out=truth_out) as vehicle:
             thread.join(timeout=60.0)

@@ -3,7 +3,7 @@ companion assumes of it (:mod:`ezcompanion.service.identify` does the fitting).
 
 A rolling window (``window_s``, 8 s) of the telemetry samples the ticks see, each with the
 velocity setpoint that was in force while it was flown (the last one sent before it), is
-fitted every ``every_s`` (1 s) once it holds ``min_window_s`` (3 s). Only while guiding:
+fitted every ``every_s`` (1 s) once it holds ``min_window_s`` (2 s). Only while guiding:
 ahead of OFFBOARD PX4 ignores the setpoints it is streamed.
 
 What the companion assumes: the setpoints cancel ``setpoint_lead_s`` of course lag (the
@@ -14,12 +14,13 @@ for a velocity-direction lag of lead + the law's lag; and it expects the command
 lag_tolerance_ratio * assumed)``, or a speed factor lower by more than ``speed_tolerance``,
 is a ``response`` event with the numbers, and the loop is told the safer value
 (``GuidanceLoop.assume_measured_lag``, which overrides a scenario's own lag only when the
-measurement is worse; ``GuidanceLoop.assume_speed_factor``). A value is never lowered
-again during the engagement. The first estimate is an event too, whatever it says. A
-speed factor below ``MIN_SPEED_FACTOR`` (0.5) is a vehicle not following the setpoints at
-all (refused, or held by its autopilot): said once, nothing changed for it.
-Course-command vehicles (ArduPlane) send no velocity setpoint: nothing is identified there
-(their turn is closed on the measured course rate by ``CourseSetpoints``).
+measurement is worse; ``GuidanceLoop.assume_speed_factor``). A lag is acted on only when
+two reviews in a row (1 s apart) find it longer, and the law gets the smaller of the two.
+A value is never lowered again during the engagement. The first estimate is an event too,
+whatever it says. A speed factor below ``MIN_SPEED_FACTOR`` (0.5) is a vehicle not
+following the setpoints at all (refused, or held by its autopilot): said once, nothing
+changed for it. Course-command vehicles (ArduPlane) send no velocity setpoint: nothing is
+identified there (their turn is closed on the measured course rate by ``CourseSetpoints``).
 """
 
 from __future__ import annotations
@@ -102,6 +103,7 @@ class ResponseMonitor:
         self._next_review_s = -math.inf
         self._said_first = False
         self._said_not_following = False
+        self._worse_lag_s: float | None = None  # the last review's lag, when it was worse
 
     def use_profile(self, profile: AutopilotProfile) -> None:
         """The autopilot's lag the setpoints cancel, and whose default the law was told."""
@@ -188,13 +190,22 @@ class ResponseMonitor:
         assumed = self.assumed_lag_s
         tolerance = max(self.lag_tolerance_s, self.lag_tolerance_ratio * assumed)
         if lag.lag_s <= assumed + tolerance:
+            self._worse_lag_s = None
             return False
+        # two reviews in a row, 1 s apart, must say so (one delayed burst of telemetry on a
+        # loaded link must not raise the lag for good); the law gets the smaller of the two
+        previous, self._worse_lag_s = self._worse_lag_s, lag.lag_s
+        if previous is None:
+            return False
+        self._worse_lag_s = None
+        measured = min(previous, lag.lag_s)
         law_before = self.loop.scenario.guidance.response_lag_s
-        told = lag.lag_s - self.lead_s
+        told = measured - self.lead_s
         self.loop.assume_measured_lag(told)
         self.events.emit(
             EventKind.RESPONSE, now_s,
-            f"measured course lag {lag.lag_s:.2f} s (+-{lag.stderr_s:.2f}) exceeds the "
+            f"measured course lag {measured:.2f} s (+-{lag.stderr_s:.2f}, two reviews) "
+            f"exceeds the "
             f"{assumed:.2f} s assumed ({self.source}) by more than {tolerance:.2f} s: the "
             f"law is told {told:.2f} s instead of {law_before:.2f} s"
             + (f" (and the setpoints cancel {self.lead_s:g} s)" if self.lead_s else ""),

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from ezcompanion.errors import IdentificationError
@@ -112,6 +112,7 @@ def test_a_first_order_lag_and_a_speed_factor_are_recovered_within_the_bounds(
 
 
 @settings(max_examples=15, deadline=None)
+@example(lag_s=1.5, factor=0.71875, speed_lag_s=0.625, seed=602)  # 1.626 s, start not fitted
 @given(lag_s=st.floats(0.0, 1.5), factor=st.floats(0.7, 1.0), speed_lag_s=st.floats(0.2, 2.0),
        seed=st.integers(0, 2**16))
 def test_from_hover_the_slow_samples_are_left_out_and_both_are_still_recovered(
@@ -157,4 +158,4 @@ def test_a_gap_in_the_samples_restarts_the_fit_instead_of_bridging_it() -> None:
         "command_east_m_s")))
     lag = fit_course_lag(holed)
     assert abs(lag.lag_s - 0.6) <= LAG_BOUND_S + LAG_BOUND_RATIO * 0.6
-    assert lag.samples == len(holed) - 2  # the first sample and the one after the gap
+    assert lag.samples == len(holed)  # two runs, each from its own (fitted) start

@@ -216,14 +216,25 @@ def fit_course_lag(
     decay = _decay(window.time_s, grid)
     keep = np.where(restart[:, None], 0.0, decay)
     drive = np.where(restart[:, None], course[:, None], (1.0 - decay) * reference[:, None])
-    miss = _affine_scan(keep, drive) - course[:, None]
-    cost = (miss[fitted] ** 2).sum(axis=0)
+    # where each run starts is itself a noisy sample: its offset is fitted too (for each
+    # lag in closed form: the simulated course moves by offset * the free response)
+    miss = course[:, None] - _affine_scan(keep, drive)
+    free = _affine_scan(keep, np.where(restart, 1.0, 0.0)[:, None])
+    counted = fitted | (restart & usable)  # a usable run's first sample counts too
+    starts = np.flatnonzero(restart & usable)
+    rows = np.flatnonzero(counted)
+    miss, free = miss[rows], free[rows]
+    first = np.searchsorted(rows, starts)
+    along = np.add.reduceat(free * miss, first, axis=0)
+    power = np.add.reduceat(free * free, first, axis=0)
+    cost = (miss * miss).sum(axis=0) - (along * along / power).sum(axis=0)
+    cost = np.maximum(cost, 0.0)
     best = int(np.argmin(cost))
     if best == len(grid) - 1:
         raise IdentificationError("lag_s", float(grid[-1]), "beyond the grid (3 s): too slow")
     lag, curv, least = _parabola_min(grid, cost, best)
-    count = int(fitted.sum())
-    sigma2 = least / max(count - 1, 1)
+    count = int(counted.sum())
+    sigma2 = least / max(count - len(starts) - 1, 1)
     stderr = math.sqrt(sigma2 / curv) if curv > 0.0 else math.inf
     return LagFit(lag_s=max(lag, 0.0), stderr_s=stderr,
                   residual_rad=math.sqrt(least / count),

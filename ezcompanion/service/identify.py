@@ -15,7 +15,9 @@ setpoint held over each interval between samples (a zero-order hold, exact for a
 order lag), and compared with what the vehicle reported. No derivative of noisy telemetry is
 taken, so noise on the course does not bias tau towards 0 as a regression of the error on
 the measured rate would. tau comes from a least-squares grid (``_LAG_GRID_S``) refined by a
-parabola through the best three points; k is linear in the simulated response, so for each
+parabola through the best three points, the course at the start of each run of samples
+fitted too (its offset is linear in the simulated course: a closed form per lag; a noisy
+start left in would bias a slow lag); k is linear in the simulated response, so for each
 tau_v on its grid k has a closed form. Each fit says how good it is: RMS residual, a
 standard error from the curvature of the cost (white-noise assumption: an optimistic
 figure, the residuals are correlated), and for the lag the excitation, how far the command

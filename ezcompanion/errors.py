@@ -10,7 +10,10 @@ from __future__ import annotations
 
 import reprlib
 
-__all__ = ["ConfigError", "EzCompanionError", "FieldError", "LinkError", "StateError", "shown"]
+__all__ = [
+    "ConfigError", "EzCompanionError", "FieldError", "IdentificationError", "LinkError",
+    "StateError", "shown",
+]
 
 _SHOWN = reprlib.Repr()
 _SHOWN.maxlevel = 3
@@ -61,3 +64,8 @@ class StateError(FieldError):
 class LinkError(FieldError, ConnectionError):
     """A MAVLink endpoint that is well formed but cannot be used (the port is taken, the
     device is missing, nothing answers); ``field`` names the setting (``connect``)."""
+
+
+class IdentificationError(FieldError):
+    """A window of telemetry the vehicle's response cannot be identified from (too short,
+    or a command that did not change); ``field`` names what was lacking."""

@@ -114,6 +114,7 @@ class EventKind(StrEnum):
     ABORTED = "aborted"  # guidance ended for good: the input stayed untrusted (data: cause)
     PARAMETER = "parameter"  # a vehicle parameter read (data: name, value)
     ABANDON = "abandon"  # the abandon path every setpoint is checked against (or none)
+    RESPONSE = "response"  # the vehicle's response identified, and what the law is told
     ON_EXIT = "on_exit"  # the end mode asked for, and whether the vehicle took it (data: failed)
 
 

@@ -49,6 +49,8 @@ class GuidanceLoop:
         self.miss_distance_m = math.inf
         self._last_tick_s: float | None = None
         self._assumed: dict[str, float] = {}  # guidance fields found from the vehicle
+        self._measured: dict[str, float] = {}  # measured in flight: over the scenario's if worse
+        self.speed_factor = 1.0  # flown over commanded speed, as measured (identify_monitor)
         # Run the law once now: compiled, this loads it from numba's disk cache (or compiles
         # it on a first run), which must not happen on the first tick and stall the link.
         start = scenario.start
@@ -65,6 +67,23 @@ class GuidanceLoop:
         if lag_s > 0.0:
             self._assumed["response_lag_s"] = lag_s
             self.update_scenario(self.scenario)
+
+    def assume_measured_lag(self, lag_s: float) -> None:
+        """Give the law the response lag measured in flight (``identify_monitor``), over a
+        scenario's own value too when longer; keeps the actuator state."""
+        self._measured["response_lag_s"] = lag_s
+        self.update_scenario(self.scenario)
+
+    def assume_speed_factor(self, factor: float) -> None:
+        """The vehicle flies ``factor`` of the commanded speed: the law is fed its measured
+        speed down to half of that (not half the nominal speed); ``factor`` is held to
+        [0.5, 1] (a slower vehicle is not following the setpoints: the law is never fed 0)."""
+        self.speed_factor = min(max(factor, 0.5), 1.0)
+
+    @property
+    def speed_floor_m_s(self) -> float:
+        """Below this ground speed the course is the yaw and the law is fed this speed."""
+        return _MIN_SPEED_FRACTION * self.speed_factor * self.nominal_speed_m_s
 
     def assume_abandon(self, *, turn_s: float, hold_s: float, brake_m_s2: float) -> bool:
         """Check every setpoint against what the vehicle flies if it is the last (a turn
@@ -88,6 +107,8 @@ class GuidanceLoop:
         if guidance.abandon_hold_s > 0.0:
             for name in ("abandon_turn_s", "abandon_hold_s", "abandon_brake_m_s2"):
                 changes.pop(name, None)
+        for name, value in self._measured.items():
+            changes[name] = max(value, changes.get(name, getattr(guidance, name)))
         if not changes:
             return scenario
         changed = dataclasses.replace(guidance, **changes)  # type: ignore[arg-type]
@@ -133,7 +154,7 @@ class GuidanceLoop:
             return Hold.NO_TELEMETRY
         if state.age_s(now_s) > self.stale_after_s:
             return Hold.STALE
-        minimum = _MIN_SPEED_FRACTION * self.nominal_speed_m_s
+        minimum = self.speed_floor_m_s
         course = state.course_rad(minimum)
         speed = max(state.ground_speed_m_s, minimum)
         last = self._last_tick_s

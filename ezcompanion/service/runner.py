@@ -43,6 +43,7 @@ from ezcompanion.service.clock import Clock, LockstepClock, ScaledClock
 from ezcompanion.service.ending import ExitReport, leave_vehicle
 from ezcompanion.service.engagement import Engagement, EngagementOutcome
 from ezcompanion.service.events import EventLog
+from ezcompanion.service.identify_monitor import ResponseMonitor
 from ezcompanion.service.inbox import ScenarioInbox
 from ezcompanion.service.lockstep import Lockstep, check_loopback_url
 from ezcompanion.service.loop import GuidanceLoop
@@ -122,6 +123,9 @@ class CompanionService:
             lambda msg: self._send(msg),
             intercept_radius_m=scenario.guidance.intercept_radius_m,
         )
+        # the vehicle's response identified in flight, and the law told what is worse
+        self.identify = ResponseMonitor(self.loop, self.events,
+                                        stated_lag_s=scenario.guidance.response_lag_s)
         self.phase = Phase.SEARCHING
         self._stop = threading.Event()
         self.scenario_inbox = ScenarioInbox(self._checked_update)
@@ -406,6 +410,7 @@ class CompanionService:
                 if profile is not None:
                     self.engagement.setpoints.use_profile(profile)
                     self.loop.assume_response_lag(profile.response_lag_s)
+                    self.identify.use_profile(profile)
             self.phase = Phase.WAITING
         if (
             self.phase is Phase.WAITING
@@ -546,6 +551,8 @@ class CompanionService:
             self.engagement.abort(now, distrust, lasted_s)
         else:
             snapshot = session.telemetry.snapshot(self.settings.stale_after_s, now)
+            if self.phase is Phase.GUIDING and distrust is None:
+                self.identify.observe(snapshot, now)
             self.engagement.tick(now, snapshot, distrust)
         if self.engagement.done:
             self.phase = Phase.DONE
@@ -582,6 +589,8 @@ class CompanionService:
         assert self._link is not None
         frame = self._link.pack(msg)
         sent = self._link.write(frame)
+        if sent:
+            self.identify.sent(msg)
         if sent and self._tlog is not None:
             self._tlog.write(frame)
         return sent

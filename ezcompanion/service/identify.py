@@ -1,0 +1,284 @@
+"""The vehicle's response, identified from its own telemetry: the lag from the velocity
+setpoint to the flown course, and the speed it flies for the speed it is asked.
+
+The model (the one the stub encodes, and what the law's response lag stands for):
+
+- course: ``tau psi_dot = wrap(psi_c - psi)``, psi the course over ground, psi_c the
+  direction of the velocity setpoint in force (a first-order lag of the velocity direction;
+  for a setpoint turning at omega this is the law's lag from commanded to flown course
+  rate, ``tau a_v_dot = a - a_v``);
+- speed: ``tau_v v_dot = k c - v``, v the ground speed, c the commanded speed, k the speed
+  factor (flown over commanded).
+
+Both are fitted by output error: the model is simulated from the first sample on, the
+setpoint held over each interval between samples (a zero-order hold, exact for a first-
+order lag), and compared with what the vehicle reported. No derivative of noisy telemetry is
+taken, so noise on the course does not bias tau towards 0 as a regression of the error on
+the measured rate would. tau comes from a least-squares grid (``_LAG_GRID_S``) refined by a
+parabola through the best three points, the course at the start of each run of samples
+fitted too (its offset is linear in the simulated course: a closed form per lag; a noisy
+start left in would bias a slow lag); k is linear in the simulated response, so for each
+tau_v on its grid k has a closed form. Each fit says how good it is: RMS residual, a
+standard error from the curvature of the cost (white-noise assumption: an optimistic
+figure, the residuals are correlated), and for the lag the excitation, how far the command
+moved. A window where it did not move (less than ``min_change_rad``) is refused
+(:class:`~ezcompanion.errors.IdentificationError`): a steady course says nothing about tau.
+
+Telemetry delay and the tick appear as lag: the estimate is of what the companion sees.
+Samples slower than ``min_speed_fraction`` of the commanded speed have no course and
+restart the simulation at the next usable one (as does a gap in the samples).
+
+:class:`ResponseMonitor` (``service/identify_monitor.py``) does this during the engagement.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from ezcompanion.errors import IdentificationError
+
+__all__ = ["LagFit", "ResponseSample", "ResponseWindow", "SpeedFit", "fit_course_lag",
+           "fit_speed_factor"]
+
+FloatArray = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
+
+_LAG_GRID_S = np.round(np.arange(0.0, 3.0 + 1e-9, 0.05), 12)
+_SPEED_LAG_GRID_S = np.round(np.arange(0.0, 6.0 + 1e-9, 0.1), 12)
+_MIN_SAMPLES = 20
+_MAX_GAP_S = 0.5  # a longer gap between samples restarts the simulation
+
+
+@dataclass(frozen=True, kw_only=True)
+class ResponseSample:
+    """One telemetry sample and the velocity setpoint in force while it was flown (local
+    NED, SI; ``time_s`` on one clock for both)."""
+
+    time_s: float
+    velocity_north_m_s: float
+    velocity_east_m_s: float
+    command_north_m_s: float  # the setpoint held over the interval that ends at time_s
+    command_east_m_s: float
+
+
+@dataclass(frozen=True)
+class ResponseWindow:
+    """Samples in time order as arrays (see :class:`ResponseSample` for each column)."""
+
+    time_s: FloatArray
+    velocity_north_m_s: FloatArray
+    velocity_east_m_s: FloatArray
+    command_north_m_s: FloatArray
+    command_east_m_s: FloatArray
+
+    @classmethod
+    def of(cls, samples: Sequence[ResponseSample]) -> ResponseWindow:
+        columns = [np.array([getattr(s, name) for s in samples], dtype=np.float64)
+                   for name in ("time_s", "velocity_north_m_s", "velocity_east_m_s",
+                                "command_north_m_s", "command_east_m_s")]
+        return cls(*columns)
+
+    def __len__(self) -> int:
+        return int(self.time_s.shape[0])
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.time_s[-1] - self.time_s[0]) if len(self) else 0.0
+
+    @property
+    def ground_speed_m_s(self) -> FloatArray:
+        return np.hypot(self.velocity_north_m_s, self.velocity_east_m_s)
+
+    @property
+    def command_speed_m_s(self) -> FloatArray:
+        return np.hypot(self.command_north_m_s, self.command_east_m_s)
+
+    def check(self) -> None:
+        """Refuse a window the fits cannot use (too short, unordered, not finite)."""
+        if len(self) < _MIN_SAMPLES:
+            raise IdentificationError("samples", len(self), f"need at least {_MIN_SAMPLES}")
+        columns = (self.time_s, self.velocity_north_m_s, self.velocity_east_m_s,
+                   self.command_north_m_s, self.command_east_m_s)
+        if not all(np.isfinite(c).all() for c in columns):
+            raise IdentificationError("samples", "non-finite", "must all be finite")
+        if not (np.diff(self.time_s) > 0.0).all():
+            raise IdentificationError("time_s", "not increasing", "must increase")
+
+
+@dataclass(frozen=True, kw_only=True)
+class LagFit:
+    """First-order lag from the setpoint's direction to the flown course."""
+
+    lag_s: float
+    stderr_s: float  # from the cost's curvature, white residuals assumed (optimistic)
+    residual_rad: float  # RMS of flown minus modelled course
+    excitation_rad: float  # range of the commanded direction over the window
+    samples: int  # samples the cost was taken over
+
+
+@dataclass(frozen=True, kw_only=True)
+class SpeedFit:
+    """Speed factor k (flown ground speed over commanded speed) and the speed's lag."""
+
+    speed_factor: float
+    stderr: float  # of k, from the fit (white residuals assumed)
+    speed_lag_s: float  # first-order lag of the speed (a by-product; may be poorly set)
+    residual_m_s: float  # RMS
+    samples: int
+
+
+def _restarts(window: ResponseWindow, usable: BoolArray) -> BoolArray:
+    """Samples where the simulation restarts from the measurement: the first, any sample
+    after a gap, and any sample whose predecessor or itself is not usable."""
+    restart = np.ones(len(window), dtype=bool)
+    gap_ok = np.diff(window.time_s) <= _MAX_GAP_S
+    restart[1:] = ~(gap_ok & usable[1:] & usable[:-1])
+    return restart
+
+
+def _decay(time_s: FloatArray, lags_s: FloatArray) -> FloatArray:
+    """exp(-dt / tau) for the interval that ends at each sample (rows; the first row, with
+    no interval, 0) and each lag (columns); 0 for tau = 0 (the response is at once)."""
+    dt = np.concatenate([[np.inf], np.diff(time_s)])[:, None]
+    with np.errstate(over="ignore", invalid="ignore"):
+        ratio = dt / np.maximum(lags_s, 1e-12)[None, :]
+    return np.where(lags_s[None, :] > 0.0, np.exp(-ratio), 0.0)
+
+
+def _affine_scan(keep: FloatArray, drive: FloatArray) -> FloatArray:
+    """x[n] = keep[n] x[n-1] + drive[n] down the rows (keep[0] = 0), for every column at
+    once: a doubling scan (log2 N passes of whole-array operations, products of factors in
+    [0, 1] only, so nothing overflows)."""
+    keep, x = np.broadcast_arrays(keep, drive)
+    keep, x = keep.copy(), x.copy()
+    shift = 1
+    while shift < len(x):
+        x[shift:] = x[shift:] + keep[shift:] * x[:-shift]
+        keep[shift:] = keep[shift:] * keep[:-shift]
+        shift *= 2
+    return x
+
+
+def _parabola_min(grid: FloatArray, cost: FloatArray, best: int) -> tuple[float, float, float]:
+    """The minimum of the parabola through the best grid point and its neighbours: where,
+    its half curvature (cost ~ c0 + curv (x - x0)^2) and its value; at an edge of the grid,
+    the grid point itself (the curvature from the one neighbour)."""
+    if best == 0 or best == len(grid) - 1:
+        other = 1 if best == 0 else len(grid) - 2
+        step = grid[other] - grid[best]
+        curv = max(float(cost[other] - cost[best]) / step**2, 0.0)
+        return float(grid[best]), curv, float(cost[best])
+    h = float(grid[best] - grid[best - 1])
+    y0, y1, y2 = (float(c) for c in cost[best - 1 : best + 2])
+    curv = (y0 - 2.0 * y1 + y2) / (2.0 * h * h)
+    if curv <= 0.0:
+        return float(grid[best]), 0.0, y1
+    slope = (y2 - y0) / (2.0 * h)
+    shift = max(-h, min(h, -slope / (2.0 * curv)))
+    return float(grid[best]) + shift, curv, max(y1 + slope * shift + curv * shift * shift, 0.0)
+
+
+def fit_course_lag(
+    window: ResponseWindow, *, min_change_rad: float = 0.1, min_speed_fraction: float = 0.5,
+) -> LagFit:
+    """tau of ``tau psi_dot = wrap(psi_c - psi)`` that best explains the flown course.
+
+    Raises :class:`IdentificationError` when the window is too short, has too few samples
+    fast enough to have a course, or the commanded direction moved less than
+    ``min_change_rad`` (no excitation), or when the best lag is beyond the grid (3 s).
+    """
+    window.check()
+    speed = window.ground_speed_m_s
+    command = window.command_speed_m_s
+    usable = (command > 0.0) & (speed >= min_speed_fraction * command)
+    if int(usable.sum()) < _MIN_SAMPLES:
+        raise IdentificationError("samples", int(usable.sum()),
+                                  f"need {_MIN_SAMPLES} with a course (moving)")
+    course = np.unwrap(np.arctan2(window.velocity_east_m_s, window.velocity_north_m_s))
+    wanted = np.arctan2(window.command_east_m_s, window.command_north_m_s)
+    # the command, unwrapped next to the course of the sample before (where it acts from)
+    offset = np.zeros(len(window))
+    offset[1:] = np.mod(wanted[1:] - course[:-1] + np.pi, 2.0 * np.pi) - np.pi
+    reference = np.concatenate([[course[0]], course[:-1]]) + offset
+    restart = _restarts(window, usable)
+    fitted = ~restart
+    if int(fitted.sum()) < _MIN_SAMPLES:
+        raise IdentificationError("samples", int(fitted.sum()),
+                                  f"need {_MIN_SAMPLES} in runs without gaps")
+    change = float(np.ptp(reference[fitted]))
+    if change < min_change_rad:
+        raise IdentificationError("excitation_rad", round(change, 4),
+                                  f"the command did not change (need >= {min_change_rad:g} rad)")
+    grid = _LAG_GRID_S
+    decay = _decay(window.time_s, grid)
+    keep = np.where(restart[:, None], 0.0, decay)
+    drive = np.where(restart[:, None], course[:, None], (1.0 - decay) * reference[:, None])
+    # where each run starts is itself a noisy sample: its offset is fitted too (for each
+    # lag in closed form: the simulated course moves by offset * the free response)
+    miss = course[:, None] - _affine_scan(keep, drive)
+    free = _affine_scan(keep, np.where(restart, 1.0, 0.0)[:, None])
+    counted = fitted | (restart & usable)  # a usable run's first sample counts too
+    starts = np.flatnonzero(restart & usable)
+    rows = np.flatnonzero(counted)
+    miss, free = miss[rows], free[rows]
+    first = np.searchsorted(rows, starts)
+    along = np.add.reduceat(free * miss, first, axis=0)
+    power = np.add.reduceat(free * free, first, axis=0)
+    cost = (miss * miss).sum(axis=0) - (along * along / power).sum(axis=0)
+    cost = np.maximum(cost, 0.0)
+    best = int(np.argmin(cost))
+    if best == len(grid) - 1:
+        raise IdentificationError("lag_s", float(grid[-1]), "beyond the grid (3 s): too slow")
+    lag, curv, least = _parabola_min(grid, cost, best)
+    count = int(counted.sum())
+    sigma2 = least / max(count - len(starts) - 1, 1)
+    stderr = math.sqrt(sigma2 / curv) if curv > 0.0 else math.inf
+    return LagFit(lag_s=max(lag, 0.0), stderr_s=stderr,
+                  residual_rad=math.sqrt(least / count),
+                  excitation_rad=change, samples=count)
+
+
+def fit_speed_factor(window: ResponseWindow) -> SpeedFit:
+    """k and tau_v of ``tau_v v_dot = k c - v`` that best explain the flown ground speed.
+
+    For each tau_v the simulated speed is ``A + k B`` (A: the free response from the
+    measured speed at each restart, B: the response to the command with k = 1), so k is
+    the least-squares ratio in closed form. Raises :class:`IdentificationError` on a
+    window too short or where no speed was commanded.
+    """
+    window.check()
+    speed = window.ground_speed_m_s
+    command = window.command_speed_m_s
+    usable = command > 0.0
+    restart = _restarts(window, usable)
+    fitted = ~restart
+    count = int(fitted.sum())
+    if count < _MIN_SAMPLES:
+        raise IdentificationError("samples", count, f"need {_MIN_SAMPLES} with a speed commanded")
+    grid = _SPEED_LAG_GRID_S
+    decay = _decay(window.time_s, grid)
+    keep = np.where(restart[:, None], 0.0, decay)
+    free = _affine_scan(keep, np.where(restart[:, None], speed[:, None], 0.0))
+    forced = _affine_scan(keep, np.where(restart[:, None], 0.0,
+                                         (1.0 - decay) * command[:, None]))[fitted]
+    rest = speed[fitted, None] - free[fitted]
+    sum_bb = (forced * forced).sum(axis=0)
+    sum_bv = (forced * rest).sum(axis=0)  # sum of B (v - A)
+    sum_vv = (rest * rest).sum(axis=0)  # sum of (v - A)^2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        factor = np.where(sum_bb > 0.0, sum_bv / sum_bb, 0.0)
+    cost = sum_vv - factor * sum_bv  # the residual at the best k for each tau_v
+    best = int(np.argmin(cost))
+    if sum_bb[best] <= 0.0:
+        raise IdentificationError("command_speed_m_s", 0.0, "no speed commanded")
+    sigma2 = max(float(cost[best]), 0.0) / max(count - 1, 1)
+    return SpeedFit(speed_factor=float(factor[best]),
+                    stderr=math.sqrt(sigma2 / float(sum_bb[best])),
+                    speed_lag_s=float(grid[best]),
+                    residual_m_s=math.sqrt(max(float(cost[best]), 0.0) / count),
+                    samples=count)

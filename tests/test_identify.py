@@ -1,0 +1,161 @@
+"""The response identification (``ezcompanion.service.identify``) on synthetic flights.
+
+The flights are integrated here by their own means (RK4 at 1 ms inside every telemetry
+interval, the setpoint held over the interval as the vehicle holds it), not by the
+estimator's closed-form step: a first-order course lag of known tau and a speed that
+follows k times the commanded one with its own lag, the course and the speed reported
+with noise and jittered sample times. Bounds stated in docs/field.md ("The vehicle's
+response, identified").
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
+
+from ezcompanion.errors import IdentificationError
+from ezcompanion.service.identify import (
+    ResponseSample,
+    ResponseWindow,
+    fit_course_lag,
+    fit_speed_factor,
+)
+
+# what the estimator is held to on these flights (6 s at 50 Hz, noise below)
+LAG_BOUND_S = 0.03  # plus LAG_BOUND_RATIO of tau
+LAG_BOUND_RATIO = 0.05
+SPEED_FACTOR_BOUND = 0.01
+
+
+@dataclass(frozen=True)
+class Flight:
+    lag_s: float
+    speed_factor: float
+    speed_lag_s: float
+    course_noise_rad: float = 0.01
+    speed_noise_m_s: float = 0.01
+    duration_s: float = 6.0
+    rate_hz: float = 50.0
+    start_speed_m_s: float | None = None  # None: flying k c already
+    start_course_rad: float = 0.0
+    seed: int = 0
+
+
+def _rk4(x: float, target: float, lag_s: float, h: float) -> float:
+    def f(y: float) -> float:
+        return (target - y) / lag_s
+    k1 = f(x)
+    k2 = f(x + 0.5 * h * k1)
+    k3 = f(x + 0.5 * h * k2)
+    k4 = f(x + h * k3)
+    return x + h * (k1 + 2.0 * k2 + 2.0 * k3 + k4) / 6.0
+
+
+def fly(flight: Flight, command_rad: np.ndarray | None = None) -> ResponseWindow:
+    """A flight under a turning, wandering command (or ``command_rad`` per sample)."""
+    rng = np.random.default_rng(flight.seed)
+    count = round(flight.duration_s * flight.rate_hz)
+    period = 1.0 / flight.rate_hz
+    times = np.cumsum(period * rng.uniform(0.8, 1.2, count))
+    if command_rad is None:
+        # a turn rate that wanders: two sinusoids of random phase and frequency, a bias
+        f1, f2 = rng.uniform(0.1, 0.4, 2)
+        p1, p2 = rng.uniform(0.0, 2.0 * math.pi, 2)
+        rate = (0.3 * np.sin(2 * math.pi * f1 * times + p1)
+                + 0.2 * np.sin(2 * math.pi * f2 * times + p2) + rng.uniform(-0.2, 0.2))
+        command_rad = flight.start_course_rad + np.cumsum(rate * np.gradient(times))
+    course = flight.start_course_rad
+    speed = (flight.speed_factor if flight.start_speed_m_s is None
+             else flight.start_speed_m_s)
+    samples = []
+    for n, t in enumerate(times):
+        if n:
+            dt = t - times[n - 1]
+            steps = max(1, math.ceil(dt / 1e-3))
+            for _ in range(steps):  # the command of this interval, held
+                if flight.lag_s >= 1e-3:  # (RK4 at 1 ms is stable down to 0.4 ms)
+                    course = _rk4(course, command_rad[n], flight.lag_s, dt / steps)
+                else:
+                    course = command_rad[n]
+                if flight.speed_lag_s >= 1e-3:
+                    speed = _rk4(speed, flight.speed_factor, flight.speed_lag_s, dt / steps)
+                else:
+                    speed = flight.speed_factor
+        seen = course + rng.normal(0.0, flight.course_noise_rad)
+        flown = max(speed + rng.normal(0.0, flight.speed_noise_m_s), 0.0)
+        samples.append(ResponseSample(
+            time_s=float(t), velocity_north_m_s=flown * math.cos(seen),
+            velocity_east_m_s=flown * math.sin(seen),
+            command_north_m_s=math.cos(command_rad[n]), command_east_m_s=math.sin(command_rad[n])))
+    return ResponseWindow.of(samples)
+
+
+@settings(max_examples=40, deadline=None)
+@given(lag_s=st.floats(0.0, 1.5), factor=st.floats(0.7, 1.0), speed_lag_s=st.floats(0.0, 2.0),
+       noise_rad=st.floats(0.0, 0.02), course=st.floats(-math.pi, math.pi),
+       seed=st.integers(0, 2**16))
+def test_a_first_order_lag_and_a_speed_factor_are_recovered_within_the_bounds(
+        lag_s: float, factor: float, speed_lag_s: float, noise_rad: float, course: float,
+        seed: int) -> None:
+    window = fly(Flight(lag_s, factor, speed_lag_s, course_noise_rad=noise_rad,
+                        start_course_rad=course, seed=seed))
+    lag = fit_course_lag(window)
+    assert abs(lag.lag_s - lag_s) <= LAG_BOUND_S + LAG_BOUND_RATIO * lag_s, lag
+    assert lag.residual_rad <= 2.0 * noise_rad + 0.005, lag
+    speed = fit_speed_factor(window)
+    assert abs(speed.speed_factor - factor) <= SPEED_FACTOR_BOUND, speed
+
+
+@settings(max_examples=15, deadline=None)
+@example(lag_s=1.5, factor=0.71875, speed_lag_s=0.625, seed=602)  # 1.626 s, start not fitted
+@given(lag_s=st.floats(0.0, 1.5), factor=st.floats(0.7, 1.0), speed_lag_s=st.floats(0.2, 2.0),
+       seed=st.integers(0, 2**16))
+def test_from_hover_the_slow_samples_are_left_out_and_both_are_still_recovered(
+        lag_s: float, factor: float, speed_lag_s: float, seed: int) -> None:
+    window = fly(Flight(lag_s, factor, speed_lag_s, start_speed_m_s=0.0, seed=seed))
+    lag = fit_course_lag(window)
+    assert abs(lag.lag_s - lag_s) <= LAG_BOUND_S + LAG_BOUND_RATIO * lag_s, lag
+    assert lag.samples < len(window)  # the hover's samples have no course: not fitted
+    speed = fit_speed_factor(window)
+    assert abs(speed.speed_factor - factor) <= 2.0 * SPEED_FACTOR_BOUND, speed
+
+
+def test_a_window_where_the_command_did_not_change_is_refused() -> None:
+    steady = np.full(300, 0.7)
+    window = fly(Flight(0.5, 0.9, 0.5, start_course_rad=0.7), command_rad=steady)
+    with pytest.raises(IdentificationError, match="excitation_rad: the command did not change"):
+        fit_course_lag(window)
+    # the speed needs no turn: it is still identified
+    assert fit_speed_factor(window).speed_factor == pytest.approx(0.9, abs=SPEED_FACTOR_BOUND)
+
+
+def test_a_small_turn_is_enough_and_a_smaller_one_is_refused() -> None:
+    step = np.where(np.arange(300) < 100, 0.0, 0.15)  # one 0.15 rad step of the command
+    window = fly(Flight(0.8, 1.0, 0.0), command_rad=step)
+    assert fit_course_lag(window).lag_s == pytest.approx(0.8, abs=LAG_BOUND_S + 0.04)
+    with pytest.raises(IdentificationError, match="excitation_rad"):
+        fit_course_lag(window, min_change_rad=0.2)
+
+
+def test_a_lag_beyond_the_grid_and_a_short_window_are_refused() -> None:
+    with pytest.raises(IdentificationError, match="lag_s: beyond the grid"):
+        fit_course_lag(fly(Flight(6.0, 1.0, 0.0, course_noise_rad=0.0)))
+    with pytest.raises(IdentificationError, match="samples: need at least 20"):
+        fit_course_lag(fly(Flight(0.5, 1.0, 0.0, duration_s=0.2)))
+
+
+def test_a_gap_in_the_samples_restarts_the_fit_instead_of_bridging_it() -> None:
+    window = fly(Flight(0.6, 0.8, 0.4, seed=3))
+    cut = np.ones(len(window), dtype=bool)
+    cut[120:160] = False  # 0.8 s of telemetry lost
+    holed = ResponseWindow(*(getattr(window, name)[cut] for name in (
+        "time_s", "velocity_north_m_s", "velocity_east_m_s", "command_north_m_s",
+        "command_east_m_s")))
+    lag = fit_course_lag(holed)
+    assert abs(lag.lag_s - 0.6) <= LAG_BOUND_S + LAG_BOUND_RATIO * 0.6
+    assert lag.samples == len(holed)  # two runs, each from its own (fitted) start

@@ -131,17 +131,18 @@ def fly(
     stub_port: int | None = None,
     stub_config: Path | None = None,
     lockstep: bool = False,
-    vehicle_first: bool = True,
+    vehicle_first: bool = False,
     **companion: Any,
 ) -> Flight:
     """The companion in a thread, the vehicle in a process, until the engagement ends.
 
     The companion listens on ``port`` (default: a free one); the vehicle sends to
-    ``stub_port`` (default: the companion's; a relay's, to sit in between). The vehicle
-    starts first and the companion once its first datagram has reached ``port``
-    (``vehicle_first``): a process start-up is seconds of wall time on a loaded machine,
-    and at 5x each one is five of the companion's seconds, which its budgets (no vehicle
-    heard, ``max_time_s``) would count. With
+    ``stub_port`` (default: the companion's; a relay's, to sit in between). With
+    ``vehicle_first`` the vehicle starts first and the companion once its first datagram
+    has reached ``port`` (a process start-up is seconds of wall time on a loaded machine,
+    and at 5x each is five of the companion's seconds, which its budgets count); not the
+    default: the vehicle then flies on its own clock for those seconds, which moves where
+    and when the engagement starts (placement, a fault's time), which several tests fix. With
     ``lockstep`` both run in lockstep (``--lockstep``): the vehicle's time waits for the
     companion and every budget is in vehicle time, whatever the load of the machine; for
     every test that does not test timing or time stamps itself (hostile input may forge

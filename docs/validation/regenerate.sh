@@ -20,6 +20,12 @@ cp "$OUT/summary.txt" "$OUT/tables.md" "$OUT"/*.png docs/validation/
     --out "$OUT-backup" $WHERE
 mkdir -p docs/validation/backup_2k
 cp "$OUT-backup/tables.md" "$OUT-backup/summary.txt" docs/validation/backup_2k/
+# the default (backup) law alone, 10,000 runs of a seed none of the above used
+# shellcheck disable=SC2086
+"$BIN/ezcompanion" validate --runs 10000 --seed 2027 --law backup --map-runs 2000 \
+    --chatter-runs 100 --abandon px4 --no-figures --no-progress --out "$OUT-backup-10k" $WHERE
+mkdir -p docs/validation/backup_10k
+cp "$OUT-backup-10k/tables.md" "$OUT-backup-10k/summary.txt" docs/validation/backup_10k/
 if [ -n "${FULL:-}" ]; then
     # shellcheck disable=SC2086
     "$BIN/ezcompanion" validate --runs 100000 --seed 2026 --law robust --map-runs 10000 \

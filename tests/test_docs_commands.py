@@ -138,6 +138,8 @@ CHECKS: dict[str, Check] = {
     "ezcompanion validate --runs 2000 --seed 2026 --law backup --law robust --law qp-filter "
     "--map-runs 500 --chatter-runs 50 --abandon px4 --no-figures "
     "--out validation-out-backup": Check.PARSE,
+    "ezcompanion validate --runs 10000 --seed 2027 --law backup --map-runs 2000 "
+    "--chatter-runs 100 --abandon px4 --no-figures --out validation-out-backup-10k": Check.PARSE,
 }
 # Python blocks, by doc: run, or (needing certificates, a router and a scenario to send)
 # only compiled.

@@ -122,8 +122,10 @@ class ResponseMonitor:
         self._command = (float(message.vx), float(message.vy))
 
     def observe(self, state: VehicleState | None, now_s: float) -> None:
-        """A tick's picture of the vehicle (while guiding): a new sample, and a review when
-        one is due."""
+        """A tick's picture of the vehicle (while guiding), before its setpoint goes out: a
+        new sample, paired with the setpoint in force until it. The review it may make due
+        runs in :meth:`review_if_due`, after the tick's setpoint has left (a fit is a few
+        milliseconds, a third of a 50 Hz period: not in front of a setpoint)."""
         if state is None or self._command is None:
             return
         t = state.position_time_s
@@ -136,8 +138,12 @@ class ResponseMonitor:
             command_east_m_s=east))  # fmt: skip
         while self._samples and self._samples[0].time_s < t - self.window_s:
             self._samples.popleft()
-        span = t - self._samples[0].time_s
-        if span >= self.min_window_s and now_s >= self._next_review_s:
+
+    def review_if_due(self, now_s: float) -> None:
+        """Fit the window if it spans enough and a review is due (every ``every_s``)."""
+        if not self._samples or now_s < self._next_review_s:
+            return
+        if self._samples[-1].time_s - self._samples[0].time_s >= self.min_window_s:
             self._next_review_s = now_s + self.every_s
             self.review(now_s)
 

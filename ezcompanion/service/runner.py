@@ -551,9 +551,12 @@ class CompanionService:
             self.engagement.abort(now, distrust, lasted_s)
         else:
             snapshot = session.telemetry.snapshot(self.settings.stale_after_s, now)
-            if self.phase is Phase.GUIDING and distrust is None:
+            observing = self.phase is Phase.GUIDING and distrust is None
+            if observing:
                 self.identify.observe(snapshot, now)
             self.engagement.tick(now, snapshot, distrust)
+            if observing:
+                self.identify.review_if_due(now)  # after the setpoint has left
         if self.engagement.done:
             self.phase = Phase.DONE
 

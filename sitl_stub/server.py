@@ -209,7 +209,9 @@ class SitlStub:
             if gate is not None:
                 now = min(now, gate.limit_s(self._state.t_s, dt))
             caught_up = self._advance(now)
-            for frame in self.faults.release(self._state.t_s if gate is not None else now):
+            # on the simulated clock, the one the frames' stamps are on: a loop that has
+            # fallen behind the wall releases nothing before its own time reaches it
+            for frame in self.faults.release(self._state.t_s):
                 link.write(frame)
             with self._lock:
                 self._sim_s = self._state.t_s
@@ -300,6 +302,7 @@ class SitlStub:
                           t_s=self._steps * dt)
             with self._lock:
                 self._state = new
+                self._sim_s = new.t_s  # before any frame stamped at it goes out
             if self._record:
                 self.history.append(new)
             if self._truth is not None:

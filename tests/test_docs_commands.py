@@ -388,7 +388,7 @@ def test_the_replay_command_reads_a_live_recording(
         asked.set()
         return {"scenario": SCENARIO_RAW}
 
-    with publisher(endpoint, status=status, publish_rate_hz=1000.0) as pub:
+    with publisher(endpoint, status=status, publish_rate_hz=1000.0, patient=True) as pub:
         monitor = Monitor(endpoint, record=recording, refresh_hz=20.0)
         assert wait_for(lambda: pub.has_subscribers("guidance") and pub.has_subscribers("event"),
                         timeout_s=60.0)  # fmt: skip

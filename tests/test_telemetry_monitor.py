@@ -78,7 +78,7 @@ def test_the_live_table_shows_margins_mode_accelerations_and_outcome(tmp_path: P
     endpoint = free_endpoint()
     record = tmp_path / "engagement.jsonl"
     status = {"phase": "guiding", "scenario": SCENARIO_RAW}
-    with publisher(endpoint, status=lambda: status, publish_rate_hz=1000.0) as pub:
+    with publisher(endpoint, status=lambda: status, publish_rate_hz=1000.0, patient=True) as pub:
         monitor = Monitor(endpoint, record=record, refresh_hz=20.0)
         assert wait_for(lambda: pub.has_subscribers("guidance") and pub.has_subscribers("event"))
         assert wait_for(lambda: "yes" in monitor.text())  # alive, and its status asked
@@ -115,7 +115,7 @@ def test_the_live_table_shows_margins_mode_accelerations_and_outcome(tmp_path: P
 
 def test_json_lines_are_the_raw_samples() -> None:
     endpoint = free_endpoint()
-    with publisher(endpoint, publish_rate_hz=1000.0) as pub:
+    with publisher(endpoint, publish_rate_hz=1000.0, patient=True) as pub:
         monitor = Monitor(endpoint, json_lines=True, vehicle="vehicle1")
         assert wait_for(lambda: pub.has_subscribers("guidance") and pub.has_subscribers("event"))
         fly(pub, ticks=5)

@@ -111,6 +111,40 @@ def test_the_zone_is_the_reach_disc_seen_from_the_lookahead_point(
     assert (gap > 0.0) == (clearance > 0.0)
 
 
+@settings(max_examples=300, deadline=None)
+@given(
+    zones=layouts(), n=st.floats(-10, 10), e=st.floats(-10, 10), h=st.floats(-4, 4),
+    bias_m=st.floats(0.0, 1.0), bias_dir=st.floats(-math.pi, math.pi),
+    course_error=st.floats(-0.2, 0.2),
+)  # fmt: skip
+def test_an_estimate_error_moves_the_lookahead_gap_by_at_most_itself(
+    zones: ZoneSet, n: float, e: float, h: float, bias_m: float, bias_dir: float,
+    course_error: float,
+) -> None:
+    """What the margin covers (docs/guidance.md, assumption 4): the look-ahead gap is
+    1-Lipschitz in the position (a distance less constants) and mu R-Lipschitz in the
+    course (the look-ahead point moves mu R |du| <= mu R |d psi|). Under a constant
+    position error the believed flight is the true one shifted whole, so where the shield
+    keeps the believed gap >= shield_margin_m, the true gap is >= the margin less the
+    error: an error up to the margin is covered."""
+    z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m)
+    dn, de = bias_m * math.cos(bias_dir), bias_m * math.sin(bias_dir)
+    believed = lk.lookahead_gap(*z, n + dn, e + de, h + course_error)
+    true = lk.lookahead_gap(*z, n, e, h)
+    mur = float(np.max(zones.mu_range_m))
+    assert abs(believed - true) <= bias_m + mur * abs(course_error) + 1e-9
+    # and the bound is reached: shifted straight at the nearest zone's disc centre
+    if course_error == 0.0 and bias_m > 0.0:
+        q_n, q_e = n + mur * math.cos(h), e + mur * math.sin(h)
+        i = int(np.argmin(np.hypot(zones.north_m[0] - q_n, zones.east_m[0] - q_e)
+                          - zones.reach_m[0]))
+        to_n, to_e = zones.north_m[0, i] - q_n, zones.east_m[0, i] - q_e
+        dist = math.hypot(to_n, to_e)
+        assume(dist > bias_m + 1e-6 and np.all(zones.mu_range_m == mur))
+        closer = lk.lookahead_gap(*z, n + bias_m * to_n / dist, e + bias_m * to_e / dist, h)
+        assert closer == pytest.approx(true - bias_m, abs=1e-9)
+
+
 @settings(max_examples=200, deadline=None)
 @given(
     zones=layouts(), n=st.floats(-10, 10), e=st.floats(-10, 10), h=st.floats(-4, 4),

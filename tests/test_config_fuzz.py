@@ -52,6 +52,7 @@ REQUIRED = {
 }
 FREE_STRINGS = {"name", "signing_passphrase"}  # any string is valid there
 NULLABLE = {"initial_mode", "setpoint_timeout_s"}  # null is valid there: the default
+UNBOUNDED = {"seed"}  # any integer >= 0 is valid there: no huge positive one is broken
 Path_ = tuple[str | int, ...]
 Case = tuple[bytes, str | None]  # a file's bytes, and the field its error must name
 
@@ -119,7 +120,9 @@ def bad_value(leaf: Path_, value: Any) -> st.SearchStrategy[Any]:
         return st.one_of(st.integers(0, 1), words, st.none())
     if isinstance(value, int | float):
         fractional = st.floats(0.1, 0.9) if isinstance(value, int) else st.nothing()
-        return st.one_of(huge, non_finite, not_a_number, fractional)
+        too_big = huge.filter(lambda v: v < 0 or isinstance(v, float)) if (
+            leaf[-1] in UNBOUNDED) else huge
+        return st.one_of(too_big, non_finite, not_a_number, fractional)
     if leaf[-1] in FREE_STRINGS:
         return not_a_string
     # a name, an enum, an endpoint, a mode: non-strings, or words that are none of them

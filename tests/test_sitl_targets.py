@@ -6,8 +6,10 @@ a 22 m/s plane with a_max 4.5 m/s^2 (ArduPlane flying 0.54x of the course comman
 23.4 m/s over ground): each must intercept with true clearance > 0 by the stub's truth.
 
 The stub runs as its own process (``python -m sitl_stub``, its measured defaults); the
-companion in a thread of this one. Budgets are in vehicle time: the stub's speed-up, the
-companion's clock at the same speed-up.
+companion in a thread of this one, both in lockstep (``--lockstep``): the vehicle's time
+waits for the companion and every budget is in vehicle time, so the result is the same on a
+loaded machine as on an idle one; the speed-up is only the most the vehicle runs ahead of
+the wall.
 """
 
 from __future__ import annotations
@@ -43,12 +45,13 @@ def fly(config: Path, tmp_path: Path, *, profile: str, start_mode: str, speedup:
     duration_s = scenario.simulation.duration_s
     port = free_udp_port()
     settings = companion_settings(
-        scenario, connect=f"udpin:127.0.0.1:{port}", engage=True, speedup=speedup,
+        scenario, connect=f"udpin:127.0.0.1:{port}", engage=True,
         telemetry_rate_hz=rate_hz, loop_rate_hz=rate_hz)
     events = EventLog(lambda e: print(e.line()))  # shown when a test fails
     listening = threading.Event()
     events.add_sink(lambda e: listening.set() if e.kind is EventKind.LISTENING else None)
-    service = CompanionService(scenario, settings, events=events, telemetry=None)
+    service = CompanionService(scenario, settings, events=events, telemetry=None,
+                               lockstep=True)
     result: list[EngagementOutcome] = []
     # the companion's budget: the scenario's length after engaging, plus discovery
     budget_s = 2.0 * duration_s + 20.0
@@ -62,9 +65,10 @@ def fly(config: Path, tmp_path: Path, *, profile: str, start_mode: str, speedup:
             [sys.executable, "-m", "sitl_stub", "--config", str(config), "--profile", profile,
              "--connect", f"udpout:127.0.0.1:{port}", "--speedup", f"{speedup:g}",
              "--truth-out", str(truth), "--initial-mode", start_mode,
-             "--duration", f"{budget_s:g}"],
+             "--duration", f"{budget_s:g}", "--lockstep"],
             stdout=subprocess.DEVNULL)
-        thread.join(timeout=budget_s / speedup + 60.0)
+        # in lockstep the wall time is the machine's: as long as it takes, within reason
+        thread.join(timeout=10.0 * budget_s / speedup + 60.0)
     finally:
         service.stop()
         thread.join(timeout=10.0)

@@ -25,7 +25,7 @@ def test_the_service_reads_the_vehicles_timeout_and_checks_every_setpoint_agains
     tmp_path: Path,
 ) -> None:
     config = scenario_file(tmp_path, 2, sitl_stub={"setpoint_timeout_s": 1.25})
-    flight = fly(config, tmp_path, abandon_check=True, max_time_s=40.0)
+    flight = fly(config, tmp_path, abandon_check=True, max_time_s=40.0, lockstep=True)
     read = flight.events.of_kind(EventKind.PARAMETER)
     assert [(e.data["name"], e.data["value"]) for e in read] == [("GUID_TIMEOUT", 1.25)]
     abandon = flight.events.of_kind(EventKind.ABANDON)
@@ -40,7 +40,7 @@ def test_the_service_reads_the_vehicles_timeout_and_checks_every_setpoint_agains
 
 def test_without_the_check_nothing_is_asked(tmp_path: Path) -> None:
     config = scenario_file(tmp_path, 1)
-    flight = fly(config, tmp_path, max_time_s=40.0)
+    flight = fly(config, tmp_path, max_time_s=40.0, lockstep=True)
     assert not flight.events.of_kind(EventKind.PARAMETER)
     abandon = flight.events.of_kind(EventKind.ABANDON)
     assert len(abandon) == 1 and "abandon check off" in abandon[0].message

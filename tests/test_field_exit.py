@@ -73,7 +73,8 @@ def test_after_an_intercept_the_vehicle_reports_the_chosen_mode(
     profile: str, start_mode: str, on_exit: str | None, mode_number: int, tmp_path: Path
 ) -> None:
     flight = fly(CONFIG / "paper_scenario1.yaml", tmp_path, profile=profile,
-                 start_mode=start_mode, on_exit=on_exit, max_time_s=60.0)  # fmt: skip
+                 start_mode=start_mode, on_exit=on_exit, max_time_s=60.0,
+                 lockstep=True)  # fmt: skip
     assert flight.outcome.intercepted
     report = flight.service.exit_report
     assert report is not None and report.acknowledged and report.confirmed, report

@@ -74,7 +74,7 @@ def test_a_scenario_relative_to_the_vehicle_is_placed_where_it_engages(tmp_path:
                          "speed_m_s": 1.0, "accel_max_m_s2": 1.0}  # fmt: skip
     config = write(tmp_path, "relative.yaml", ours)
     vehicle = write(tmp_path, "vehicle.yaml", theirs)
-    flight = fly(config, tmp_path, stub_config=vehicle, max_time_s=60.0)
+    flight = fly(config, tmp_path, stub_config=vehicle, max_time_s=60.0, lockstep=True)
     placement = flight.service.placement
     assert placement is not None
     assert math.hypot(placement.vehicle_north_m - 40.0, placement.vehicle_east_m - 25.0) < 0.5

@@ -134,7 +134,7 @@ def test_a_position_jump_over_udp_ends_guidance_with_the_gate_named(
     config = scenario_file(
         tmp_path, sitl_stub={"faults": {"jump_at_s": 2.0, "jump_east_m": jump_m}}
     )
-    flight = fly(config, tmp_path, max_time_s=25.0, **LIGHT)
+    flight = fly(config, tmp_path, max_time_s=25.0, lockstep=True, **LIGHT)
     alarms = [e for e in flight.events.of_kind(EventKind.ALARM) if e.data["cause"] == "gate"]
     assert alarms, "the jump was not refused"
     assert [e.data["cause"] for e in flight.events.of_kind(EventKind.ABORTED)] == ["gate"]

@@ -80,6 +80,14 @@ class Gcs:
         while self.conn.recv_match(blocking=False) is not None:
             pass
 
+    def barrier(self) -> None:
+        """Until the stub has handled everything this station sent before (it reads one
+        socket in order, so the acknowledgement of a command sent now comes after), then
+        drop what arrived meanwhile: for messages that are not acknowledged themselves."""
+        ack = self.command(mavutil.mavlink.MAV_CMD_DO_SET_SERVO, 9, 1500)  # unsupported
+        assert ack is not None, "the stub did not answer"
+        self.drain()
+
     def command(self, command: int, *params: float, target_system: int = 1,
                 timeout_s: float = ANSWER_WAIT_S) -> Msg | None:
         """Send COMMAND_LONG and wait for its COMMAND_ACK."""

@@ -85,7 +85,12 @@ def decoder(encoding: str, schema_name: str, schema: bytes) -> Callable[[bytes],
 
 class FoxgloveClient:
     """A Foxglove WebSocket client: subscribes to every channel advertised and keeps each
-    message decoded, as (log_time_ns, message), by topic."""
+    message decoded, as (log_time_ns, message), by topic.
+
+    foxglove-sdk (0.30.3) queues a channel's advertisement before it adds the channel to
+    the client's own map, so a subscription that arrives in between is refused ("Unknown
+    channel ID", seen under two CPU burners); the client subscribes again, as a robust
+    client must."""
 
     def __init__(self, port: int) -> None:
         self._stack = contextlib.ExitStack()
@@ -96,6 +101,8 @@ class FoxgloveClient:
         self.channels: dict[int, dict[str, Any]] = {}  # by channel id
         self.topic_of: dict[int, str] = {}  # by subscription id
         self.decode: dict[int, Callable[[bytes], Any]] = {}
+        self.subscription_of: dict[int, int] = {}  # by channel id
+        self.resubscribed = 0  # subscriptions refused as unknown and sent again
         self.messages: dict[str, list[tuple[int, Any]]] = {}
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
@@ -120,12 +127,20 @@ class FoxgloveClient:
     def _on_text(self, op: dict[str, Any]) -> None:
         if op["op"] == "serverInfo":
             self.server_info = op
+        elif op["op"] == "status" and op["message"].startswith("Unknown channel ID: "):
+            channel_id = int(op["message"].rsplit(" ", 1)[1])
+            sub_id = self.subscription_of[channel_id]
+            self.resubscribed += 1
+            time.sleep(0.05)  # past the server's window
+            self.ws.send(json.dumps({"op": "subscribe",
+                                     "subscriptions": [{"id": sub_id, "channelId": channel_id}]}))
         elif op["op"] == "advertise":
             subscriptions = []
             for channel in op["channels"]:
                 sub_id = len(self.topic_of) + 1
                 self.channels[channel["id"]] = channel
                 self.topic_of[sub_id] = channel["topic"]
+                self.subscription_of[channel["id"]] = sub_id
                 schema = channel["schema"]
                 raw = (
                     base64.b64decode(schema)

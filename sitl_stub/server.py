@@ -239,8 +239,8 @@ class SitlStub:
         events = [self._next_heartbeat_s, self._scheduler.next_due_s(),
                   self._state.t_s + self.config.settings.physics_dt_s]
         release = self.faults.next_release_s()
-        if release is not None:
-            events.append(release)
+        if release is not None:  # released on the simulated clock: at a physics step
+            events.append(max(release, self._state.t_s + self.config.settings.physics_dt_s))
         return max(0.0, min(_MAX_WAIT_WALL_S, (min(events) - now) / speedup))
 
     def _drain_wake(self) -> None:

@@ -102,7 +102,6 @@ class FoxgloveClient:
         self.topic_of: dict[int, str] = {}  # by subscription id
         self.decode: dict[int, Callable[[bytes], Any]] = {}
         self.subscription_of: dict[int, int] = {}  # by channel id
-        self.resubscribed = 0  # subscriptions refused as unknown and sent again
         self.messages: dict[str, list[tuple[int, Any]]] = {}
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
@@ -130,7 +129,6 @@ class FoxgloveClient:
         elif op["op"] == "status" and op["message"].startswith("Unknown channel ID: "):
             channel_id = int(op["message"].rsplit(" ", 1)[1])
             sub_id = self.subscription_of[channel_id]
-            self.resubscribed += 1
             time.sleep(0.05)  # past the server's window
             self.ws.send(json.dumps({"op": "subscribe",
                                      "subscriptions": [{"id": sub_id, "channelId": channel_id}]}))

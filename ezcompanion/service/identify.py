@@ -171,22 +171,21 @@ def _parabola_min(grid: FloatArray, cost: FloatArray, best: int) -> tuple[float,
     between the first two (a lag shorter than the grid's step: 0.027 s was fitted 0 with a
     residual of 5 mrad before); at the last, the grid point itself (the curvature from the
     one neighbour)."""
-    lower = best == 0 and len(grid) >= 3
-    if lower:
-        best = 1
-    if best == len(grid) - 1 or (best == 0 and not lower):
-        other = 1 if best == 0 else len(grid) - 2
-        step = grid[other] - grid[best]
-        curv = max(float(cost[other] - cost[best]) / step**2, 0.0)
-        return float(grid[best]), curv, float(cost[best])
-    h = float(grid[best] - grid[best - 1])
-    y0, y1, y2 = (float(c) for c in cost[best - 1 : best + 2])
+    lower = best == 0 and len(grid) >= 3  # the parabola centred on the second point
+    centre = 1 if lower else best
+    if centre in (0, len(grid) - 1):
+        other = 1 if centre == 0 else len(grid) - 2
+        step = grid[other] - grid[centre]
+        curv = max(float(cost[other] - cost[centre]) / step**2, 0.0)
+        return float(grid[centre]), curv, float(cost[centre])
+    h = float(grid[centre] - grid[centre - 1])
+    y0, y1, y2 = (float(c) for c in cost[centre - 1 : centre + 2])
     curv = (y0 - 2.0 * y1 + y2) / (2.0 * h * h)
     if curv <= 0.0:
-        return (float(grid[0]), 0.0, y0) if lower else (float(grid[best]), 0.0, y1)
+        return (float(grid[0]), 0.0, y0) if lower else (float(grid[centre]), 0.0, y1)
     slope = (y2 - y0) / (2.0 * h)
     shift = max(-h, min(0.0 if lower else h, -slope / (2.0 * curv)))
-    return float(grid[best]) + shift, curv, max(y1 + slope * shift + curv * shift * shift, 0.0)
+    return float(grid[centre]) + shift, curv, max(y1 + slope * shift + curv * shift * shift, 0.0)
 
 
 def fit_course_lag(

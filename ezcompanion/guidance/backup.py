@@ -36,9 +36,12 @@ assumptions named; tests/test_backup.py checks each step):
 5. **The shield step.** The nominal command, held over the next control step, is flown if
    some backup is certified (>= theta) from where it leads; its weight comes from the
    nominal held for a longer preview (a fixed time, so the behaviour does not depend on the
-   step), smoothstep over ``shield_band_m`` above theta, and a weight below 1 blends in the
-   held backup's command, verified the same way. Otherwise the held backup flies, by its
-   rule. The held backup changes only to one certified (>= theta) and better by 2 theta.
+   step), smoothstep over ``shield_band_m`` above theta, held up where it falls faster
+   than ``shield_weight_fall_1_s`` (a weight with memory), and a weight below 1 blends in
+   the held backup's command, verified the same way. Otherwise the held backup flies, by
+   its rule. (The weight only chooses among commands that are each verified: it moves
+   smoothness, never safety.) The held backup changes only to one certified (>= theta)
+   and better by 2 theta.
    By induction on the control steps, under the model: *if a backup is certified at the
    start, the flight stays outside every zone by the margin for ever*, whatever the
    nominal command does. (The held backup is always one whose flight, by its rule, is safe
@@ -95,8 +98,9 @@ _N_BACKUPS = 3
     S_AB_TURN,
     S_AB_HOLD,
     S_AB_BRAKE,
+    S_FALL,
     S_SIZE,
-) = range(12)
+) = range(13)
 
 # The sampled part of a flow ends when the heading change still to come is bounded by this
 # (it is then accounted for in closed form), or after this many samples; a turn looks for
@@ -133,6 +137,7 @@ def pack_shield(params: GuidanceParams, **abandon: float) -> FloatArray:
     p[S_AB_TURN] = abandon.get("abandon_turn_s", params.abandon_turn_s)
     p[S_AB_HOLD] = abandon.get("abandon_hold_s", params.abandon_hold_s)
     p[S_AB_BRAKE] = abandon.get("abandon_brake_m_s2", params.abandon_brake_m_s2)
+    p[S_FALL] = params.shield_weight_fall_1_s
     return p
 
 
@@ -591,7 +596,7 @@ def backup_command(s: FloatArray, policy: int, a: float) -> float:
 def shield_one(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float,
-    nominal: float, dt: float, current: int, out: FloatArray, k: int,
+    nominal: float, dt: float, current: int, weight_before: float, out: FloatArray, k: int,
 ) -> None:
     """One shielded step for vehicle ``k``: writes ``out[k, :]`` = (a after the step, the
     model's a_v after it, the backup held after the step, the nominal's weight, the
@@ -609,6 +614,10 @@ def shield_one(
                                            speed, dt, dt, theta, certs)  # fmt: skip
     x = min(max((preview - theta) / band, 0.0), 1.0)
     weight = x * x * (3.0 - 2.0 * x) if ahead >= theta else 0.0
+    fall = s[S_FALL]
+    if fall > 0.0 and weight_before >= 0.0 and ahead >= theta:
+        # memory: the weight falls at most this fast (what it leads to is checked below)
+        weight = max(weight, min(weight_before - fall * dt, 1.0))
     cert_now = math.nan  # computed only where the backup's command is used
     if weight < 1.0:
         # the held backup: kept unless another is certified (>= theta) and better by 2 theta
@@ -661,6 +670,7 @@ def shield_batch(
     active: npt.NDArray[np.bool_],
     dt: float,
     current: npt.NDArray[np.int8],
+    weight_before: FloatArray,
     out: FloatArray,
 ) -> None:
     """``shield_one`` for every vehicle with ``active`` set (zone row k, or 0 if shared)."""
@@ -669,5 +679,5 @@ def shield_batch(
         if active[k]:
             shield_one(
                 s, zn, ze, zmur, zreach, 0 if shared else k, n[k], e[k], h[k], a[k], av[k],
-                speed[k], nominal[k], dt, int(current[k]), out, k,
+                speed[k], nominal[k], dt, int(current[k]), weight_before[k], out, k,
             )  # fmt: skip

@@ -146,6 +146,7 @@ class GuidanceController:
         self._accel = np.zeros(1)
         self._flown = np.zeros(1)  # the model's flown lateral acceleration (backup law)
         self._backup = np.full(1, BACKUP_NONE, dtype=np.int8)
+        self._weight = np.full(1, math.nan)  # the nominal's weight at the last step (backup)
         self._shield = pack_shield(self.params)
         self._no_shield: _ShieldViews | None = None
         # one vehicle's path (``step_one``): its constants, zones and work space
@@ -175,16 +176,18 @@ class GuidanceController:
         self._accel = accel.reshape(-1).copy()
         self._flown = self._accel.copy()
         self._backup = np.full(self._accel.shape, BACKUP_NONE, dtype=np.int8)
+        self._weight = np.full(self._accel.shape, math.nan)
 
     def restrict(
         self, mask: npt.NDArray[np.bool_], *, zones: ZoneSet, target: Target | Sequence[Target]
     ) -> GuidanceController:
         """The same law for the vehicles in ``mask`` of a 1-d batch only (with their zones and
-        targets), each vehicle's internal state kept: actuator, model and held backup."""
+        targets), each vehicle's internal state kept: actuator, model, held backup and weight."""
         new = GuidanceController(zones=zones, target=target, params=self.params, law=self.law)
         new.reset(self._accel[mask])
         new._flown = self._flown[mask].copy()
         new._backup = self._backup[mask].copy()
+        new._weight = self._weight[mask].copy()
         return new
 
     def evaluate(self, state: KinematicState) -> LawOutput:
@@ -271,7 +274,8 @@ class GuidanceController:
         captured = np.empty(1, dtype=np.bool_)
         step_one(
             self._single, zones, north_m, east_m, course_rad, speed_m_s, rate_1_s, dt_s, accel,
-            self._flown, self._backup, out, out_zone, self._scratch, result, flags, captured,
+            self._flown, self._backup, self._weight, out, out_zone, self._scratch, result, flags,
+            captured,
         )  # fmt: skip
         self._accel = result[:1]
         if self._shielded:
@@ -325,12 +329,13 @@ class GuidanceController:
         shield_batch(
             self._shield, zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m,
             north, east, course, self._accel, flown, speed, out[:, O_AC], active, dt_s,
-            self._backup, shield,
+            self._backup, self._weight, shield,
         )  # fmt: skip
         accel_next[active] = shield[active, 0]
         self._flown = np.where(active, shield[:, 1], accel_next)
         backup = np.where(active, shield[:, 2], BACKUP_NONE).astype(np.int8)
         self._backup = backup
+        self._weight = np.where(active, shield[:, 3], math.nan)
         # the safety share of what is flown: the backup's, plus the nominal's own alpha
         share = 1.0 - shield[:, 3] * (1.0 - out[:, O_ALPHA])
         mode[active & (share >= 1.0 - _MODE_PURE)] = _SAFETY

@@ -148,6 +148,9 @@ class GuidanceParams:
     # blended out over shield_band_m above the acceptance level
     shield_margin_m: float = 0.1
     shield_band_m: float = 0.05
+    # ... and, while the blend it gives passes the shield's check, the nominal's weight falls
+    # at most this fast (a weight with memory: no chattering at the step; 0: none)
+    shield_weight_fall_1_s: float = 1.0
     # ... and its nominal's own safety share fades out within this many turn radii
     # (v^2 / a_max) beyond one of the target, so that it arrives (0: no fade)
     safety_fade_turn_radii: float = 4.0
@@ -192,6 +195,7 @@ class GuidanceParams:
             _non_negative(name, getattr(self, name))
         _positive("shield_band_m", self.shield_band_m)
         _non_negative("shield_margin_m", self.shield_margin_m)
+        _non_negative("shield_weight_fall_1_s", self.shield_weight_fall_1_s)
         _non_negative("safety_fade_turn_radii", self.safety_fade_turn_radii)
         _finite("prediction_step_ratio", self.prediction_step_ratio)
         if not 0.0 < self.prediction_step_ratio <= 0.25:

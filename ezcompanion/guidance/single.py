@@ -120,6 +120,7 @@ def step_one(
     accel: FloatArray,
     flown: FloatArray,
     held: Int8Array,
+    weight_before: FloatArray,
     out: FloatArray,
     out_zone: FloatArray,
     scratch: FloatArray,
@@ -132,7 +133,8 @@ def step_one(
     Inputs: ``k`` from ``pack_single`` and ``zones`` from ``stack_zones``; the state
     ``n, e, course, v`` (checked finite, v > 0); ``rate``, the measured course rate or NaN
     for none (the model's ``flown`` is then used); ``dt``. State: ``accel[0]`` (a, read),
-    ``flown[0]`` (the model's a_v, updated) and ``held[0]`` (the held backup, read).
+    ``flown[0]`` (the model's a_v, updated), ``held[0]`` (the held backup, read) and
+    ``weight_before[0]`` (the nominal's weight at the step before, NaN for none; updated).
     Outputs: the law's ``out[0, O_*]`` and ``out_zone[0, Z_*, i]``; ``result`` = (a after
     the step, the nominal's weight, the held backup's certificate at the start, the
     certificate one step ahead), NaN where unshielded; ``flags`` = (mode, the backup held
@@ -163,7 +165,7 @@ def step_one(
             av = flown[0] if math.isnan(rate) else min(max(v * rate, -bound), bound)
             shield = scratch[5:6]
             shield_one(s, zn, ze, zmur, zreach, 0, n, e, course, a, av, v, out[0, O_AC], dt,
-                       int(held[0]), shield, 0)  # fmt: skip
+                       int(held[0]), weight_before[0], shield, 0)  # fmt: skip
             a_next = shield[0, 0]
             flown[0] = shield[0, 1]
             backup = int(shield[0, 2])
@@ -172,6 +174,7 @@ def step_one(
             cert_ahead = shield[0, 5]
             # the safety share of what is flown: the backup's, plus the nominal's own alpha
             mode = _mode_of(1.0 - weight * (1.0 - alpha))
+    weight_before[0] = weight
     result[0] = a_next
     result[1] = weight
     result[2] = cert

@@ -9,6 +9,7 @@ scheduled them.
 from __future__ import annotations
 
 import itertools
+import math
 import threading
 import time
 from pathlib import Path
@@ -47,10 +48,29 @@ def test_a_sample_ticks_once_and_a_late_deadline_does_not_tick_it_again() -> Non
     schedule.ticked(0.0400)
     assert not schedule.sample(0.040)  # GLOBAL_POSITION_INT of the same instant
     assert not schedule.is_due(0.0433)  # the old grid's late deadline: no second tick
-    assert schedule.is_due(0.0600)  # a period without a sample: a deadline
-    schedule.ticked(0.0600)
-    assert schedule.sample(0.065) and not schedule.is_due(0.065)  # within half a period
-    assert schedule.is_due(0.0700)
+    assert not schedule.is_due(0.0600)  # a period: a sample on time may still come
+    assert schedule.is_due(0.0620)  # a period and a tenth without a sample: a deadline
+    schedule.ticked(0.0620)
+    assert not schedule.is_due(0.0839)
+    assert schedule.sample(0.080) and schedule.is_due(0.0840)
+    schedule.ticked(0.0840)
+    assert schedule.sample(0.085) and not schedule.is_due(0.085)  # within half a period
+    assert schedule.is_due(0.0940)
+
+
+def test_a_sample_just_after_a_deadline_ticks_at_once() -> None:
+    """The deadline ticked without it (the sample was 1 ms late): the sample is not held
+    half a period behind a tick that did not use it."""
+    schedule = TickSchedule(0.02)
+    assert schedule.sample(0.0) and schedule.is_due(0.0)
+    schedule.ticked(0.0)
+    assert schedule.sample(0.020) and schedule.is_due(0.0201)  # on time (0.1 ms in)
+    schedule.ticked(0.0201)
+    assert schedule.is_due(0.0421)  # the next sample is late: a deadline
+    schedule.ticked(0.0421)
+    assert schedule.sample(0.040) and schedule.is_due(0.0425)  # 0.4 ms after it: at once
+    schedule.ticked(0.0425)
+    assert not schedule.is_due(0.0640) and schedule.is_due(0.0645)
 
 
 @settings(max_examples=200, deadline=None)
@@ -61,7 +81,7 @@ def test_a_sample_ticks_once_and_a_late_deadline_does_not_tick_it_again() -> Non
         max_size=80,
     )
 )
-def test_ticks_are_half_a_period_apart_and_each_has_a_new_sample_or_a_deadline(
+def test_sample_ticks_are_half_a_period_apart_and_each_tick_has_a_sample_or_a_deadline(
     events: list[tuple[float, bool, float]],
 ) -> None:
     period = 0.02
@@ -81,9 +101,13 @@ def test_ticks_are_half_a_period_apart_and_each_has_a_new_sample_or_a_deadline(
         if schedule.is_due(now):
             schedule.ticked(now)
             ticks.append((now, pending))
-    for (t0, _), (t1, by_sample) in itertools.pairwise(ticks):
-        assert t1 - t0 >= 0.5 * period - 1e-6
-        assert by_sample or t1 - t0 >= period - 1e-6  # no sample: only at a deadline
+    last_sample_tick = -math.inf
+    for (t0, _), (t1, by_sample) in itertools.pairwise([(-math.inf, False), *ticks]):
+        if by_sample:
+            assert t1 - last_sample_tick >= 0.5 * period - 1e-6
+            last_sample_tick = t1
+        else:
+            assert t1 - t0 >= 1.1 * period - 1e-6  # no sample: only at a deadline
 
 
 # --- the companion's clock and guard ----------------------------------------------------------

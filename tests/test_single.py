@@ -67,8 +67,8 @@ def assert_same(single: GuidanceStep, batch: GuidanceStep, k: int) -> None:
 @pytest.mark.parametrize("law", LAWS)
 @pytest.mark.parametrize("with_rate", [True, False])
 def test_one_vehicle_steps_like_its_row_of_a_batch(law: LawName, with_rate: bool) -> None:
-    """Ten steps of 24 vehicles: the actuator, the model's flown acceleration and the held
-    backup carried from step to step in both paths."""
+    """Ten steps of 24 vehicles: the actuator, the model's flown acceleration, the held
+    backup and the nominal's weight (its memory) carried from step to step in both paths."""
     rng = np.random.default_rng(13 + int(with_rate))
     size = 24
     zones, target, params = SCENARIO.zones(), SCENARIO.target, SCENARIO.guidance

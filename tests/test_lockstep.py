@@ -59,8 +59,8 @@ def test_a_sample_ticks_once_and_a_late_deadline_does_not_tick_it_again() -> Non
 
 
 def test_a_sample_just_after_a_deadline_ticks_at_once() -> None:
-    """The deadline ticked without it (the sample was 1 ms late): the sample is not held
-    half a period behind a tick that did not use it."""
+    """The deadline ticked without it (the sample came 2.5 ms late, 0.4 ms after the
+    deadline): the sample is not held half a period behind a tick that did not use it."""
     schedule = TickSchedule(0.02)
     assert schedule.sample(0.0) and schedule.is_due(0.0)
     schedule.ticked(0.0)

@@ -74,7 +74,7 @@ def estimates() -> None:
 def clearance() -> None:
     print("copter lag  scenario  law told  intercepted (truth)  min true clearance")
     with tempfile.TemporaryDirectory() as tmp:
-        for lag in (1.1, 1.5):
+        for lag in (1.1, 1.3, 1.5, 1.8):
             for number in (1, 2):
                 for acting in (True, False):
                     truth = Path(tmp) / "truth.csv"

@@ -127,6 +127,15 @@ def test_a_vehicle_slower_than_its_profile_makes_the_law_take_the_measured_lag(
     assert intercepted or not run.outcome.intercepted, miss
 
 
+def test_a_vehicle_too_slow_to_turn_at_the_laws_bound_is_said_to_be() -> None:
+    """A copter lagging 1.8 s: the setpoints lead its course by at most 85 degrees, so it
+    turns at most at 1.48 / 1.8 = 0.82 of a_max, and the law's argument needs a_max."""
+    run = fly("copter", max_time_s=6.0, velocity_lag_s=1.8)
+    [said] = [e for e in run.response_events() if "turns at most at" in e.message]
+    assert said.data["turn_bound_m_s2"] == pytest.approx(0.82, abs=0.03)
+    assert "safety argument does not hold" in said.message
+
+
 def _stating(lag_s: float) -> Scenario:
     scenario = load_scenario(SCENARIO)
     return dataclasses.replace(

@@ -42,6 +42,7 @@ from ezcompanion.service.identify import (
     fit_speed_factor,
 )
 from ezcompanion.service.loop import GuidanceLoop
+from ezcompanion.service.setpoints import turn_bound_m_s2
 from ezcompanion.wire import Message, mavlink
 
 __all__ = ["Identified", "ResponseMonitor"]
@@ -51,6 +52,7 @@ _MAX_LAG_STDERR_S = 0.05
 _MAX_LAG_RESIDUAL_RAD = 0.15
 _MAX_SPEED_STDERR = 0.02
 _KEPT_ESTIMATES = 1000  # the reviews kept (one a second)
+_TURN_BOUND_SHORT = 0.05  # of a_max: the lag estimate is within 5% (docs/field.md)
 # a vehicle flying less than this of the commanded speed is not following the setpoints
 # (refused, say, or held by its autopilot): said once, nothing is changed for it
 MIN_SPEED_FACTOR = 0.5
@@ -103,6 +105,7 @@ class ResponseMonitor:
         self._next_review_s = -math.inf
         self._said_first = False
         self._said_not_following = False
+        self._said_turn_bound = False
         self._worse_lag_s: float | None = None  # the last review's lag, when it was worse
 
     def use_profile(self, profile: AutopilotProfile) -> None:
@@ -193,6 +196,7 @@ class ResponseMonitor:
         if (lag is None or lag.stderr_s > _MAX_LAG_STDERR_S
                 or lag.residual_rad > _MAX_LAG_RESIDUAL_RAD):
             return False
+        self._check_turn_bound(now_s, lag.lag_s, found)
         assumed = self.assumed_lag_s
         tolerance = max(self.lag_tolerance_s, self.lag_tolerance_ratio * assumed)
         if lag.lag_s <= assumed + tolerance:
@@ -220,6 +224,27 @@ class ResponseMonitor:
         )  # fmt: skip
         self.source = f"measured at {now_s:.2f} s"
         return True
+
+    def _check_turn_bound(self, now_s: float, measured_s: float, found: Identified) -> None:
+        """Say once when the vehicle lags too much for the setpoints to get the law's bound
+        from it: they lead its course by at most 85 degrees (``turn_bound_m_s2``), and the
+        law's safety argument counts on turning at a_max (docs/guidance.md, assumption 2).
+        Only when short by more than the estimate's own error (``_TURN_BOUND_SHORT``): the
+        measured PX4 model, 0.8 of the speed and a 1.2 s lag, is 1% short at a_max."""
+        accel_max = self.loop.scenario.guidance.accel_max_m_s2
+        speed = self.loop.speed_factor * self.loop.nominal_speed_m_s
+        bound = turn_bound_m_s2(speed, measured_s)
+        if self._said_turn_bound or bound >= (1.0 - _TURN_BOUND_SHORT) * accel_max:
+            return
+        self._said_turn_bound = True
+        self.events.emit(
+            EventKind.RESPONSE, now_s,
+            f"a vehicle lagging {measured_s:.2f} s turns at most at {bound:.2f} m/s^2 on "
+            f"setpoints that lead its course by 85 degrees, short of the law's bound "
+            f"{accel_max:g} m/s^2: its safety argument does not hold for this vehicle "
+            f"(docs/guidance.md, assumption 2)",
+            turn_bound_m_s2=bound, accel_max_m_s2=accel_max, **self._data(found),
+        )  # fmt: skip
 
     def _act_on_speed(self, now_s: float, speed: SpeedFit | None, found: Identified) -> bool:
         if speed is None or speed.stderr > _MAX_SPEED_STDERR:

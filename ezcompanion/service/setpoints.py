@@ -8,10 +8,14 @@ points along a reference course that turns at omega = a / v; yaw_rate = omega ke
 with it. (Measured on ArduPilot 4.7 SITL: a 2 m/s vector rotated at 15 deg/s with yaw_rate
 15 deg/s flew 2.02 m/s at 15.1 deg/s.) LOCAL_NED rather than BODY_NED, because ArduCopter
 turns a body-frame velocity into a fixed direction when it arrives. The reference course
-starts at the measured course and may lead it by at most 30 degrees, so it cannot wind up
-while the vehicle lags; for PX4, whose 1.2 s lag would need far more lead than that, the
-reference is instead the measured course plus omega * 1.2 s (the profile's
-``setpoint_lead_s``), the inverse of its first-order lag. Standing still (slower than half
+starts at the measured course and may lead it by at most what the law's model needs
+(``lead_limit_rad``), so it cannot wind up while the vehicle lags: a course lagging its
+setpoint by tau (first order) turns at a / v once the reference leads it by a tau / v, so
+the limit is that at a_max with a quarter to spare, 30 to 85 degrees. (It was 30 degrees
+fixed: a copter lagging 1.5 s then turned at most at 0.35 a_max while the law, told the
+lag, counted on a_max, and it entered a zone.) For PX4 the reference is instead the
+measured course plus omega * 1.2 s (the profile's ``setpoint_lead_s``), the inverse of its
+first-order lag. Standing still (slower than half
 the nominal speed) the reference does not turn. The vertical velocity holds the height of
 the first tick by feedback on the measured height (PX4 does not hold it on vz = 0).
 Streamed every tick, well inside the autopilots' timeouts (ArduCopter 3 s, PX4 1 s).
@@ -40,10 +44,18 @@ from ezcompanion.service.loop import TickCommand
 from ezcompanion.service.settings import SetpointKind
 from ezcompanion.wire import Link, Message, course_command, s_to_ms, velocity_setpoint
 
-__all__ = ["CourseSetpoints", "Setpoints", "VelocitySetpoints", "make_setpoints"]
+__all__ = [
+    "CourseSetpoints",
+    "Setpoints",
+    "VelocitySetpoints",
+    "lead_limit_rad",
+    "make_setpoints",
+    "turn_bound_m_s2",
+]
 
-_MAX_LEAD_RAD = math.radians(30.0)
-_MAX_COMPENSATED_LEAD_RAD = math.radians(85.0)
+_MIN_LEAD_RAD = math.radians(30.0)
+_MAX_LEAD_RAD = math.radians(85.0)  # a velocity further off the course is not a course lag
+_LEAD_MARGIN = 1.25  # over the steady lead of a turn at a_max
 _STILL_FRACTION = 0.5  # of the nominal speed: slower, the vehicle stands still
 _HEIGHT_GAIN_1_S = 1.0  # height hold: vz = gain * error ...
 _MAX_CLIMB_M_S = 1.0  # ... within this
@@ -54,6 +66,22 @@ _MAX_COURSE_LEAD_RAD = 0.5 * math.pi  # a course command never more than 90 degr
 _TRIM_FROM_RATIO = 0.2  # of a_max: the outer loop trims only in a clear turn
 _TRIM_RATE_1_S = 0.5  # relative gain change per second per unit of relative turn error
 _GAIN_MIN, _GAIN_MAX = 0.5, 4.0  # p3 / |a|
+
+
+def lead_limit_rad(accel_max_m_s2: float, speed_m_s: float, lag_s: float) -> float:
+    """How far the integrating velocity reference may lead the measured course: in a steady
+    turn at a, a course lagging its setpoint by ``lag_s`` (first order) needs the lead
+    a lag / v, so the limit is that at ``accel_max_m_s2`` times 1.25, within 30 to 85
+    degrees."""
+    needed = _LEAD_MARGIN * accel_max_m_s2 * lag_s / speed_m_s
+    return min(max(needed, _MIN_LEAD_RAD), _MAX_LEAD_RAD)
+
+
+def turn_bound_m_s2(speed_m_s: float, lag_s: float) -> float:
+    """The largest steady lateral acceleration the velocity setpoints get from a vehicle
+    whose course lags them by ``lag_s`` (first order): v times the largest lead over the lag
+    (inf without a lag)."""
+    return speed_m_s * _MAX_LEAD_RAD / lag_s if lag_s > 0.0 else math.inf
 
 
 class Setpoints(ABC):
@@ -119,7 +147,8 @@ class VelocitySetpoints(Setpoints):
         With ``lead_s`` (the vehicle's measured first-order course lag, PX4) it leads the
         course by omega * lead_s, the inverse of that lag, so that the course turns at omega
         now instead of lagging it (within 85 degrees). Without, it integrates omega and
-        leads the measured course by at most 30 degrees, so it cannot wind up.
+        leads the measured course by at most ``lead_limit_rad`` for the law's bound and lag,
+        so it cannot wind up but a turn at the bound is flown with the law's lag.
         """
         omega = command.turn_rate_rad_s
         course = command.course_rad
@@ -127,13 +156,13 @@ class VelocitySetpoints(Setpoints):
             self._reference_rad = None
             return course
         if self.lead_s > 0.0:
-            lead = min(max(omega * self.lead_s, -_MAX_COMPENSATED_LEAD_RAD),
-                       _MAX_COMPENSATED_LEAD_RAD)
+            lead = min(max(omega * self.lead_s, -_MAX_LEAD_RAD), _MAX_LEAD_RAD)
             return course + lead
         reference = course if self._reference_rad is None else self._reference_rad
         reference += omega * command.dt_s
         lead = float(wrap_pi(reference - course))
-        lead = min(max(lead, -_MAX_LEAD_RAD), _MAX_LEAD_RAD)
+        limit = lead_limit_rad(command.accel_max_m_s2, command.speed_m_s, command.response_lag_s)
+        lead = min(max(lead, -limit), limit)
         self._reference_rad = course + lead
         return self._reference_rad
 

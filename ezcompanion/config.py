@@ -39,6 +39,7 @@ Any position (vehicle, target, defender) may be given as ``lat_deg, lon_deg`` in
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -420,14 +421,26 @@ def _mapping(path: str, value: object) -> Mapping[str, Any]:
     return value
 
 
+_LISTED_KEYS_CHARS = 300  # an error lists every allowed key up to this long, one line
+
+
+def _unknown(key: str, allowed: set[str]) -> str:
+    """Why ``key`` is refused: the allowed keys, or (too many for one line) the nearest."""
+    names = sorted(allowed)
+    listed = ", ".join(names)
+    if len(listed) <= _LISTED_KEYS_CHARS:
+        return f"unknown key; expected one of {listed}"
+    near = difflib.get_close_matches(key, names, n=3, cutoff=0.6)
+    if near:
+        return f"unknown key; did you mean {' or '.join(near)}? ({len(names)} keys allowed)"
+    return f"unknown key; not one of the {len(names)} allowed ({', '.join(names[:6])}, ...)"
+
+
 def _only(path: str, data: Mapping[str, Any], *, required: set[str], optional: set[str]) -> None:
     prefix = f"{path}." if path else ""
     for key in data:
         if key not in required | optional:
-            allowed = ", ".join(sorted(required | optional))
-            raise ConfigError(
-                f"{prefix}{key}", data[key], f"unknown key; expected one of {allowed}"
-            )
+            raise ConfigError(f"{prefix}{key}", data[key], _unknown(key, required | optional))
     for key in sorted(required - set(data)):
         raise ConfigError(f"{prefix}{key}", None, "is required")
 

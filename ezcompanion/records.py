@@ -78,8 +78,6 @@ class TickCommand:
     nominal_speed_m_s: float  # the speed to fly (the scenario's constant speed)
     accel_lat_m_s2: float  # lateral acceleration to fly (the actuator state at the step's end)
     step: GuidanceStep
-    accel_max_m_s2: float  # the law's bound on it
-    response_lag_s: float  # the law's model: the flown lateral acceleration lags it by this
 
     @property
     def captured(self) -> bool:

@@ -282,10 +282,11 @@ def run_shield(
     nominal: list[float],
     dt: float,
     speed: float = 1.0,
-) -> tuple[float, list[float], list[float]]:
+) -> tuple[float, list[float], list[float], list[float]]:
     """Fly ``shield_one`` with the given nominal commands (one per step) from ``start``
-    (north, east, course, a): the least true gap, and per step the shield's weight and the
-    held backup's certificate (NaN where the nominal passed whole)."""
+    (north, east, course, a): the least true gap, and per step the shield's weight, the
+    held backup's certificate (NaN where the nominal passed whole) and the best certificate
+    one step ahead on the nominal."""
     s = settings_for(params)
     north, east, course, a = start
     vehicle = Vehicle(north, east, course, a, speed, params.response_lag_s)
@@ -293,7 +294,7 @@ def run_shield(
     current = bk.BACKUP_NONE
     weight = math.nan
     least = true_gap(zones, north, east, course)
-    weights, certs = [], []
+    weights, certs, aheads = [], [], []
     for command in nominal:
         n, e, h, av = vehicle.x
         bk.shield_one(
@@ -303,10 +304,11 @@ def run_shield(
         a_next, current, weight = float(out[0, 0]), int(out[0, 2]), float(out[0, 3])
         weights.append(weight)
         certs.append(float(out[0, 4]))
+        aheads.append(float(out[0, 5]))
         assert abs(a_next) < params.accel_max_m_s2
         least = min(least, vehicle.fly(a, a_next, dt, zones))
         a = a_next
-    return least, weights, certs
+    return least, weights, certs, aheads
 
 
 def start_certificate(
@@ -329,7 +331,9 @@ def engagements(draw: st.DrawFn) -> Engagement:
     zones = draw(layouts())
     tau = draw(st.sampled_from([0.0, 0.0, 0.3, 1.2]))
     fall = draw(st.sampled_from([PARAMS.shield_weight_fall_1_s, 0.0, 20.0]))  # 0: no memory
-    params = dataclasses.replace(PARAMS, response_lag_s=tau, shield_weight_fall_1_s=fall)
+    robust = draw(st.sampled_from([PARAMS.shield_robust_m, 0.0, 0.2]))  # 0: no reserve
+    params = dataclasses.replace(PARAMS, response_lag_s=tau, shield_weight_fall_1_s=fall,
+                                 shield_robust_m=robust)
     start = (
         draw(st.floats(-8, 8)), draw(st.floats(-8, 8)), draw(st.floats(-math.pi, math.pi)),
         draw(st.floats(-0.9, 0.9)),
@@ -356,7 +360,7 @@ def test_a_certified_start_stays_out_of_every_zone_whatever_the_nominal(case: En
     theta = bk.acceptance_level_m(settings_for(params), zones.mu_range_m, zones.reach_m, 0,
                                   1.0, dt)  # fmt: skip
     assume(start_certificate(zones, params, start, dt) >= theta)
-    least, _weights, _ = run_shield(zones, params, start, nominal, dt)
+    least, _weights, _, _ = run_shield(zones, params, start, nominal, dt)
     assert least >= params.shield_margin_m - 1e-6
 
 
@@ -370,12 +374,30 @@ def test_the_nominal_weight_falls_no_faster_than_its_rate_unless_the_check_refus
     blend, and the held backup flew); where it passes whole it is 1."""
     zones, params, start, nominal, dt = case
     params = dataclasses.replace(params, shield_weight_fall_1_s=1.0)
-    _least, weights, certs = run_shield(zones, params, start, nominal, dt)
+    _least, weights, certs, _ = run_shield(zones, params, start, nominal, dt)
     fall = params.shield_weight_fall_1_s * dt
     for before, after in itertools.pairwise(weights):
         assert after == 0.0 or after >= before - fall - 1e-12, (before, after)
     for weight, cert in zip(weights, certs, strict=True):
         assert (weight == 1.0) == math.isnan(cert)  # the backup computed only where used
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(case=engagements())
+def test_the_nominal_flies_only_where_it_leaves_the_reserve(case: Engagement) -> None:
+    """``shield_robust_m``: with a lag, the nominal has a share of the command only where,
+    one step on it, some backup is certified by theta plus the reserve (so that a state
+    whose measured a_v is a little off keeps the exit its certificate counts on:
+    docs/guidance.md, step 5); with none (a_v = a, nothing measured), theta."""
+    zones, params, start, nominal, dt = case
+    params = dataclasses.replace(params, shield_robust_m=0.2)
+    theta = bk.acceptance_level_m(settings_for(params), zones.mu_range_m, zones.reach_m, 0,
+                                  1.0, dt)  # fmt: skip
+    level = theta + (0.2 if params.response_lag_s > 0.0 else 0.0)
+    _least, weights, _, aheads = run_shield(zones, params, start, nominal, dt)
+    flown = [(w, ahead) for w, ahead in zip(weights, aheads, strict=True) if w > 0.0]
+    assume(flown)
+    assert all(ahead >= level for _, ahead in flown), (level, flown)
 
 
 @pytest.mark.parametrize("number", [1, 2])
@@ -405,7 +427,7 @@ def test_the_shield_overrides_a_nominal_that_flies_into_a_zone() -> None:
     straight = [0.0] * 400
     free = Vehicle(*start, 1.0, 0.0)
     assert min(free.fly(0.0, 0.0, dt, zones) for _ in straight) < 0.0
-    least, weights, _certs = run_shield(zones, PARAMS, start, straight, dt)
+    least, weights, _certs, _ = run_shield(zones, PARAMS, start, straight, dt)
     assert least >= PARAMS.shield_margin_m - 1e-9
     # blended out (gradually: the weight's memory holds it to the fall rate), then back
     assert min(weights) < 0.5 and max(weights) == 1.0

@@ -112,3 +112,17 @@ def test_numbers_have_physical_ranges(path: tuple[Any, ...], value: object, mess
         scenario_from_dict(data)
     assert str(caught.value).startswith(message)
     assert len(str(caught.value)) < 200
+
+
+def test_a_misspelt_key_is_refused_with_the_nearest_names(tmp_path: Path) -> None:
+    """The guidance section has too many keys to list on one line: a near miss names the
+    key meant, anything else the count and the first few."""
+    misspelt = TEXT.replace("guidance:", "guidance:\n  shield_robst_m: 0.1", 1)
+    error = refused(misspelt, tmp_path)
+    assert error.field == "guidance.shield_robst_m" and error.value == 0.1
+    assert "did you mean shield_robust_m" in error.reason
+    garbage = refused(TEXT.replace("guidance:", "guidance:\n  zzzz: 1", 1), tmp_path)
+    assert garbage.field == "guidance.zzzz" and "not one of the" in garbage.reason
+    assert len(str(garbage)) < 300
+    short = refused(TEXT.replace("guidance:", "vehicle_extra: 1\nguidance:", 1), tmp_path)
+    assert "expected one of" in short.reason  # the top level lists every key

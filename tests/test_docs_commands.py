@@ -141,11 +141,13 @@ CHECKS: dict[str, Check] = {
     "ezcompanion validate --runs 10000 --seed 2027 --law backup --map-runs 2000 "
     "--chatter-runs 100 --abandon px4 --no-figures --out validation-out-backup-10k": Check.PARSE,
     "ezcompanion validate --runs 2000 --seed 2026 --law backup --set shield_weight_fall_1_s=0 "
-    "--map-runs 500 --chatter-runs 0 --abandon px4 --no-figures --workers 1 "
-    "--out validation-out-memory-off": Check.PARSE,
+    "--set shield_robust_m=0 --map-runs 500 --chatter-runs 0 --abandon px4 --no-figures "
+    "--workers 1 --out validation-out-memory-off": Check.PARSE,
     "ezcompanion validate --runs 2000 --seed 2026 --law backup --set shield_weight_fall_1_s=1 "
-    "--map-runs 500 --chatter-runs 0 --abandon px4 --no-figures --workers 1 "
-    "--out validation-out-memory-on": Check.PARSE,
+    "--set shield_robust_m=0 --map-runs 500 --chatter-runs 0 --abandon px4 --no-figures "
+    "--workers 1 --out validation-out-memory-on": Check.PARSE,
+    "ezcompanion validate --runs 2000 --seed 2026 --law backup --map-runs 500 --chatter-runs 0 "
+    "--abandon px4 --no-figures --workers 1 --out validation-out-reserve": Check.PARSE,
 }
 # Python blocks, by doc: run, or (needing certificates, a router and a scenario to send)
 # only compiled.

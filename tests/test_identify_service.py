@@ -110,16 +110,20 @@ def test_the_service_identifies_the_measured_autopilots_and_changes_only_what_is
         assert loop.speed_floor_m_s == pytest.approx(0.4, abs=SPEED_FACTOR_BOUND)
 
 
+@pytest.mark.parametrize("lag_s", [1.1, 1.3])
 def test_a_vehicle_slower_than_its_profile_makes_the_law_take_the_measured_lag(
-        tmp_path: Path) -> None:
-    run = fly("copter", velocity_lag_s=1.1, truth_out=tmp_path / "truth.csv")
+        tmp_path: Path, lag_s: float) -> None:
+    """Told the lag it flies, the copter stays out. At 1.3 s it entered without the
+    shield's reserve (``shield_robust_m`` 0: docs/guidance.md, "Assumption 4 and the
+    measured a_v")."""
+    run = fly("copter", velocity_lag_s=lag_s, truth_out=tmp_path / "truth.csv")
     changes = [e for e in run.response_events() if e.message.startswith("measured course lag")]
     assert changes, [e.line() for e in run.response_events()]
     change = changes[0]
-    assert abs(change.data["measured_lag_s"] - 1.1) <= LAG_BOUND_S
+    assert abs(change.data["measured_lag_s"] - lag_s) <= LAG_BOUND_S
     assert change.data["assumed_lag_s"] == 0.5 and "ArduCopter's default" in change.message
     told = run.service.loop.scenario.guidance.response_lag_s
-    assert abs(told - 1.1) <= LAG_BOUND_S and told == max(e.data["law_lag_s"] for e in changes)
+    assert abs(told - lag_s) <= LAG_BOUND_S and told == max(e.data["law_lag_s"] for e in changes)
     # told the lag it flies, the engagement stays out of every zone by the stub's truth, and
     # the companion says "intercepted" only if the truth agrees
     intercepted, _, miss, clearance, _ = judge_truth(run.service.scenario, tmp_path / "truth.csv")
@@ -128,11 +132,12 @@ def test_a_vehicle_slower_than_its_profile_makes_the_law_take_the_measured_lag(
 
 
 def test_a_vehicle_too_slow_to_turn_at_the_laws_bound_is_said_to_be() -> None:
-    """A copter lagging 1.8 s: the setpoints lead its course by at most 85 degrees, so it
-    turns at most at 1.48 / 1.8 = 0.82 of a_max, and the law's argument needs a_max."""
-    run = fly("copter", max_time_s=6.0, velocity_lag_s=1.8)
+    """A copter lagging 1.1 s: the setpoints lead its course by at most 30 degrees, so it
+    turns at most at sin(30 deg) / 1.1 = 0.45 of a_max, and the law's argument needs a_max
+    (the measured models, in the test above, are not said to be: 0.5 s gives 1.0)."""
+    run = fly("copter", max_time_s=6.0, velocity_lag_s=1.1)
     [said] = [e for e in run.response_events() if "turns at most at" in e.message]
-    assert said.data["turn_bound_m_s2"] == pytest.approx(0.82, abs=0.03)
+    assert said.data["turn_bound_m_s2"] == pytest.approx(0.45, abs=0.03)
     assert "safety argument does not hold" in said.message
 
 

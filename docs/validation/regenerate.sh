@@ -26,18 +26,23 @@ cp "$OUT-backup/tables.md" "$OUT-backup/summary.txt" docs/validation/backup_2k/
     --chatter-runs 100 --abandon px4 --no-figures --no-progress --out "$OUT-backup-10k" $WHERE
 mkdir -p docs/validation/backup_10k
 cp "$OUT-backup-10k/tables.md" "$OUT-backup-10k/summary.txt" docs/validation/backup_10k/
-# the shield's weight without and with its memory, the same 2,000 runs
+# the shield's weight without and with its memory, the same 2,000 runs (no reserve)
 "$BIN/ezcompanion" validate --runs 2000 --seed 2026 --law backup --set shield_weight_fall_1_s=0 \
-    --map-runs 500 --chatter-runs 0 --abandon px4 --no-figures --workers 1 --no-progress \
-    --out "$OUT-memory-off"
+    --set shield_robust_m=0 --map-runs 500 --chatter-runs 0 --abandon px4 --no-figures \
+    --workers 1 --no-progress --out "$OUT-memory-off"
 "$BIN/ezcompanion" validate --runs 2000 --seed 2026 --law backup --set shield_weight_fall_1_s=1 \
-    --map-runs 500 --chatter-runs 0 --abandon px4 --no-figures --workers 1 --no-progress \
-    --out "$OUT-memory-on"
+    --set shield_robust_m=0 --map-runs 500 --chatter-runs 0 --abandon px4 --no-figures \
+    --workers 1 --no-progress --out "$OUT-memory-on"
 for memory in off on; do
     mkdir -p "docs/validation/memory_2k/$memory"
     cp "$OUT-memory-$memory/tables.md" "$OUT-memory-$memory/summary.txt" \
         "docs/validation/memory_2k/$memory/"
 done
+# the shield's reserve (the default), the same 2,000 runs: against memory_2k/on, without it
+"$BIN/ezcompanion" validate --runs 2000 --seed 2026 --law backup --map-runs 500 --chatter-runs 0 \
+    --abandon px4 --no-figures --workers 1 --no-progress --out "$OUT-reserve"
+mkdir -p docs/validation/reserve_2k
+cp "$OUT-reserve/tables.md" "$OUT-reserve/summary.txt" docs/validation/reserve_2k/
 if [ -n "${FULL:-}" ]; then
     # shellcheck disable=SC2086
     "$BIN/ezcompanion" validate --runs 100000 --seed 2026 --law robust --map-runs 10000 \

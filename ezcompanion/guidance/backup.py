@@ -99,8 +99,9 @@ _N_BACKUPS = 3
     S_AB_HOLD,
     S_AB_BRAKE,
     S_FALL,
+    S_ROBUST,
     S_SIZE,
-) = range(13)
+) = range(14)
 
 # The sampled part of a flow ends when the heading change still to come is bounded by this
 # (it is then accounted for in closed form), or after this many samples; a turn looks for
@@ -138,6 +139,7 @@ def pack_shield(params: GuidanceParams, **abandon: float) -> FloatArray:
     p[S_AB_HOLD] = abandon.get("abandon_hold_s", params.abandon_hold_s)
     p[S_AB_BRAKE] = abandon.get("abandon_brake_m_s2", params.abandon_brake_m_s2)
     p[S_FALL] = params.shield_weight_fall_1_s
+    p[S_ROBUST] = params.shield_robust_m
     return p
 
 
@@ -603,19 +605,23 @@ def shield_one(
     certificate of the held backup at the start, the certificate one step ahead on the
     nominal)."""
     theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
+    # what the nominal (or a blend) must leave to be flown: theta, and with a lag a reserve
+    # above it, so that a state whose measured a_v is a little off keeps the exits its
+    # certificate counts on (with no lag a_v = a, the actuator state: nothing measured)
+    accept = theta + (s[S_ROBUST] if s[S_TAU] > 0.0 else 0.0)
     band = s[S_BAND]
     certs = np.empty(_N_BACKUPS)
     # the nominal held for the preview sets the weight; held for one step, it must keep a
-    # certificate >= theta to be flown at all
+    # certificate >= accept to be flown at all
     preview_s = max(dt, _PREVIEW_SAMPLES * sample_ticks(s, speed, dt) * dt)
     preview, _, _, _ = _ahead(s, zn, ze, zmur, zreach, kz, nominal, n, e, h, a, av, speed, dt,
-                              preview_s, theta + band, certs)  # fmt: skip
+                              preview_s, accept + band, certs)  # fmt: skip
     ahead, which, a_next, av_next = _ahead(s, zn, ze, zmur, zreach, kz, nominal, n, e, h, a, av,
-                                           speed, dt, dt, theta, certs)  # fmt: skip
-    x = min(max((preview - theta) / band, 0.0), 1.0)
-    weight = x * x * (3.0 - 2.0 * x) if ahead >= theta else 0.0
+                                           speed, dt, dt, accept, certs)  # fmt: skip
+    x = min(max((preview - accept) / band, 0.0), 1.0)
+    weight = x * x * (3.0 - 2.0 * x) if ahead >= accept else 0.0
     fall = s[S_FALL]
-    if fall > 0.0 and weight_before >= 0.0 and ahead >= theta:
+    if fall > 0.0 and weight_before >= 0.0 and ahead >= accept:
         # memory: the weight falls at most this fast (what it leads to is checked below)
         weight = max(weight, min(weight_before - fall * dt, 1.0))
     cert_now = math.nan  # computed only where the backup's command is used
@@ -636,8 +642,8 @@ def shield_one(
             # blend with the held backup's command, held over the step, and verify the blend
             blended = weight * nominal + (1.0 - weight) * backup_command(s, current, a)
             check, which_b, a_b, av_b = _ahead(s, zn, ze, zmur, zreach, kz, blended, n, e, h, a,
-                                               av, speed, dt, dt, theta, certs)  # fmt: skip
-            if check >= theta:
+                                               av, speed, dt, dt, accept, certs)  # fmt: skip
+            if check >= accept:
                 accepted = True
                 which, a_next, av_next = which_b, a_b, av_b
         if not accepted:

@@ -151,6 +151,10 @@ class GuidanceParams:
     # ... and, while the blend it gives passes the shield's check, the nominal's weight falls
     # at most this fast (a weight with memory: no chattering at the step; 0: none)
     shield_weight_fall_1_s: float = 1.0
+    # ... and, with a lag, the nominal (or a blend) is flown only where it leaves a
+    # certificate this far above the acceptance level: a reserve for the measured a_v's
+    # error (0: none)
+    shield_robust_m: float = 0.03
     # ... and its nominal's own safety share fades out within this many turn radii
     # (v^2 / a_max) beyond one of the target, so that it arrives (0: no fade)
     safety_fade_turn_radii: float = 4.0
@@ -196,6 +200,7 @@ class GuidanceParams:
         _positive("shield_band_m", self.shield_band_m)
         _non_negative("shield_margin_m", self.shield_margin_m)
         _non_negative("shield_weight_fall_1_s", self.shield_weight_fall_1_s)
+        _non_negative("shield_robust_m", self.shield_robust_m)
         _non_negative("safety_fade_turn_radii", self.safety_fade_turn_radii)
         _finite("prediction_step_ratio", self.prediction_step_ratio)
         if not 0.0 < self.prediction_step_ratio <= 0.25:

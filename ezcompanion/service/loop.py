@@ -177,6 +177,4 @@ class GuidanceLoop:
             nominal_speed_m_s=self.nominal_speed_m_s,
             accel_lat_m_s2=float(step.accel_lat_cmd_m_s2),
             step=step,
-            accel_max_m_s2=self.scenario.guidance.accel_max_m_s2,
-            response_lag_s=self.scenario.guidance.response_lag_s,
         )

@@ -8,13 +8,16 @@ points along a reference course that turns at omega = a / v; yaw_rate = omega ke
 with it. (Measured on ArduPilot 4.7 SITL: a 2 m/s vector rotated at 15 deg/s with yaw_rate
 15 deg/s flew 2.02 m/s at 15.1 deg/s.) LOCAL_NED rather than BODY_NED, because ArduCopter
 turns a body-frame velocity into a fixed direction when it arrives. The reference course
-starts at the measured course and may lead it by at most what the law's model needs
-(``lead_limit_rad``), so it cannot wind up while the vehicle lags: a course lagging its
-setpoint by tau (first order) turns at a / v once the reference leads it by a tau / v, so
-the limit is that at a_max with a quarter to spare, 30 to 85 degrees. (It was 30 degrees
-fixed: a copter lagging 1.5 s then turned at most at 0.35 a_max while the law, told the
-lag, counted on a_max, and it entered a zone.) For PX4 the reference is instead the
-measured course plus omega * 1.2 s (the profile's ``setpoint_lead_s``), the inverse of its
+starts at the measured course and may lead it by at most 30 degrees, so it cannot wind up
+while the vehicle lags, and so that the vehicle flies as the law's model says: measured on
+ArduCopter 4.5.6 SITL (velocity setpoints leading the course by a fixed angle L), the
+course lags first order with its speed held within 0.87 V up to 30 degrees; further, the
+velocity itself lags (speed V cos L, lateral acceleration V sin L / tau, and at 60 to 85
+degrees tight circles at a third of V), so a larger limit buys no turn the law can count
+on. A vehicle lagging tau therefore turns at most at about V sin(30 deg) / tau
+(``turn_bound_m_s2``); the identification says so where that is short of a_max. For PX4,
+whose 1.2 s lag would need far more lead than that, the reference is instead the measured
+course plus omega * 1.2 s (the profile's ``setpoint_lead_s``), the inverse of its
 first-order lag. Standing still (slower than half
 the nominal speed) the reference does not turn. The vertical velocity holds the height of
 the first tick by feedback on the measured height (PX4 does not hold it on vz = 0).
@@ -48,14 +51,12 @@ __all__ = [
     "CourseSetpoints",
     "Setpoints",
     "VelocitySetpoints",
-    "lead_limit_rad",
     "make_setpoints",
     "turn_bound_m_s2",
 ]
 
-_MIN_LEAD_RAD = math.radians(30.0)
-_MAX_LEAD_RAD = math.radians(85.0)  # a velocity further off the course is not a course lag
-_LEAD_MARGIN = 1.25  # over the steady lead of a turn at a_max
+_MAX_LEAD_RAD = math.radians(30.0)
+_MAX_COMPENSATED_LEAD_RAD = math.radians(85.0)
 _STILL_FRACTION = 0.5  # of the nominal speed: slower, the vehicle stands still
 _HEIGHT_GAIN_1_S = 1.0  # height hold: vz = gain * error ...
 _MAX_CLIMB_M_S = 1.0  # ... within this
@@ -68,20 +69,12 @@ _TRIM_RATE_1_S = 0.5  # relative gain change per second per unit of relative tur
 _GAIN_MIN, _GAIN_MAX = 0.5, 4.0  # p3 / |a|
 
 
-def lead_limit_rad(accel_max_m_s2: float, speed_m_s: float, lag_s: float) -> float:
-    """How far the integrating velocity reference may lead the measured course: in a steady
-    turn at a, a course lagging its setpoint by ``lag_s`` (first order) needs the lead
-    a lag / v, so the limit is that at ``accel_max_m_s2`` times 1.25, within 30 to 85
-    degrees."""
-    needed = _LEAD_MARGIN * accel_max_m_s2 * lag_s / speed_m_s
-    return min(max(needed, _MIN_LEAD_RAD), _MAX_LEAD_RAD)
-
-
 def turn_bound_m_s2(speed_m_s: float, lag_s: float) -> float:
-    """The largest steady lateral acceleration the velocity setpoints get from a vehicle
-    whose course lags them by ``lag_s`` (first order): v times the largest lead over the lag
-    (inf without a lag)."""
-    return speed_m_s * _MAX_LEAD_RAD / lag_s if lag_s > 0.0 else math.inf
+    """The largest steady lateral acceleration the integrating velocity reference gets from
+    a vehicle whose velocity lags it by ``lag_s`` (first order): V sin(30 deg) / lag, the
+    velocity-lag figure measured on ArduCopter (the stub's course lag gives 0.52 V / lag;
+    inf without a lag)."""
+    return speed_m_s * math.sin(_MAX_LEAD_RAD) / lag_s if lag_s > 0.0 else math.inf
 
 
 class Setpoints(ABC):
@@ -147,8 +140,7 @@ class VelocitySetpoints(Setpoints):
         With ``lead_s`` (the vehicle's measured first-order course lag, PX4) it leads the
         course by omega * lead_s, the inverse of that lag, so that the course turns at omega
         now instead of lagging it (within 85 degrees). Without, it integrates omega and
-        leads the measured course by at most ``lead_limit_rad`` for the law's bound and lag,
-        so it cannot wind up but a turn at the bound is flown with the law's lag.
+        leads the measured course by at most 30 degrees, so it cannot wind up.
         """
         omega = command.turn_rate_rad_s
         course = command.course_rad
@@ -156,13 +148,13 @@ class VelocitySetpoints(Setpoints):
             self._reference_rad = None
             return course
         if self.lead_s > 0.0:
-            lead = min(max(omega * self.lead_s, -_MAX_LEAD_RAD), _MAX_LEAD_RAD)
+            lead = min(max(omega * self.lead_s, -_MAX_COMPENSATED_LEAD_RAD),
+                       _MAX_COMPENSATED_LEAD_RAD)
             return course + lead
         reference = course if self._reference_rad is None else self._reference_rad
         reference += omega * command.dt_s
         lead = float(wrap_pi(reference - course))
-        limit = lead_limit_rad(command.accel_max_m_s2, command.speed_m_s, command.response_lag_s)
-        lead = min(max(lead, -limit), limit)
+        lead = min(max(lead, -_MAX_LEAD_RAD), _MAX_LEAD_RAD)
         self._reference_rad = course + lead
         return self._reference_rad
 

@@ -148,6 +148,12 @@ CHECKS: dict[str, Check] = {
     "--workers 1 --out validation-out-memory-on": Check.PARSE,
     "ezcompanion validate --runs 2000 --seed 2026 --law backup --map-runs 500 --chatter-runs 0 "
     "--abandon px4 --no-figures --workers 1 --out validation-out-reserve": Check.PARSE,
+    "ezcompanion validate --runs 2000 --seed 2026 --law backup --set shield_robust_m=0 "
+    "--rate-filter 0.1 --map-runs 500 --chatter-runs 0 --abandon px4 --no-figures --workers 1 "
+    "--out validation-out-rate-filter-no_reserve": Check.PARSE,
+    "ezcompanion validate --runs 2000 --seed 2026 --law backup --rate-filter 0.1 "
+    "--map-runs 500 --chatter-runs 0 --abandon px4 --no-figures --workers 1 "
+    "--out validation-out-rate-filter-reserve": Check.PARSE,
 }
 # Python blocks, by doc: run, or (needing certificates, a router and a scenario to send)
 # only compiled.

@@ -146,3 +146,54 @@ def test_campaign_merge_is_the_same_for_any_chunking() -> None:
     for policy in base.policies:
         for name, value in one.metrics[policy].as_arrays().items():
             np.testing.assert_array_equal(value, two.metrics[policy].as_arrays()[name])
+
+
+class _Recording:
+    """A policy that records the state it is given, then steps the real one."""
+
+    def __init__(self, policy: object) -> None:
+        self.policy = policy
+        self.courses: list[np.ndarray] = []
+        self.rates: list[np.ndarray] = []
+
+    def step(self, state: object, dt: float) -> object:
+        self.courses.append(np.array(state.course_rad))  # type: ignore[attr-defined]
+        self.rates.append(np.array(state.course_rate_rad_s))  # type: ignore[attr-defined]
+        return self.policy.step(state, dt)  # type: ignore[attr-defined]
+
+    def keep(self, scenarios: object, live: object) -> _Recording:
+        raise AssertionError("a batch of one is never compacted")
+
+
+@pytest.mark.parametrize("filter_s", [0.0, 0.1])
+def test_the_course_rate_is_measured_as_the_service_measures_it(filter_s: float) -> None:
+    """``rate_filter_s``: the rate the law is given is the course change over the last
+    step, filtered first order over that time (``ezcompanion.service.state``), from the
+    courses the law itself was given; 0 gives the exact flown rate a_f / v."""
+    drawn = draw_scenarios(ScenarioDistribution(ideal_response_probability=0.0), 5, 0, 1)
+    assert drawn.response_lag_s[0] > 0.0
+    settings = BatchSettings(duration_s=6.0, rate_filter_s=filter_s)
+    recording = _Recording(law_policy(drawn, PARAMS, LawName.BACKUP))
+    simulate_batch(drawn, recording, accel_max_m_s2=PARAMS.accel_max_m_s2,  # type: ignore[arg-type]
+                   settings=settings)  # fmt: skip
+    dt = settings.dt_s
+    courses, rates = np.array(recording.courses)[:, 0], np.array(recording.rates)[:, 0]
+    turned = np.remainder(np.diff(courses) + math.pi, 2 * math.pi) - math.pi
+    if filter_s == 0.0:  # exact: the rate at the step, not over it; close to the mean
+        assert np.max(np.abs(rates[1:] - turned / dt)) < 0.05
+        return
+    gain = dt / (dt + filter_s)
+    expected = np.zeros_like(rates)
+    for k, turn in enumerate(turned / dt):
+        expected[k + 1] = expected[k] + gain * (turn - expected[k])
+    np.testing.assert_allclose(rates, expected, atol=1e-12)
+
+
+def test_the_rate_filter_changes_nothing_for_an_ideal_vehicle() -> None:
+    """Without a lag the shield takes a_v = a: the measured rate is not used (the other
+    laws never use it)."""
+    drawn = draw_scenarios(ScenarioDistribution(ideal_response_probability=1.0), 5, 0, 20)
+    exact = _fly(drawn, "backup", BatchSettings(duration_s=10.0))
+    filtered = _fly(drawn, "backup", BatchSettings(duration_s=10.0, rate_filter_s=0.1))
+    for name, value in exact.as_arrays().items():
+        np.testing.assert_array_equal(value, filtered.as_arrays()[name], err_msg=name)

@@ -43,6 +43,18 @@ done
     --abandon px4 --no-figures --workers 1 --no-progress --out "$OUT-reserve"
 mkdir -p docs/validation/reserve_2k
 cp "$OUT-reserve/tables.md" "$OUT-reserve/summary.txt" docs/validation/reserve_2k/
+# the same, the law given the course rate as the service measures it (0.1 s filter)
+"$BIN/ezcompanion" validate --runs 2000 --seed 2026 --law backup --set shield_robust_m=0 \
+    --rate-filter 0.1 --map-runs 500 --chatter-runs 0 --abandon px4 --no-figures --workers 1 \
+    --no-progress --out "$OUT-rate-filter-no_reserve"
+"$BIN/ezcompanion" validate --runs 2000 --seed 2026 --law backup --rate-filter 0.1 \
+    --map-runs 500 --chatter-runs 0 --abandon px4 --no-figures --workers 1 --no-progress \
+    --out "$OUT-rate-filter-reserve"
+for reserve in no_reserve reserve; do
+    mkdir -p "docs/validation/rate_filter_2k/$reserve"
+    cp "$OUT-rate-filter-$reserve/tables.md" "$OUT-rate-filter-$reserve/summary.txt" \
+        "docs/validation/rate_filter_2k/$reserve/"
+done
 if [ -n "${FULL:-}" ]; then
     # shellcheck disable=SC2086
     "$BIN/ezcompanion" validate --runs 100000 --seed 2026 --law robust --map-runs 10000 \

@@ -59,18 +59,25 @@ class BatchSettings:
 
     ``dt_s`` 0.02 s is the 50 Hz control step; tests compare it against the reference
     simulator at 2 ms. ``bound_ratio``: |a| at or above this share of a_max counts as
-    time at the bound.
+    time at the bound. ``rate_filter_s``: the controller's course rate is measured as the
+    service measures it (``ezcompanion.service.state``: the course change over the last
+    step, then a first-order filter of this time constant) instead of given exactly
+    (0, the default).
     """
 
     dt_s: float = 0.02
     duration_s: float = 40.0
     bound_ratio: float = 0.9
+    rate_filter_s: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("dt_s", "duration_s", "bound_ratio"):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0.0):
                 raise ConfigError(name, value, "must be a finite number > 0")
+        rate = self.rate_filter_s
+        if not (isinstance(rate, int | float) and math.isfinite(rate) and 0.0 <= rate <= 10.0):
+            raise ConfigError("rate_filter_s", rate, "must be a number in [0, 10]")
         if self.dt_s > self.duration_s:
             raise ConfigError("dt_s", self.dt_s, "must not exceed duration_s")
         if self.bound_ratio > 1.0:
@@ -295,8 +302,12 @@ def simulate_batch(
     speed = scenarios.flown_speed_m_s.copy()
     lag = scenarios.response_lag_s.copy()
     flown = np.zeros(size)  # a_f, the flown lateral acceleration
+    measuring = settings.rate_filter_s > 0.0
+    gain = dt / (dt + settings.rate_filter_s)
+    measured = np.zeros(size)  # the course rate as measured, when ``measuring``
     for k in range(steps + 1):
-        state = KinematicState(x[0], x[1], x[2], speed, flown / speed)
+        rate = measured if measuring else flown / speed
+        state = KinematicState(x[0], x[1], x[2], speed, rate)
         out = policy.step(state, dt)
         rows = index[live]
         if abandon is not None and k >= check_from:
@@ -337,10 +348,14 @@ def simulate_batch(
             active = active.subset(live)
             policy = policy.keep(active, live)
             index, x, speed, a0, a1 = index[live], x[:, live], speed[live], a0[live], a1[live]
-            lag, flown = lag[live], flown[live]
+            lag, flown, measured = lag[live], flown[live], measured[live]
             live = np.ones(remaining, dtype=bool)
         slope = (a1 - a0) / dt
         x_next = _advance(x, speed, a0, slope, flown, lag, k * dt, dt)
+        if measuring:  # the course change over the step, filtered
+            turned = np.remainder(x_next[2] - x[2] + math.pi, 2.0 * math.pi) - math.pi
+            turned /= dt
+            measured = np.where(live, measured + gain * (turned - measured), measured)
         x = np.where(live, x_next, x)
         flown = np.where(live, flown_accel_m_s2(a0, slope, flown, lag, dt), flown)
     return RunMetrics(

@@ -50,6 +50,10 @@ def add_validate_parser(subparsers: Any) -> None:
     )  # fmt: skip
     p.add_argument("--dt", type=float, default=BatchSettings().dt_s, help="step (s)")
     p.add_argument("--duration", type=float, default=BatchSettings().duration_s, help="limit (s)")
+    p.add_argument(
+        "--rate-filter", type=float, default=BatchSettings().rate_filter_s, metavar="S",
+        help="measure the course rate as the service does, filtered over S s (default 0: exact)",
+    )  # fmt: skip
     p.add_argument("--map-runs", type=int, default=2000, help="failure-map starts (0: none)")
     p.add_argument(
         "--workers", type=int, default=0,
@@ -116,7 +120,8 @@ def spec_from_args(args: argparse.Namespace) -> CampaignSpec:
         policies=tuple(dict.fromkeys(args.laws)) if args.laws else POLICIES,
         params=params,
         distribution=dist,
-        settings=BatchSettings(dt_s=args.dt, duration_s=args.duration),
+        settings=BatchSettings(dt_s=args.dt, duration_s=args.duration,
+                               rate_filter_s=args.rate_filter),
         map_runs=args.map_runs,
         workers=args.workers,
         chunk_runs=args.chunk_runs,

@@ -56,7 +56,10 @@ def summary_text(result: CampaignResult) -> str:
     labels = strata(result.scenarios, result.escape_margin_m, result.oracle)
     head = (
         f"{spec.runs} random engagements, seed {spec.seed}, dt {spec.settings.dt_s} s, "
-        f"limit {spec.settings.duration_s} s, policies {', '.join(spec.policies)}; "
+        f"limit {spec.settings.duration_s} s, "
+        + (f"course rate measured through a {spec.settings.rate_filter_s} s filter, "
+           if spec.settings.rate_filter_s > 0.0 else "")
+        + f"policies {', '.join(spec.policies)}; "
         f"{result.wall_s:.1f} s wall ({result.cluster}).\nRates: % of runs [95% Wilson "
         "interval], a zero count as 0/N (< its one-sided 95% upper bound); 'entered|safe "
         "existed': entries among runs where the oracle found a safe manoeuvre; 'S+I/oracle': "

@@ -117,7 +117,7 @@ def test_the_flown_turn_lags_as_the_law_is_told_while_the_lead_is_small(
 def test_a_lagging_vehicle_turns_at_most_at_the_stated_bound(link: wire.Link) -> None:
     """Asked for more, a vehicle lagging 1.5 s turns at what the 30-degree lead gives: on
     the stub's course lag 0.52 v / tau, just above ``turn_bound_m_s2`` (v sin 30 deg / tau,
-    the velocity lag ArduCopter showed beyond 30 degrees, at 0.87 of its speed)."""
+    the velocity-lag figure, which ArduCopter followed beyond 30 degrees)."""
     flown, _ = flown_turn(link, 1.5, 1.0, 1.0, 20.0)
     assert flown[-1] == pytest.approx(math.radians(30.0) / 1.5, rel=0.02)
     assert turn_bound_m_s2(1.0, 1.5) == pytest.approx(0.5 / 1.5)

@@ -11,16 +11,16 @@ turns a body-frame velocity into a fixed direction when it arrives. The referenc
 starts at the measured course and may lead it by at most 30 degrees, so it cannot wind up
 while the vehicle lags, and so that the vehicle flies as the law's model says: measured on
 ArduCopter 4.5.6 SITL (velocity setpoints leading the course by a fixed angle L), the
-course lags first order with its speed held within 0.87 V up to 30 degrees; further, the
+course lags first order with its speed at 0.91 V or more up to 30 degrees; further, the
 velocity itself lags (speed V cos L, lateral acceleration V sin L / tau, and at 60 to 85
 degrees tight circles at a third of V), so a larger limit buys no turn the law can count
 on. A vehicle lagging tau therefore turns at most at about V sin(30 deg) / tau
 (``turn_bound_m_s2``); the identification says so where that is short of a_max. For PX4,
 whose 1.2 s lag would need far more lead than that, the reference is instead the measured
 course plus omega * 1.2 s (the profile's ``setpoint_lead_s``), the inverse of its
-first-order lag. Standing still (slower than half
-the nominal speed) the reference does not turn. The vertical velocity holds the height of
-the first tick by feedback on the measured height (PX4 does not hold it on vz = 0).
+first-order lag. Standing still (slower than half the nominal speed) the reference does
+not turn. The vertical velocity holds the height of the first tick by feedback on the
+measured height (PX4 does not hold it on vz = 0).
 Streamed every tick, well inside the autopilots' timeouts (ArduCopter 3 s, PX4 1 s).
 
 ``course`` (ArduPlane): MAV_CMD_GUIDED_CHANGE_HEADING as COMMAND_INT, p1 = 0 (course over

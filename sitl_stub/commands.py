@@ -195,13 +195,18 @@ class CommandHandlers:
 
     def parameters(self) -> dict[str, float]:
         """The parameters the stub answers for: its setpoint timeout, under the imitated
-        autopilot's name (ArduCopter GUID_TIMEOUT, PX4 COM_OF_LOSS_T). ArduPlane's course
-        command has no timeout: nothing."""
+        autopilot's name (ArduCopter GUID_TIMEOUT, PX4 COM_OF_LOSS_T), and ArduCopter's
+        velocity shaping (WPNAV_ACCEL in cm/s/s, PSC_JERK_XY in m/s/s/s) where it is
+        modelled. ArduPlane's course command has no timeout: nothing."""
         timeout = self.config.timeout_s("setpoint")
         if self.spec.profile is Profile.PX4:
             return {"COM_OF_LOSS_T": timeout}
         if self.spec.profile is Profile.COPTER:
-            return {"GUID_TIMEOUT": timeout}
+            shaping = self.config.velocity_shaping()
+            if shaping is None:
+                return {"GUID_TIMEOUT": timeout}
+            return {"GUID_TIMEOUT": timeout, "WPNAV_ACCEL": 100.0 * shaping.accel_max_m_s2,
+                    "PSC_JERK_XY": shaping.jerk_max_m_s3}
         return {}
 
     def _on_param_request_read(self, msg: Message, t_s: float, state: VehicleState) -> None:

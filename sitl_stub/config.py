@@ -11,7 +11,7 @@ Layout (every key optional; see ``docs/sitl_stub.md``)::
       seed: 0
       physics_dt_s: 0.01
       model: measured               # measured | ideal (docs/sitl_stub.md)
-      velocity_lag_s: null          # null: the model's (measured: copter 0.5, PX4 1.2)
+      velocity_lag_s: null          # null: the model's (measured: copter 0.6, PX4 1.2)
       speed_ratio: null             # flown / commanded (measured: PX4 0.8, plane 23.4/22)
       heading_accel_ratio: null     # plane course command (measured 0.54)
       vz_hold_drift_m_s: null       # climb under vz = 0 without a height (PX4 0.1)
@@ -60,6 +60,7 @@ from ezcompanion.errors import ConfigError
 from sitl_stub.mav import key_from_hex, key_from_passphrase
 from sitl_stub.profiles import Profile, ProfileSpec, profile_spec
 from sitl_stub.transport import check_stub_url
+from sitl_stub.vehicle import VelocityShaping
 
 __all__ = ["Faults", "StreamRates", "StubConfig", "StubSettings", "load_stub_config", "stub_config"]
 
@@ -279,6 +280,18 @@ class StubConfig:
         if name == "velocity_lag_s":
             return 1.0 / self.settings.course_gain_1_s
         return _IDEAL[name]
+
+    def velocity_shaping(self) -> VelocityShaping | None:
+        """ArduCopter's velocity shaping in the measured model, else None: WPNAV_ACCEL from
+        the profile, the tracking lag (at most half the lag), and PSC_JERK_XY such that
+        the shaping and the tracking add up to ``velocity_lag_s``; None at a lag of 0."""
+        accel = self.spec.shaping_accel_m_s2
+        lag = self.model_value("velocity_lag_s")
+        if not self.measured or accel is None or lag <= 0.0:
+            return None
+        tracking = min(self.spec.tracking_lag_s, 0.5 * lag)
+        return VelocityShaping(accel_max_m_s2=accel, jerk_max_m_s3=accel / (lag - tracking),
+                               tracking_lag_s=tracking)
 
     @property
     def max_stream_rate_hz(self) -> float:

@@ -67,6 +67,8 @@ class ProfileSpec:
     can_hover: bool
     # the measured response (docs/sitl_stub.md, "Measured response models")
     velocity_lag_s: float  # flown velocity direction behind the setpoint's (first order)
+    shaping_accel_m_s2: float | None  # velocity shaped as ArduCopter's (WPNAV_ACCEL), or None
+    tracking_lag_s: float  # with shaping: the vehicle's velocity behind the shaped reference
     speed_ratio: float  # flown / commanded speed (plane: ground speed / cruise airspeed)
     heading_accel_ratio: float  # flown / commanded lateral acceleration of a course command
     vz_hold_drift_m_s: float  # climb while told vz = 0 without a height (up)
@@ -111,7 +113,10 @@ _COPTER = ProfileSpec(
     max_stream_rate_hz=200.0, setpoint_timeout_s=3.0, attitude_timeout_s=3.0, course_timeout_s=0.0,
     accepts_velocity=True, accepts_course_command=False, ardupilot_attitude_mask=False,
     supports_data_streams=True, can_hover=True,
-    velocity_lag_s=0.5, speed_ratio=1.0, heading_accel_ratio=1.0, vz_hold_drift_m_s=0.0,
+    # WPNAV_ACCEL 2.5 m/s^2 and PSC_JERK_XY 5 m/s^3 (shaping 0.5 s) + 0.1 s tracking: the
+    # course flies 0.54 to 0.59 s behind (docs/sitl_stub.md), taken as 0.6
+    velocity_lag_s=0.6, shaping_accel_m_s2=2.5, tracking_lag_s=0.1,
+    speed_ratio=1.0, heading_accel_ratio=1.0, vz_hold_drift_m_s=0.0,
     failsafe_descent_m_s=0.0, acks_twice=False, firmware=(4, 7, 0, 0),
 )
 
@@ -128,7 +133,8 @@ _PLANE = ProfileSpec(
     max_stream_rate_hz=40.0, setpoint_timeout_s=0.0, attitude_timeout_s=3.0, course_timeout_s=0.0,
     accepts_velocity=False, accepts_course_command=True, ardupilot_attitude_mask=True,
     supports_data_streams=True, can_hover=False,
-    velocity_lag_s=0.0, speed_ratio=23.4 / 22.0, heading_accel_ratio=0.54, vz_hold_drift_m_s=0.0,
+    velocity_lag_s=0.0, shaping_accel_m_s2=None, tracking_lag_s=0.0,
+    speed_ratio=23.4 / 22.0, heading_accel_ratio=0.54, vz_hold_drift_m_s=0.0,
     failsafe_descent_m_s=0.0, acks_twice=False, firmware=(4, 7, 0, 0),
 )
 
@@ -147,7 +153,8 @@ _PX4 = ProfileSpec(
     max_stream_rate_hz=200.0, setpoint_timeout_s=1.0, attitude_timeout_s=1.0, course_timeout_s=0.0,
     accepts_velocity=True, accepts_course_command=False, ardupilot_attitude_mask=False,
     supports_data_streams=False, can_hover=True,
-    velocity_lag_s=1.2, speed_ratio=0.8, heading_accel_ratio=1.0, vz_hold_drift_m_s=0.1,
+    velocity_lag_s=1.2, shaping_accel_m_s2=None, tracking_lag_s=0.0,
+    speed_ratio=0.8, heading_accel_ratio=1.0, vz_hold_drift_m_s=0.1,
     failsafe_descent_m_s=0.8, acks_twice=True, firmware=(1, 16, 0, 255),
 )
 

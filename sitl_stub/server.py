@@ -65,7 +65,7 @@ class SitlStub:
             can_hover=config.spec.can_hover, wind=self._wind,
             speed_ratio=config.model_value("speed_ratio"),
             speed_lag_s=config.model_value("velocity_lag_s") if config.measured else 0.0,
-            follows_setpoint_speed=config.measured,
+            follows_setpoint_speed=config.measured, shaping=config.velocity_shaping(),
         )
         grounded = not s.start_armed and config.spec.can_hover
         speed = 0.0 if grounded else config.start.speed_m_s

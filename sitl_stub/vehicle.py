@@ -15,6 +15,17 @@ State (local NED of the scenario, SI):
 - ``accel_lat_m_s2``: the lateral acceleration actually flown, positive turning right; it
   follows the desired one with a first-order lag of ``response_time_s`` (0 = at once) and is
   bounded by ``accel_max_m_s2`` and by ``speed * yaw_rate_max``.
+- ``shaped``: with :class:`VelocityShaping` (ArduCopter), the autopilot's own shaped
+  velocity reference and its acceleration while it follows a velocity setpoint or brakes;
+  None otherwise.
+
+A vehicle with :class:`VelocityShaping` follows velocity setpoints (and brakes) as
+ArduCopter's position controller does, not as a unicycle: a jerk-limited square-root
+controller shapes a reference velocity towards the setpoint (``AC_PosControl``'s
+``shape_vel_accel_xy``: gain ``jerk / accel``, acceleration at most ``accel_max_m_s2``,
+jerk at most ``jerk_max_m_s3``) and the vehicle's velocity over ground follows that reference
+with a first-order lag of ``tracking_lag_s``. Fitted to ArduCopter 4.5.6 SITL
+(docs/sitl_stub.md, "ArduCopter's velocity response, measured again").
 
 Commands say what the autopilot's inner loops are asked to do; :func:`step` turns one into
 the lateral acceleration and speed of one fixed step and integrates
@@ -34,18 +45,21 @@ from ezcompanion.sim.kinematics import Wind, course_and_ground_speed, rk4_step, 
 __all__ = [
     "FollowCourse",
     "LateralAccel",
+    "ShapedReference",
     "Stop",
     "Straight",
     "TurnRate",
     "VehicleCommand",
     "VehicleParams",
     "VehicleState",
+    "VelocityShaping",
     "Vertical",
     "desired_accel",
     "step",
 ]
 
 _HOVER_M_S = 1e-6  # below this speed the vehicle hovers: no translation, yaw at yaw_rate_max
+_STOPPED_M_S = 1e-3  # braking under velocity shaping: within 1 mm/s, stopped and held
 
 
 @dataclass(frozen=True)
@@ -108,6 +122,27 @@ class Vertical:
 
 
 @dataclass(frozen=True, kw_only=True)
+class VelocityShaping:
+    """ArduCopter's horizontal velocity shaping (see the module docstring): WPNAV_ACCEL
+    (``accel_max_m_s2``), PSC_JERK_XY (``jerk_max_m_s3``) and the lag of the vehicle's
+    velocity behind the shaped reference (its attitude and velocity loops)."""
+
+    accel_max_m_s2: float
+    jerk_max_m_s3: float
+    tracking_lag_s: float
+
+
+@dataclass(frozen=True)
+class ShapedReference:
+    """The shaped velocity reference over ground and its acceleration (NED, SI)."""
+
+    north_m_s: float
+    east_m_s: float
+    accel_north_m_s2: float
+    accel_east_m_s2: float
+
+
+@dataclass(frozen=True, kw_only=True)
 class VehicleParams:
     """The airframe and its inner loops."""
 
@@ -123,6 +158,7 @@ class VehicleParams:
     height_gain_1_s: float = 1.0  # height hold: climb = gain * error ...
     climb_max_m_s: float = 2.0  # ... within this
     wind: Wind = field(default_factory=Wind)
+    shaping: VelocityShaping | None = None  # velocity setpoints shaped as ArduCopter does
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -138,6 +174,7 @@ class VehicleState:
     yaw_rate_rad_s: float = 0.0  # heading rate over the last step
     height_m: float = 0.0  # above the origin, up
     climb_m_s: float = 0.0  # rate of height_m over the last step
+    shaped: ShapedReference | None = None  # the autopilot's shaped reference (shaping only)
 
     def ground_velocity(self, wind: Wind) -> tuple[float, float]:
         """Velocity over ground ``(north_m_s, east_m_s)``; a hovering vehicle holds still."""
@@ -225,12 +262,89 @@ def _hover_yaw_rate(state: VehicleState, command: VehicleCommand, params: Vehicl
     return 0.0
 
 
+def _limit(x: float, y: float, length: float) -> tuple[float, float]:
+    norm = math.hypot(x, y)
+    return (x, y) if norm <= length else (x * length / norm, y * length / norm)
+
+
+def _sqrt_controller(error: float, gain_1_s: float, limit: float, dt_s: float) -> float:
+    """ArduPilot's square-root controller of a non-negative error: linear (``gain``) up to
+    ``limit / gain^2``, then ``sqrt(2 limit (error - limit / (2 gain^2)))``, and never more
+    than closes the error in one step."""
+    linear = limit / (gain_1_s * gain_1_s)
+    rate = (gain_1_s * error if error <= linear
+            else math.sqrt(2.0 * limit * (error - 0.5 * linear)))
+    return min(rate, error / dt_s)
+
+
+def shaped_step(
+    reference: ShapedReference, target_n_m_s: float, target_e_m_s: float,
+    shaping: VelocityShaping, dt_s: float,
+) -> ShapedReference:
+    """One step of ArduCopter's velocity shaping towards the setpoint ``target``: the
+    square-root correction along the velocity error (gain jerk / accel), its length at most
+    ``accel_max``, the acceleration moved towards it at most ``jerk_max`` per second."""
+    accel, jerk = shaping.accel_max_m_s2, shaping.jerk_max_m_s3
+    err_n, err_e = target_n_m_s - reference.north_m_s, target_e_m_s - reference.east_m_s
+    error = math.hypot(err_n, err_e)
+    want_n = want_e = 0.0
+    if error > 0.0:
+        scale = _sqrt_controller(error, jerk / accel, jerk, dt_s) / error
+        want_n, want_e = _limit(err_n * scale, err_e * scale, accel)
+    d_n, d_e = _limit(want_n - reference.accel_north_m_s2, want_e - reference.accel_east_m_s2,
+                      jerk * dt_s)
+    a_n, a_e = reference.accel_north_m_s2 + d_n, reference.accel_east_m_s2 + d_e
+    return ShapedReference(reference.north_m_s + a_n * dt_s, reference.east_m_s + a_e * dt_s,
+                           a_n, a_e)
+
+
+def _shaped_vehicle_step(
+    state: VehicleState, command: FollowCourse | Stop, params: VehicleParams,
+    shaping: VelocityShaping, dt_s: float, height: float, climb: float,
+) -> VehicleState:
+    """The vehicle under ArduCopter's velocity shaping (see the module docstring)."""
+    wind = params.wind
+    g_n, g_e = state.ground_velocity(wind)
+    reference = state.shaped or ShapedReference(g_n, g_e, 0.0, 0.0)
+    target_n = target_e = 0.0
+    if isinstance(command, FollowCourse):
+        speed = _target_speed(command, params)
+        course = command.reference_rad(state.t_s)
+        target_n, target_e = speed * math.cos(course), speed * math.sin(course)
+    reference = shaped_step(reference, target_n, target_e, shaping, dt_s)
+    keep = math.exp(-dt_s / shaping.tracking_lag_s) if shaping.tracking_lag_s > 0.0 else 0.0
+    n_next = reference.north_m_s + (g_n - reference.north_m_s) * keep
+    e_next = reference.east_m_s + (g_e - reference.east_m_s) * keep
+    if (isinstance(command, Stop) and math.hypot(n_next, e_next) < _STOPPED_M_S
+            and math.hypot(reference.north_m_s, reference.east_m_s) < _STOPPED_M_S):
+        reference, n_next, e_next = ShapedReference(0.0, 0.0, 0.0, 0.0), 0.0, 0.0  # held
+    air_n, air_e = n_next - wind.north_m_s, e_next - wind.east_m_s
+    speed_next = math.hypot(air_n, air_e)
+    heading = state.heading_rad if speed_next <= _HOVER_M_S else math.atan2(air_e, air_n)
+    a_n, a_e = (n_next - g_n) / dt_s, (e_next - g_e) / dt_s
+    return VehicleState(
+        t_s=state.t_s + dt_s,
+        north_m=state.north_m + 0.5 * (g_n + n_next) * dt_s,
+        east_m=state.east_m + 0.5 * (g_e + e_next) * dt_s,
+        heading_rad=heading, speed_m_s=speed_next,
+        accel_lat_m_s2=-a_n * math.sin(heading) + a_e * math.cos(heading),
+        yaw_rate_rad_s=float(wrap_pi(heading - state.heading_rad)) / dt_s,
+        height_m=height, climb_m_s=climb, shaped=reference,
+    )
+
+
 def step(
     state: VehicleState, command: VehicleCommand, params: VehicleParams, dt_s: float,
     vertical: Vertical | None = None,
 ) -> VehicleState:
     """Advance the vehicle by one fixed step ``dt_s`` under ``command`` (and ``vertical``:
     None holds the climb rate at 0)."""
+    shaping = params.shaping
+    if (shaping is not None and params.can_hover
+            and (isinstance(command, Stop) or (isinstance(command, FollowCourse)
+                                               and command.speed_m_s is not None))):
+        height, climb = _next_height(state, vertical or Vertical(), params, dt_s)
+        return _shaped_vehicle_step(state, command, params, shaping, dt_s, height, climb)
     speed_next = _next_speed(state.speed_m_s, _target_speed(command, params), params, dt_s,
                              braking=isinstance(command, Stop))
     speed_mean = 0.5 * (state.speed_m_s + speed_next)

@@ -12,10 +12,14 @@ import math
 import socket
 from pathlib import Path
 
+import pytest
 from test_service_loopback import fly, scenario_file
+from test_sitl_models import flight as stub_flight
+from test_sitl_models import guided, velocity
 
 from ezcompanion.config import load_scenario
 from ezcompanion.records import EventKind
+from ezcompanion.service.autopilots import ARDUCOPTER
 from ezcompanion.service.demo import judge_truth
 from ezcompanion.service.parameters import ParameterReader
 from ezcompanion.wire import mavlink, open_link
@@ -27,15 +31,44 @@ def test_the_service_reads_the_vehicles_timeout_and_checks_every_setpoint_agains
     config = scenario_file(tmp_path, 2, sitl_stub={"setpoint_timeout_s": 1.25})
     flight = fly(config, tmp_path, abandon_check=True, max_time_s=40.0, lockstep=True)
     read = flight.events.of_kind(EventKind.PARAMETER)
-    assert [(e.data["name"], e.data["value"]) for e in read] == [("GUID_TIMEOUT", 1.25)]
+    assert sorted((e.data["name"], e.data["value"]) for e in read) == [
+        ("GUID_TIMEOUT", 1.25), ("PSC_JERK_XY", 5.0), ("WPNAV_ACCEL", 250.0)]
     abandon = flight.events.of_kind(EventKind.ABANDON)
-    assert len(abandon) == 1 and "GUID_TIMEOUT as read" in abandon[0].message
-    assert abandon[0].data["hold_s"] == 1.25 and abandon[0].data["brake_m_s2"] == 2.5
+    assert len(abandon) == 1
+    assert "GUID_TIMEOUT, WPNAV_ACCEL, PSC_JERK_XY as read" in abandon[0].message
+    # the timeout, then the braking as late as the shaping starts it (2.5 / 5 + 0.1 s)
+    assert abandon[0].data["hold_s"] == pytest.approx(1.25 + 0.6)
+    assert abandon[0].data["brake_m_s2"] == 2.5
     # the parameter was read before guidance started: the check was on from the first tick
     engaged = flight.events.of_kind(EventKind.ENGAGED)
     assert engaged and read[0].time_s <= engaged[0].time_s
     _, _, _, clearance, _ = judge_truth(load_scenario(config), flight.truth)
     assert min(clearance) > 0.0
+
+
+@pytest.mark.parametrize("lag_s", [0.6, 1.6])
+@pytest.mark.parametrize("speed_m_s", [0.5, 1.0, 2.0, 5.0])
+def test_the_abandon_path_from_the_vehicles_parameters_covers_where_the_copter_stops(
+        speed_m_s: float, lag_s: float) -> None:
+    """The stub's ArduCopter, its velocity shaping fitted to 4.5.6 SITL (7.6 m from
+    2 m/s, measured), stops within the straight part and braking the service gives the
+    law from the parameters it answers. Braking at WPNAV_ACCEL from the timeout on (the
+    path before) falls short of it."""
+    f = stub_flight("copter", speed_m_s=speed_m_s, velocity_lag_s=lag_s)
+    profile = ARDUCOPTER.with_parameters(f.autopilot.parameters())
+    guided(f)
+    course = f.state.course_rad(f.stub.params.wind)
+    f.run(4.0, lambda fl: fl.send(velocity(course, speed_m_s)))
+    last = f.state
+    f.run(profile.abandon_hold_s + 20.0)
+    end = f.history[-1]
+    assert end.speed_m_s == 0.0
+    flown = math.hypot(end.north_m - last.north_m, end.east_m - last.east_m)
+    straight = speed_m_s * profile.abandon_straight_s
+    stop = 0.5 * speed_m_s**2 / profile.abandon_brake_m_s2
+    assert flown <= straight + stop
+    assert flown > speed_m_s * profile.abandon_hold_s + stop  # the delay is needed
+    assert flown >= 0.9 * (straight + stop)  # and not much more than needed
 
 
 def test_without_the_check_nothing_is_asked(tmp_path: Path) -> None:

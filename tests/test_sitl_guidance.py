@@ -112,11 +112,12 @@ def test_copter_guided_timeout_stops_and_holds(gcs: Gcs) -> None:
         gcs.velocity(1.0, 0.0)
         text = gcs.recv("STATUSTEXT", 3.0, lambda m: "timeout" in m.text)
         assert text is not None
-        stub.wait_sim_time(t_last + 5.5)
+        stub.wait_sim_time(t_last + 8.0)
         flying = between(stub, t_last + 0.1, t_last + 2.9)
-        stopped = between(stub, t_last + 4.2, t_last + 5.5)
-    # the last velocity is flown for GUID_TIMEOUT (3 s), then the copter brakes and hovers
-    assert all(s.speed_m_s == pytest.approx(1.0) for s in flying)
+        stopped = between(stub, t_last + 7.0, t_last + 8.0)
+    # the last velocity is flown for GUID_TIMEOUT (3 s), then the copter brakes (its velocity
+    # shaping: 3.7 s from 1 m/s to within 1 mm/s) and hovers
+    assert all(s.speed_m_s == pytest.approx(1.0, abs=0.02) for s in flying)
     assert all(s.speed_m_s == 0.0 for s in stopped)
     assert stopped[-1].north_m == stopped[0].north_m and stopped[-1].east_m == stopped[0].east_m
 

@@ -109,11 +109,12 @@ def course_lag_s(f: Flight, c0: float, omega: float) -> float:
 
 
 @pytest.mark.parametrize(("profile", "lag_s", "speed_m_s"),
-                         [("copter", 0.5, 1.0), ("px4", 1.2, 0.8)])
+                         [("copter", 0.6, 1.0), ("px4", 1.2, 0.8)])
 def test_flown_course_lags_a_turning_reference_as_measured(
         profile: str, lag_s: float, speed_m_s: float) -> None:
-    # issue 11: ArduCopter's course rate lags by ~0.5 s; PX4's velocity by 0.9-1.4 s and it
-    # flies 0.78-0.80 m/s for 1.0 m/s commanded
+    # issue 11: ArduCopter's course rate lags by 0.54-0.59 s (4.5.6; the stub's shaping and
+    # tracking add up to 0.6 s); PX4's velocity by 0.9-1.4 s and it flies 0.78-0.80 m/s for
+    # 1.0 m/s commanded
     f = flight(profile)
     guided(f)
     omega = math.radians(10.0)

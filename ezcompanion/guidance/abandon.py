@@ -41,8 +41,9 @@ class AbandonProfile:
 
 
 ABANDON_PROFILES = {
-    # GUID_TIMEOUT 3 s, then braking at WPNAV_ACCEL 2.5 m/s^2 (measured: 3.0 s, then brakes)
-    "arducopter": AbandonProfile(turn_s=0.0, hold_s=3.0, brake_m_s2=2.5),
+    # GUID_TIMEOUT 3 s, then its velocity shaping brakes: within v * 0.6 s + v^2 / (2 * 2.5)
+    # (WPNAV_ACCEL / PSC_JERK_XY + 0.1 s late, at WPNAV_ACCEL; measured 7.6 m from 2 m/s)
+    "arducopter": AbandonProfile(turn_s=0.0, hold_s=3.6, brake_m_s2=2.5),
     # COM_OF_LOSS_T 1.0 s (measured 1.04-1.15 s), then POSCTL brakes at MPC_ACC_HOR 3 m/s^2
     "px4": AbandonProfile(turn_s=0.0, hold_s=1.15, brake_m_s2=3.0),
     # the last course for ever: the course 2 s of turning ahead, then a 10 s horizon

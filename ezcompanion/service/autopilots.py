@@ -3,9 +3,14 @@ vehicle responds, and what it flies when the setpoints stop.
 
 Figures (issues 9 and 11, ArduCopter and ArduPlane V4.7.0-dev SITL, PX4 v1.16 SIH):
 
-- ArduCopter: the flown course rate lags the commanded one by about 0.5 s; with no new
-  setpoint it flies the last velocity for its GUIDED timeout (GUID_TIMEOUT, 3 s), then
-  brakes (WPNAV_ACCEL, 2.5 m/s^2 by default).
+- ArduCopter: the flown course rate lags the commanded one by 0.54 to 0.59 s (4.5.6 SITL,
+  WPNAV_ACCEL / PSC_JERK_XY = 0.5 s of velocity shaping and about 0.1 s of tracking; 0.6 s
+  taken); with no new setpoint it flies the last velocity for its GUIDED timeout
+  (GUID_TIMEOUT, 3 s), then brakes through the same shaping: at 2 m/s it stopped 7.6 m
+  from the last setpoint, where braking at WPNAV_ACCEL (2.5 m/s^2) from the timeout on
+  gives 6.8 m. The shaping's stopping distance is at most v * (A / J + 0.1 s) + v^2 / (2 A)
+  (A = WPNAV_ACCEL, J = PSC_JERK_XY: ``brake_delay_s`` 0.6 s by default, read with the
+  timeout where the vehicle answers).
 - PX4 multicopter: velocity setpoints lag by 0.9 to 1.4 s (1.2 s taken) and it flies 0.78
   to 0.80 of the commanded speed; offboard loss after 1.04 to 1.15 s (COM_OF_LOSS_T 1.0 s),
   then a failsafe to POSCTL, which brakes (MPC_ACC_HOR 3 m/s^2) and, with no RC, descends.
@@ -53,18 +58,44 @@ class AutopilotProfile:
     # hold (s); None: no such parameter
     timeout_parameter: str | None = None
     timeout_overshoot_s: float = 0.0
+    # braking that starts late: ArduCopter's velocity shaping stops the vehicle within
+    # v * delay + v^2 / (2 brake), delay = WPNAV_ACCEL / PSC_JERK_XY + the tracking lag
+    brake_delay_s: float = 0.0
+    shaping_parameters: tuple[str, str] | None = None  # (accel in cm/s/s, jerk in m/s^3)
+    tracking_lag_s: float = 0.0
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """The parameters the abandon path is read from."""
+        timeout = () if self.timeout_parameter is None else (self.timeout_parameter,)
+        return timeout + (self.shaping_parameters or ())
+
+    @property
+    def abandon_straight_s(self) -> float:
+        """The straight part of the abandon path given to the law: the hold, and the late
+        start of the braking (stopping distance v * (hold + delay) + v^2 / (2 brake))."""
+        return self.abandon_hold_s + self.brake_delay_s
 
     def with_parameters(self, values: Mapping[str, float]) -> AutopilotProfile:
-        """This profile with the hold the vehicle's own timeout parameter gives, if known."""
+        """This profile with the hold the vehicle's own timeout parameter gives, and the
+        braking its shaping parameters give, where it answered for them."""
+        profile = self
         name = self.timeout_parameter
-        if name is None or name not in values:
-            return self
-        return replace(self, abandon_hold_s=values[name] + self.timeout_overshoot_s)
+        if name is not None and name in values:
+            profile = replace(profile, abandon_hold_s=values[name] + self.timeout_overshoot_s)
+        if self.shaping_parameters is not None and all(
+                n in values for n in self.shaping_parameters):
+            accel_cm, jerk = (values[n] for n in self.shaping_parameters)
+            brake = accel_cm / 100.0
+            profile = replace(profile, abandon_brake_m_s2=brake,
+                              brake_delay_s=brake / jerk + self.tracking_lag_s)
+        return profile
 
 
 ARDUCOPTER = AutopilotProfile(
-    name="ArduCopter", response_lag_s=0.5, abandon_turn_s=0.0, abandon_hold_s=3.0,
-    abandon_brake_m_s2=2.5, timeout_parameter="GUID_TIMEOUT",
+    name="ArduCopter", response_lag_s=0.6, abandon_turn_s=0.0, abandon_hold_s=3.0,
+    abandon_brake_m_s2=2.5, timeout_parameter="GUID_TIMEOUT", brake_delay_s=0.6,
+    shaping_parameters=("WPNAV_ACCEL", "PSC_JERK_XY"), tracking_lag_s=0.1,
 )  # fmt: skip
 PX4_COPTER = AutopilotProfile(
     name="PX4", response_lag_s=0.3, setpoint_lead_s=1.2, abandon_turn_s=0.0, abandon_hold_s=1.15,

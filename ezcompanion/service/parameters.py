@@ -22,10 +22,12 @@ from ezcompanion.wire import Link, Message
 
 __all__ = ["PARAMETER_RANGES", "ParameterReader"]
 
-#: The parameters read, with the range their autopilot documents (s).
+#: The parameters read, with the range their autopilot documents (units as it stores them).
 PARAMETER_RANGES = {
     "GUID_TIMEOUT": (0.1, 5.0),  # ArduCopter: guided setpoint timeout
     "COM_OF_LOSS_T": (0.0, 60.0),  # PX4: offboard loss timeout
+    "WPNAV_ACCEL": (50.0, 500.0),  # ArduCopter: horizontal acceleration (cm/s/s)
+    "PSC_JERK_XY": (1.0, 20.0),  # ArduCopter: horizontal jerk (m/s/s/s)
 }
 _RETRY_S = 0.5
 _TRIES = 6

@@ -446,12 +446,15 @@ class CompanionService:
                              "abandon_check): a setpoint may not be safe to keep flying")
             return
         elif self.loop.assume_abandon(turn_s=profile.abandon_turn_s,
-                                      hold_s=profile.abandon_hold_s,
+                                      hold_s=profile.abandon_straight_s,
                                       brake_m_s2=profile.abandon_brake_m_s2):  # fmt: skip
             guidance = self.loop.scenario.guidance
-            read = profile.timeout_parameter in self.session.parameters.values
+            read = [n for n in profile.parameter_names if n in self.session.parameters.values]
             where = f"{profile.name}'s" + (
-                f" ({profile.timeout_parameter} as read)" if read else " (its default)")
+                f" ({', '.join(read)} as read)" if read else " (its defaults)")
+            if profile.brake_delay_s > 0.0:
+                where += (f", braking {profile.brake_delay_s:.2f} s late as its velocity "
+                          f"shaping does")
         else:
             return
         self.events.emit(

@@ -278,9 +278,9 @@ class VehicleSession(StreamRequests):
         if first:
             self.heartbeat = msg
             self.fixed_wing = is_fixed_wing(msg)
-            parameter = autopilot_profile(msg).timeout_parameter
-            if parameter is not None and self.settings.abandon_check:
-                self.parameters.ask((parameter,), source, now)
+            names = autopilot_profile(msg).parameter_names
+            if names and self.settings.abandon_check:
+                self.parameters.ask(names, source, now)
             self.events.emit(
                 EventKind.VEHICLE_FOUND,
                 now,

@@ -56,9 +56,9 @@ def test_a_setpoint_leading_the_course_flies_the_measured_circle(
     assert speed / speed_m_s == pytest.approx(speed_ratio, abs=0.1)
 
 
-def test_beyond_30_degrees_the_copter_slows_rather_than_turns() -> None:
-    """Why the companion leads by 30 degrees at most (service/setpoints.py): from 30 to 85
-    degrees the lateral acceleration grows by little while the speed falls."""
+def test_past_the_lead_limit_the_copter_slows_and_then_turns_less() -> None:
+    """Why the companion's lead stops at 40 degrees (service/setpoints.py): further, the
+    speed keeps falling, and from 60 to 85 degrees the lateral acceleration falls too."""
     flown = {}
     for lead in (30, 60, 85):
         f = flight("copter", speed_m_s=2.0)

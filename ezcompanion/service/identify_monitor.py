@@ -42,7 +42,7 @@ from ezcompanion.service.identify import (
     fit_speed_factor,
 )
 from ezcompanion.service.loop import GuidanceLoop
-from ezcompanion.service.setpoints import turn_bound_m_s2
+from ezcompanion.service.setpoints import MAX_LEAD_DEG, turn_bound_m_s2
 from ezcompanion.wire import Message, mavlink
 
 __all__ = ["Identified", "ResponseMonitor"]
@@ -227,7 +227,7 @@ class ResponseMonitor:
 
     def _check_turn_bound(self, now_s: float, measured_s: float, found: Identified) -> None:
         """Say once when the vehicle lags too much for the setpoints to get the law's bound
-        from it: they lead its course by at most 30 degrees (``turn_bound_m_s2``), and the
+        from it: they lead its course by at most ``MAX_LEAD_DEG`` (``turn_bound_m_s2``), and the
         law's safety argument counts on turning at a_max (docs/guidance.md, assumption 2).
         Only when short by more than the estimate's own error (``_TURN_BOUND_SHORT``), and
         only for the integrating reference (ArduCopter): how far PX4 follows the larger lead
@@ -242,7 +242,7 @@ class ResponseMonitor:
         self.events.emit(
             EventKind.RESPONSE, now_s,
             f"a vehicle lagging {measured_s:.2f} s turns at most at {bound:.2f} m/s^2 on "
-            f"setpoints that lead its course by 30 degrees, short of the law's bound "
+            f"setpoints that lead its course by {MAX_LEAD_DEG:g} degrees, short of the law's bound "
             f"{accel_max:g} m/s^2: its safety argument does not hold for this vehicle "
             f"(docs/guidance.md, assumption 2)",
             turn_bound_m_s2=bound, accel_max_m_s2=accel_max, **self._data(found),

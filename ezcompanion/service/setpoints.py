@@ -8,13 +8,16 @@ points along a reference course that turns at omega = a / v; yaw_rate = omega ke
 with it. (Measured on ArduPilot 4.7 SITL: a 2 m/s vector rotated at 15 deg/s with yaw_rate
 15 deg/s flew 2.02 m/s at 15.1 deg/s.) LOCAL_NED rather than BODY_NED, because ArduCopter
 turns a body-frame velocity into a fixed direction when it arrives. The reference course
-starts at the measured course and may lead it by at most 30 degrees, so it cannot wind up
-while the vehicle lags, and so that the vehicle flies as the law's model says: measured on
-ArduCopter 4.5.6 SITL (velocity setpoints leading the course by a fixed angle L), the
-course lags first order with its speed at 0.91 V or more up to 30 degrees; further, the
-velocity itself lags (speed V cos L, lateral acceleration V sin L / tau, and at 60 to 85
-degrees tight circles at a third of V), so a larger limit buys no turn the law can count
-on. A vehicle lagging tau therefore turns at most at about V sin(30 deg) / tau
+starts at the measured course and may lead it by at most 40 degrees (``MAX_LEAD_DEG``), so
+it cannot wind up while the vehicle lags, and so that the vehicle flies as the law's model
+says: measured on ArduCopter 4.5.6 SITL (velocity setpoints leading the course by a fixed
+angle L), the course still lags L / rate = 0.48 to 0.57 s (1 and 2 m/s) up to 60 degrees
+and the lateral acceleration grows as V sin L / tau (0.89 m/s^2 at 30 degrees, 1.62 at 60,
+at 1 m/s), while the speed falls (0.92 V at 30 degrees, 0.74 V at 60; 0.84 V at 40 on the
+stub's model of it) and at 60 to 85 degrees it ends in tight circles. 40 degrees turns the
+default copter (0.6 s) at 1.07 m/s^2 at the paper's 1 m/s, where 30 degrees gave 0.83,
+short of a_max 1, and keeps the speed at 0.84 V or more. A vehicle lagging tau therefore
+turns at most at about V sin(40 deg) / tau
 (``turn_bound_m_s2``); the identification says so where that is short of a_max. For PX4,
 whose 1.2 s lag would need far more lead than that, the reference is instead the measured
 course plus omega * 1.2 s (the profile's ``setpoint_lead_s``), the inverse of its
@@ -48,6 +51,7 @@ from ezcompanion.service.settings import SetpointKind
 from ezcompanion.wire import Link, Message, course_command, s_to_ms, velocity_setpoint
 
 __all__ = [
+    "MAX_LEAD_DEG",
     "CourseSetpoints",
     "Setpoints",
     "VelocitySetpoints",
@@ -55,7 +59,8 @@ __all__ = [
     "turn_bound_m_s2",
 ]
 
-_MAX_LEAD_RAD = math.radians(30.0)
+MAX_LEAD_DEG = 40.0  # the most the integrating reference leads the measured course
+_MAX_LEAD_RAD = math.radians(MAX_LEAD_DEG)
 _MAX_COMPENSATED_LEAD_RAD = math.radians(85.0)
 _STILL_FRACTION = 0.5  # of the nominal speed: slower, the vehicle stands still
 _HEIGHT_GAIN_1_S = 1.0  # height hold: vz = gain * error ...
@@ -71,9 +76,9 @@ _GAIN_MIN, _GAIN_MAX = 0.5, 4.0  # p3 / |a|
 
 def turn_bound_m_s2(speed_m_s: float, lag_s: float) -> float:
     """The largest steady lateral acceleration the integrating velocity reference gets from
-    a vehicle whose velocity lags it by ``lag_s`` (first order): V sin(30 deg) / lag, the
-    velocity-lag figure measured on ArduCopter (the stub's course lag gives 0.52 V / lag;
-    inf without a lag)."""
+    a vehicle whose velocity lags it by ``lag_s``: V sin(40 deg) / lag, the velocity-lag
+    figure measured on ArduCopter and flown by the stub's model of its shaping (inf without
+    a lag)."""
     return speed_m_s * math.sin(_MAX_LEAD_RAD) / lag_s if lag_s > 0.0 else math.inf
 
 
@@ -140,7 +145,7 @@ class VelocitySetpoints(Setpoints):
         With ``lead_s`` (the vehicle's measured first-order course lag, PX4) it leads the
         course by omega * lead_s, the inverse of that lag, so that the course turns at omega
         now instead of lagging it (within 85 degrees). Without, it integrates omega and
-        leads the measured course by at most 30 degrees, so it cannot wind up.
+        leads the measured course by at most ``MAX_LEAD_DEG``, so it cannot wind up.
         """
         omega = command.turn_rate_rad_s
         course = command.course_rad

@@ -59,7 +59,7 @@ def estimates() -> None:
     print("profile  truth tau  truth k  reviews  tau estimated (range)  k estimated (range)  "
           "law told")
     for profile, lag, factor in [
-        ("copter", 0.5, 1.0), ("copter", 0.3, 1.0), ("copter", 0.8, 1.0), ("copter", 1.1, 1.0),
+        ("copter", 0.6, 1.0), ("copter", 0.3, 1.0), ("copter", 0.8, 1.0), ("copter", 1.1, 1.0),
         ("copter", 1.4, 1.0), ("px4", 1.2, 0.8), ("px4", 0.9, 0.78), ("px4", 1.4, 0.9),
     ]:  # fmt: skip
         service = fly(profile, 1, 10.0, None, True, velocity_lag_s=lag, speed_ratio=factor)

@@ -3,9 +3,10 @@
 The service's own loop (``GuidanceLoop``) and velocity setpoints drive the stub's copter
 (its velocity shaping, docs/sitl_stub.md) in process, tick by tick at 50 Hz for 4 s, from
 random places near the zones of paper scenario 1 (true clearance 0.2 to 1.5 m) with a
-random yaw, once from rest and once at the nominal 1 m/s. Only starts the law certifies
-count (the backup's certificate >= 0 on the first tick). Prints how many of those entered
-a zone, and the worst. The figures of docs/service.md, "resuming from a hover":
+random yaw, once from rest and once at the nominal 1 m/s (the flight of
+``tests/test_resume_from_hover.py``). Only starts the law certifies count (the backup's
+certificate >= 0 on the first tick). Prints how many of those entered a zone, and the
+worst. The figures of docs/service.md, "Resuming from a hover":
 
     python bench/bench_hover_start.py --seed 3 --draws 3000
     python bench/bench_hover_start.py --seed 2 --draws 4000 --abandon-check
@@ -14,80 +15,13 @@ a zone, and the worst. The figures of docs/service.md, "resuming from a hover":
 from __future__ import annotations
 
 import argparse
-import math
+import sys
 from pathlib import Path
 
-import numpy as np
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the tests' flight helpers
 
 from ezcompanion import wire
-from ezcompanion.config import load_scenario
-from ezcompanion.guidance.law import evaluate_law
-from ezcompanion.guidance.params import LawName
-from ezcompanion.records import TickCommand, VehicleState
-from ezcompanion.service.autopilots import ARDUCOPTER
-from ezcompanion.service.loop import GuidanceLoop
-from ezcompanion.service.setpoints import make_setpoints
-from ezcompanion.service.settings import SetpointKind
-from sitl_stub.vehicle import FollowCourse, Stop, VehicleParams, VelocityShaping, step
-from sitl_stub.vehicle import VehicleState as StubState
-
-SCENARIO = load_scenario(Path(__file__).resolve().parents[1] / "config" / "paper_scenario1.yaml")
-SHAPED = VehicleParams(
-    cruise_speed_m_s=1.0, accel_max_m_s2=1.0, yaw_rate_max_rad_s=math.pi / 2,
-    shaping=VelocityShaping(accel_max_m_s2=2.5, jerk_max_m_s3=5.0, tracking_lag_s=0.1),
-)  # fmt: skip
-TICK_S = 0.02
-
-
-def clearance_m(north: np.ndarray, east: np.ndarray, course: np.ndarray) -> np.ndarray:
-    """True clearance to the nearest zone (r - rho: the zones depend on the course)."""
-    out = evaluate_law(
-        LawName.ROBUST, SCENARIO.guidance, SCENARIO.zones(),
-        target_north_m=SCENARIO.target.north_m, target_east_m=SCENARIO.target.east_m,
-        north_m=north, east_m=east, course_rad=course, speed_m_s=1.0,
-        accel_m_s2=np.zeros_like(north),
-    )  # fmt: skip
-    return np.asarray(out.clearance_m).min(axis=1)
-
-
-def fly(link: wire.Link, north_m: float, east_m: float, yaw_rad: float, speed_m_s: float,
-        abandon: bool, seconds: float = 4.0) -> tuple[float, float]:
-    """(certificate on the first tick, least true clearance) of 4 s from ``speed_m_s``."""
-    loop = GuidanceLoop(SCENARIO, loop_rate_hz=50.0, stale_after_s=0.5)
-    loop.assume_response_lag(ARDUCOPTER.response_lag_s)
-    if abandon:  # GUID_TIMEOUT 1 s, as bench_recovery.py --abandon-check gives the stub
-        loop.assume_abandon(turn_s=0.0, hold_s=1.0 + ARDUCOPTER.brake_delay_s,
-                            brake_m_s2=ARDUCOPTER.abandon_brake_m_s2)
-    loop.assume_speed_factor(0.945)  # as the service measured the stub's copter
-    setpoints = make_setpoints(SetpointKind.VELOCITY, link, target_system=1,
-                               target_component=1, accel_max_m_s2=1.0)
-    setpoints.use_profile(ARDUCOPTER)
-    state = StubState(t_s=0.0, north_m=north_m, east_m=east_m, heading_rad=yaw_rad,
-                      speed_m_s=speed_m_s)
-    certificate, track = math.nan, []
-    for i in range(round(seconds / TICK_S)):
-        t = i * TICK_S
-        v_n, v_e = state.ground_velocity(SHAPED.wind)
-        moving = math.hypot(v_n, v_e) > 0.3
-        seen = VehicleState(
-            north_m=state.north_m, east_m=state.east_m, down_m=-20.0, velocity_north_m_s=v_n,
-            velocity_east_m_s=v_e, yaw_rad=state.heading_rad, position_time_s=t,
-            attitude_time_s=t, position_source="local",
-            course_rate_rad_s=state.yaw_rate_rad_s if moving else None,
-        )  # fmt: skip
-        tick = loop.tick(seen, t)
-        if isinstance(tick, TickCommand):
-            if i == 0:
-                certificate = float(np.asarray(tick.step.certificate_m).ravel()[0])
-            command: FollowCourse | Stop = FollowCourse(
-                setpoints.reference_rad(tick), speed_m_s=tick.nominal_speed_m_s)
-        else:
-            command = Stop()
-        for _ in range(2):
-            state = step(state, command, SHAPED, TICK_S / 2)
-        track.append((state.north_m, state.east_m, state.heading_rad))
-    n, e, h = (np.array(column) for column in zip(*track, strict=True))
-    return certificate, float(clearance_m(n, e, h).min())
+from tests.test_resume_from_hover import draw_starts, fly
 
 
 def main() -> None:
@@ -96,25 +30,17 @@ def main() -> None:
     parser.add_argument("--draws", type=int, default=3000)
     parser.add_argument("--abandon-check", action="store_true")
     args = parser.parse_args()
-    link = wire.open_link("udpout:127.0.0.1:9", system_id=1, component_id=191)
-    for speed in (0.0, 1.0):
-        rng = np.random.default_rng(args.seed)
-        certified, entered = 0, []
-        for _ in range(args.draws):
-            north, east = rng.uniform(-1.0, 8.0), rng.uniform(-6.0, 6.0)
-            yaw = rng.uniform(-math.pi, math.pi)
-            start = float(clearance_m(np.array([north]), np.array([east]), np.array([yaw]))[0])
-            if not 0.2 < start < 1.5:
-                continue
-            certificate, least = fly(link, north, east, yaw, speed, args.abandon_check)
-            if certificate >= 0.0:
-                certified += 1
-                if least <= 0.0:
-                    entered.append(least)
-        worst = f", worst {min(entered):+.3f} m" if entered else ""
-        print(f"from {speed:g} m/s: {len(entered)} of {certified} certified starts entered a "
-              f"zone{worst}")
-    link.close()
+    starts = draw_starts(args.seed, args.draws)
+    with wire.open_link("udpout:127.0.0.1:9", system_id=1, component_id=191) as link:
+        for speed in (0.0, 1.0):
+            flown = [fly(link, *start, speed_m_s=speed, abandon=args.abandon_check)
+                     for start in starts]
+            least = [clear for certificate, clear in flown if certificate >= 0.0]
+            entered = [clear for clear in least if clear <= 0.0]
+            worst = f", worst {min(entered):+.3f} m" if entered else ""
+            print(f"from {speed:g} m/s: {len(entered)} of {len(least)} certified starts "
+                  f"entered a zone{worst}; least clearance of the rest "
+                  f"{min(c for c in least if c > 0.0):+.3f} m")
 
 
 if __name__ == "__main__":

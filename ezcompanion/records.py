@@ -74,7 +74,7 @@ class TickCommand:
     dt_s: float
     state: VehicleState
     course_rad: float  # measured course the law used
-    speed_m_s: float  # speed the law used (measured, at least half the nominal)
+    speed_m_s: float  # speed the law used (measured, at least the flown speed)
     nominal_speed_m_s: float  # the speed to fly (the scenario's constant speed)
     accel_lat_m_s2: float  # lateral acceleration to fly (the actuator state at the step's end)
     step: GuidanceStep

@@ -182,13 +182,19 @@ def test_the_loop_keeps_a_measured_lag_through_new_scenarios_and_feeds_the_flown
     assert loop.speed_floor_m_s == 0.25
     loop.assume_speed_factor(0.8)
     assert loop.speed_floor_m_s == pytest.approx(0.4)
-    # 0.45 m/s: below half the nominal 1 m/s, above half of 0.8 of it: its own speed and course
+    # 0.45 m/s: below half the nominal 1 m/s, above half of 0.8 of it: its own course, and
+    # the law is fed the speed it flies when sent the nominal (0.8 of it), not less
     state = VehicleState(north_m=0.0, east_m=0.0, down_m=0.0, velocity_north_m_s=0.45,
                          velocity_east_m_s=0.0, yaw_rad=1.0, position_time_s=0.0,
                          attitude_time_s=0.0, position_source="local")
     command = loop.tick(state, 0.0)
     assert isinstance(command, TickCommand)
-    assert command.speed_m_s == pytest.approx(0.45) and command.course_rad == 0.0
+    assert command.speed_m_s == pytest.approx(0.8) and command.course_rad == 0.0
+    assert loop.flown_speed_m_s == pytest.approx(0.8)
+    faster = dataclasses.replace(state, velocity_north_m_s=1.1, position_time_s=0.02,
+                                 attitude_time_s=0.02)
+    command = loop.tick(faster, 0.02)
+    assert isinstance(command, TickCommand) and command.speed_m_s == pytest.approx(1.1)
 
 
 def test_a_vehicle_far_slower_than_commanded_is_not_following_and_changes_nothing() -> None:

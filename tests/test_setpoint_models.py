@@ -1,15 +1,16 @@
 """The setpoint writers against the vehicles' measured responses (issue 11).
 
 Velocity: the integrating reference (ArduCopter) gets a vehicle whose course lags it the
-law's own model, a first-order lag of the flown lateral acceleration, within its 30-degree
-lead; PX4's leads the course by omega * lag, the inverse of a first-order lag; neither turns
-while the vehicle stands still. Course (ArduPlane): the course asked
+law's own model, a first-order lag of the flown lateral acceleration, within its 40-degree
+lead; PX4's leads the course by omega * lag, the inverse of a first-order lag; both turn
+from a hover within the same lead. Course (ArduPlane): the course asked
 for is never more than 90 degrees ahead (so wrapping never reverses the turn), and the outer
 loop's gain converges to 1 / (the share of the limit the plane flies).
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Iterator
 from typing import Any
@@ -130,11 +131,16 @@ def test_a_lagging_vehicle_turns_at_most_at_the_stated_bound(link: wire.Link) ->
     assert flown[-1] == pytest.approx(turn_bound_m_s2(1.0, 1.5), rel=0.05)
 
 
-def test_reference_does_not_turn_while_standing_still(link: wire.Link) -> None:
-    for profile in (PX4_COPTER, ARDUPLANE):  # ARDUPLANE: no lead, the integrating reference
-        w: VelocitySetpoints = writer(link, SetpointKind.VELOCITY, profile)
-        for i in range(100):  # 2 s of a hard turn asked from a hover
-            assert w.reference_rad(tick(0.02 * i, 0.3, 0.0, 0.99)) == 0.3
+def test_reference_turns_from_a_hover_within_its_lead(link: wire.Link) -> None:
+    """From a hover the course is the yaw; the reference turns the law's way and leads the
+    yaw by at most what it may lead a course in flight (40 degrees integrating, 85 with
+    PX4's lead), so a nose that follows the velocity is turned and nothing winds up."""
+    for profile, most in ((PX4_COPTER, 85.0), (ARDUPLANE, 40.0)):  # ARDUPLANE: no lead,
+        w: VelocitySetpoints = writer(link, SetpointKind.VELOCITY, profile)  # integrating
+        leads = [w.reference_rad(tick(0.02 * i, 0.3, 0.0, -0.99)) - 0.3
+                 for i in range(100)]  # 2 s of a hard left turn asked from a hover
+        assert all(b <= a <= 0.0 for a, b in itertools.pairwise(leads))
+        assert leads[-1] == pytest.approx(-math.radians(most))
 
 
 def test_height_is_held_by_feedback_on_the_measured_height(link: wire.Link) -> None:

@@ -269,8 +269,8 @@ class ResponseMonitor:
         self.events.emit(
             EventKind.RESPONSE, now_s,
             f"measured speed factor {factor:.3f} (+-{speed.stderr:.3f}) is below the "
-            f"{assumed:.2f} assumed by more than {self.speed_tolerance:g}: the law flies "
-            f"the measured speed down to {self.loop.speed_floor_m_s:.2f} m/s",
+            f"{assumed:.2f} assumed by more than {self.speed_tolerance:g}: the law is fed "
+            f"its measured speed, at least the {self.loop.flown_speed_m_s:.2f} m/s it flies",
             assumed_speed_factor=assumed, **self._data(found),
         )  # fmt: skip
         return True

@@ -16,8 +16,8 @@ from ezcompanion.records import Hold, TickCommand, VehicleState
 
 __all__ = ["GuidanceLoop", "Hold", "TickCommand"]
 
-# Below this fraction of the nominal speed the velocity has no usable direction (yaw stands
-# in for course) and the law is fed this fraction of the nominal speed instead.
+# Below this fraction of the flown speed the velocity has no usable direction: the yaw
+# stands in for the course (and a measured course rate means no turn).
 _MIN_SPEED_FRACTION = 0.5
 # A measured turn restarts the actuator state at most at this fraction of the bound (the
 # actuator model holds |a| < a_max strictly).
@@ -76,14 +76,22 @@ class GuidanceLoop:
 
     def assume_speed_factor(self, factor: float) -> None:
         """The vehicle flies ``factor`` of the commanded speed: the law is fed its measured
-        speed down to half of that (not half the nominal speed); ``factor`` is held to
-        [0.5, 1] (a slower vehicle is not following the setpoints: the law is never fed 0)."""
+        speed, at least ``factor`` of the nominal (``flown_speed_m_s``); ``factor`` is held
+        to [0.5, 1] (a slower vehicle is not following the setpoints: the law is never fed
+        0)."""
         self.speed_factor = min(max(factor, 0.5), 1.0)
 
     @property
+    def flown_speed_m_s(self) -> float:
+        """What the vehicle flies when sent the nominal speed, and the least speed the law
+        is fed: a slower vehicle (from a hover, braked, slowed in a turn) is speeding up to
+        it, and a law fed less plans turns tighter (v^2 / a) than the vehicle will fly."""
+        return self.speed_factor * self.nominal_speed_m_s
+
+    @property
     def speed_floor_m_s(self) -> float:
-        """Below this ground speed the course is the yaw and the law is fed this speed."""
-        return _MIN_SPEED_FRACTION * self.speed_factor * self.nominal_speed_m_s
+        """Below this ground speed the course is the yaw (half the flown speed)."""
+        return _MIN_SPEED_FRACTION * self.flown_speed_m_s
 
     def assume_abandon(self, *, turn_s: float, hold_s: float, brake_m_s2: float) -> bool:
         """Check every setpoint against what the vehicle flies if it is the last (a turn
@@ -156,7 +164,7 @@ class GuidanceLoop:
             return Hold.STALE
         minimum = self.speed_floor_m_s
         course = state.course_rad(minimum)
-        speed = max(state.ground_speed_m_s, minimum)
+        speed = max(state.ground_speed_m_s, self.flown_speed_m_s)
         last = self._last_tick_s
         if last is None:
             self._resume_from(state, minimum)

@@ -21,8 +21,13 @@ turns at most at about V sin(40 deg) / tau
 (``turn_bound_m_s2``); the identification says so where that is short of a_max. For PX4,
 whose 1.2 s lag would need far more lead than that, the reference is instead the measured
 course plus omega * 1.2 s (the profile's ``setpoint_lead_s``), the inverse of its
-first-order lag. Standing still (slower than half the nominal speed) the reference does
-not turn. The vertical velocity holds the height of the first tick by feedback on the
+first-order lag. From a hover (slower than half the flown speed, where the course is the
+yaw) both turn as in flight: a copter's velocity can grow in any direction from rest. Held
+at the yaw there instead, as it was, the reference could not turn a vehicle whose nose
+follows its velocity once the law was fed the flown speed (the stub's copter, braking out
+of LOITER into GUIDED, stayed on its course while the law asked for a_max), and on its own
+the hold let 22 of 206 certified starts from rest enter a zone (docs/service.md, "Resuming
+from a hover"). The vertical velocity holds the height of the first tick by feedback on the
 measured height (PX4 does not hold it on vz = 0).
 Streamed every tick, well inside the autopilots' timeouts (ArduCopter 3 s, PX4 1 s).
 
@@ -62,7 +67,6 @@ __all__ = [
 MAX_LEAD_DEG = 40.0  # the most the integrating reference leads the measured course
 _MAX_LEAD_RAD = math.radians(MAX_LEAD_DEG)
 _MAX_COMPENSATED_LEAD_RAD = math.radians(85.0)
-_STILL_FRACTION = 0.5  # of the nominal speed: slower, the vehicle stands still
 _HEIGHT_GAIN_1_S = 1.0  # height hold: vz = gain * error ...
 _MAX_CLIMB_M_S = 1.0  # ... within this
 _COURSE_HORIZON_S = 2.0
@@ -140,18 +144,14 @@ class VelocitySetpoints(Setpoints):
     def reference_rad(self, command: TickCommand) -> float:
         """The direction of the velocity to send for ``command``.
 
-        Standing still (slower than half the nominal speed: the course is the yaw) the
-        reference is the course itself, so it does not turn while the vehicle cannot.
         With ``lead_s`` (the vehicle's measured first-order course lag, PX4) it leads the
         course by omega * lead_s, the inverse of that lag, so that the course turns at omega
         now instead of lagging it (within 85 degrees). Without, it integrates omega and
-        leads the measured course by at most ``MAX_LEAD_DEG``, so it cannot wind up.
+        leads the measured course by at most ``MAX_LEAD_DEG``, so it cannot wind up. The
+        same from a hover, where the course is the yaw: the bounds hold there too.
         """
         omega = command.turn_rate_rad_s
         course = command.course_rad
-        if command.state.ground_speed_m_s < _STILL_FRACTION * command.nominal_speed_m_s:
-            self._reference_rad = None
-            return course
         if self.lead_s > 0.0:
             lead = min(max(omega * self.lead_s, -_MAX_COMPENSATED_LEAD_RAD),
                        _MAX_COMPENSATED_LEAD_RAD)

@@ -17,7 +17,7 @@ from ezcompanion.records import Hold, TickCommand, VehicleState
 __all__ = ["GuidanceLoop", "Hold", "TickCommand"]
 
 # Below this fraction of the flown speed the velocity has no usable direction: the yaw
-# stands in for the course (and a measured course rate means no turn).
+# stands in for the course, and the measured course rate says nothing of a turn.
 _MIN_SPEED_FRACTION = 0.5
 # A measured turn restarts the actuator state at most at this fraction of the bound (the
 # actuator model holds |a| < a_max strictly).

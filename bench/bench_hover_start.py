@@ -38,9 +38,10 @@ def main() -> None:
             least = [clear for certificate, clear in flown if certificate >= 0.0]
             entered = [clear for clear in least if clear <= 0.0]
             worst = f", worst {min(entered):+.3f} m" if entered else ""
+            kept = [clear for clear in least if clear > 0.0]
+            rest = f"; least clearance of the rest {min(kept):+.3f} m" if kept else ""
             print(f"from {speed:g} m/s: {len(entered)} of {len(least)} certified starts "
-                  f"entered a zone{worst}; least clearance of the rest "
-                  f"{min(c for c in least if c > 0.0):+.3f} m")
+                  f"entered a zone{worst}{rest}")
 
 
 if __name__ == "__main__":

@@ -50,6 +50,7 @@ def tick(t_s: float, course_rad: float, speed_m_s: float, accel_m_s2: float, *,
         course_rate_rad_s=rate_rad_s)
     step: Any = None  # the writers read only the fields above
     return TickCommand(time_s=t_s, dt_s=0.02, state=state, course_rad=course_rad,
+                       # the speed fed to the law: the writers turn at a / it, so any > 0
                        speed_m_s=max(speed_m_s, 0.5 * nominal_m_s),
                        nominal_speed_m_s=nominal_m_s, accel_lat_m_s2=accel_m_s2, step=step)
 

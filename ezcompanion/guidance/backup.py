@@ -47,6 +47,12 @@ assumptions named; tests/test_backup.py checks each step):
    nominal command does. (The held backup is always one whose flight, by its rule, is safe
    for ever: it was certified when taken, and each step either flies it or moves to
    another certified one.)
+   *Outside the model* (the vehicle did not fly what was planned: from a hover it turns
+   slower while it speeds up) the held backup's own flight can come to enter a zone, its
+   certificate below -margin, which along its own flow under the model it cannot (it
+   stays within theta and the tail's widening of where it started). The claim then no
+   longer speaks for it, so it gives way to the backup whose flight enters least, better
+   by 2 theta, certified or not, rather than circle inside the zone.
 
 Pure and compiled like the law (:mod:`ezcompanion.guidance.law`); one vehicle per call of
 ``shield_one``, any batch through ``shield_batch``.
@@ -626,12 +632,16 @@ def shield_one(
         weight = max(weight, min(weight_before - fall * dt, 1.0))
     cert_now = math.nan  # computed only where the backup's command is used
     if weight < 1.0:
-        # the held backup: kept unless another is certified (>= theta) and better by 2 theta
+        # the held backup: kept unless another is certified (>= theta) and better by 2 theta;
+        # or, where the held one's own flight now enters a zone (the vehicle has left the
+        # model: along its own flow, under the model, it stays >= -theta), unless another is
+        # better by 2 theta, certified or not: the least predicted entry
         backup_certificates(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, math.inf,
                             certs)  # fmt: skip
         best = int(np.argmax(certs))
         if not 0 <= current < _N_BACKUPS or (
-            certs[best] >= theta and certs[best] > certs[current] + 2.0 * theta
+            (certs[best] >= theta or certs[current] < -s[S_EPS])
+            and certs[best] > certs[current] + 2.0 * theta
         ):
             current = best
         if current != BACKUP_STRAIGHT and certs[BACKUP_STRAIGHT] >= theta:

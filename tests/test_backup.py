@@ -453,12 +453,12 @@ def held_after_one_step(
 def test_a_held_backup_that_enters_a_zone_gives_way_to_the_least_entry() -> None:
     """Outside the model (the vehicle did not fly what the law planned), the held backup's
     own flight can come to enter a zone (certificate below -margin), which under the model
-    it cannot (along its own flow it stays within theta and the tail's widening of >= 0:
-    the test below). It then gives way to the backup with the least predicted entry,
-    better by 2 theta, certified or not; above -margin the held one stays until another is
-    certified, as the argument needs. (A start from rest on the stub's copter circled in a
-    zone 1.91 m deep holding a turn at -1.7 m while the other turn was at -0.14 m:
-    tests/test_resume_from_hover.py.)"""
+    it cannot (along its own flow it stays within theta and the tail's widening of where
+    it started, >= theta: the test below). It then gives way to the backup with the least
+    predicted entry, better by 2 theta, certified or not; above -margin the held one stays
+    until another is certified, as the argument needs. (A start from rest on the stub's
+    copter circled in a zone 1.91 m deep holding a turn whose certificate read -1.72 m
+    while the other turn's read -0.14 m: tests/test_resume_from_hover.py.)"""
     entering = (-0.902579540742396, 3.0476500057820752, -1.029272649459564)
     held, certs, theta = held_after_one_step(entering, bk.BACKUP_LEFT)
     assert certs[bk.BACKUP_LEFT] < -PARAMS.shield_margin_m  # its own flight enters

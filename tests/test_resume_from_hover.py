@@ -114,8 +114,8 @@ def test_certified_starts_from_a_hover_stay_out_of_every_zone() -> None:
 def test_a_start_whose_held_turn_came_to_enter_a_zone_stays_out() -> None:
     """Seed 3's draw 566 of 3000 (``bench/bench_hover_start.py``): certified by +0.046 m
     from rest, the copter turned slower than the law planned while speeding up, its held
-    turn's own flight came to enter a zone (-1.72 m) while the other turn's entered by
-    0.14 m, and holding it the copter circled 1.91 m deep. The held backup now gives way
+    turn's own flight came to enter a zone (certificate -1.72 m) while the other turn's
+    read -0.14 m, and holding it the copter circled 1.91 m deep. The held backup now gives way
     to the least predicted entry (docs/guidance.md, step 5)."""
     with wire.open_link("udpout:127.0.0.1:9", system_id=1, component_id=191) as link:
         certificate, least = fly(link, 4.267627156944439, 2.4068327636281523,

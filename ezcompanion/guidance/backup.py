@@ -634,8 +634,9 @@ def shield_one(
     if weight < 1.0:
         # the held backup: kept unless another is certified (>= theta) and better by 2 theta;
         # or, where the held one's own flight now enters a zone (the vehicle has left the
-        # model: along its own flow, under the model, it stays >= -theta), unless another is
-        # better by 2 theta, certified or not: the least predicted entry
+        # model: along its own flow, under the model, it stays within theta and the tail's
+        # widening of where it started, >= theta), to any better by 2 theta, certified or
+        # not: the least predicted entry
         backup_certificates(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, math.inf,
                             certs)  # fmt: skip
         best = int(np.argmax(certs))

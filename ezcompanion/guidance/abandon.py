@@ -3,7 +3,9 @@
 What an autopilot flies when its companion falls silent (measured; see
 ``ezcompanion.service.autopilots``): the turn it was asked for goes on for ``turn_s``, then
 straight for ``hold_s``, then it brakes to a stop at ``brake_m_s2`` (0: it flies on; the
-hold is then the horizon a person needs to take over). ``abandon_gap_m`` is the least
+hold is then the horizon a person needs to take over). A vehicle that lags its velocity
+setpoints is still turning when they stop: the last one leads its course by the lag's
+share of the turn, and it turns on to it first. ``abandon_gap_m`` is the least
 look-ahead gap along that path, the margin subtracted: >= 0 means safe to abandon. The
 backup law checks the same path inside its certificates when ``GuidanceParams`` sets an
 abandon profile (``ezcompanion.guidance.backup``).
@@ -29,6 +31,12 @@ FloatArray = npt.NDArray[np.float64]
 
 # The abandon path's turn is checked at this many points.
 _ABANDON_ARC_SAMPLES = 8
+# A lagging vehicle's turn on to its last velocity setpoint is sampled this many times per
+# lag (at most this many samples), for as long as what is left of it could cost more than
+# this in the closed form that follows.
+_LEAD_SAMPLES_PER_LAG = 6
+_LEAD_MAX_SAMPLES = 64
+_LEAD_TOL_M = 1e-3
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -60,23 +68,29 @@ def abandon_gap_m(
     east_m: FloatArray,
     course_rad: FloatArray,
     accel_lat_m_s2: FloatArray,
+    flown_accel_m_s2: FloatArray,
     speed_m_s: FloatArray,
+    lag_s: FloatArray | None = None,
 ) -> FloatArray:
     """Least gap (m, margin ``shield_margin_m`` subtracted) of each vehicle's abandon path;
-    ``zones`` with one row or one per vehicle."""
+    ``zones`` with one row or one per vehicle. ``accel_lat_m_s2`` is the commanded lateral
+    acceleration (the turn a course setpoint goes on with), ``flown_accel_m_s2`` the flown
+    one, whose lag a velocity setpoint leads (``lag_s`` per vehicle, or
+    ``response_lag_s``)."""
     packed = np.array(
         [profile.turn_s, profile.hold_s, profile.brake_m_s2, params.shield_margin_m,
          params.accel_max_m_s2]
     )  # fmt: skip
     shape = np.shape(north_m)
 
-    def flat(value: FloatArray) -> FloatArray:
+    def flat(value: FloatArray | float) -> FloatArray:
         return np.ascontiguousarray(np.broadcast_to(value, shape), dtype=np.float64).ravel()
 
     out = np.empty(int(np.prod(shape)))
     abandon_gap_batch(
         packed, zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, flat(north_m),
-        flat(east_m), flat(course_rad), flat(accel_lat_m_s2), flat(speed_m_s), out,
+        flat(east_m), flat(course_rad), flat(accel_lat_m_s2), flat(flown_accel_m_s2),
+        flat(speed_m_s), flat(params.response_lag_s if lag_s is None else lag_s), out,
     )  # fmt: skip
     return out.reshape(shape)
 
@@ -84,8 +98,9 @@ def abandon_gap_m(
 @jit_inline
 def abandon_gap(
     zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
-    n: float, e: float, heading: float, accel: float, speed: float, turn_s: float,
-    hold_s: float, brake_m_s2: float, margin_m: float, accel_max: float,
+    n: float, e: float, heading: float, accel: float, flown_accel: float, speed: float,
+    lag_s: float, turn_s: float, hold_s: float, brake_m_s2: float, margin_m: float,
+    accel_max: float,
 ) -> float:
     """Least gap of the path the autopilot flies if no setpoint follows this state: the turn
     goes on for ``turn_s`` (sampled at ``_ABANDON_ARC_SAMPLES`` points, each less
@@ -93,7 +108,9 @@ def abandon_gap(
     ``brake_m_s2`` to a stop (or, without braking, the hold's end is the horizon):
     the straight part's look-ahead points from min(mu R, v hold) to v hold + v^2 / (2 b) +
     mu R ahead, in closed form (a braking vehicle's look-ahead shrinks to its reach disc).
-    inf where no profile is set."""
+    A velocity setpoint (``turn_s`` 0) flown with a lag ``lag_s`` leads the course by
+    tau a_v / v (``flown_accel`` a_v): the vehicle turns on to it as its lag lets the turn
+    die out (``_lagged_straight``). inf where no profile is set."""
     hold = hold_s
     if hold <= 0.0:
         return math.inf
@@ -111,10 +128,83 @@ def abandon_gap(
     n1, e1, h1 = arc_end(n, e, heading, accel, speed, turn)
     brake = brake_m_s2
     stop = speed * hold + (0.5 * speed * speed / brake if brake > 0.0 else 0.0)
+    lead = lag_s * flown_accel / speed if turn <= 0.0 and lag_s > 0.0 else 0.0
+    if lead != 0.0:
+        return min(best, _lagged_straight(zn, ze, zmur, zreach, kz, n1, e1, h1, flown_accel,
+                                          speed, lag_s, hold, brake, margin_m))  # fmt: skip
     return min(best, segment_gap(
         zn, ze, zmur, zreach, kz, n1, e1, math.cos(h1), math.sin(h1), speed * hold, stop,
         True, margin_m, 0.0,
     ))  # fmt: skip
+
+
+@jit_inline
+def _heading_at(h: float, lead: float, lag_s: float, t: float) -> float:
+    """The course t after the setpoint froze: h + lead (1 - e^(-t / tau))."""
+    return h + lead * (1.0 - math.exp(-t / lag_s))
+
+
+@jit_inline
+def _lagged_straight(
+    zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
+    n: float, e: float, h: float, flown_accel: float, speed: float, lag_s: float,
+    hold_s: float, brake_m_s2: float, margin_m: float,
+) -> float:
+    """Least gap of a lagging vehicle's abandon path, from below. Its setpoint leads its
+    course h by L = tau a_v / v, and as the lag lets the turn die out (a_v e^(-t / tau),
+    the model's lag with the command gone) its course is h + L (1 - e^(-t / tau)):
+    monotone, within [h, h + L].
+
+    - Until T = min(hold, k tau), k the e-folds that leave at most ``_LEAD_TOL_M`` of the
+      bound below to the turn still to come: the course in closed form, the position by
+      Simpson's rule on it, sampled every tau / ``_LEAD_SAMPLES_PER_LAG``, each sample less
+      its second-order dip (lateral acceleration at most |a_v|, its rate |a_v| / tau).
+    - From T to the stop (the rest of the hold at v, then braking): every course lies
+      within beta / 2 of the middle one h_m, beta = |L| (e^(-T / tau) - e^(-t_stop / tau)),
+      so each look-ahead point p + lambda mu R u (lambda = v' / v) lies within
+      D sin(beta / 2) + mu R beta / 2 (D the path's length from p(T)) of a point of the
+      segment of look-ahead points along h_m from p(T), from min(mu R, D cos(beta / 2)) (the
+      path's projection on h_m is at least its length times cos(beta / 2), and braking,
+      s + mu R v' / v is concave in the distance braked) to D + mu R ahead: the segment's
+      gap less that."""
+    lead = lag_s * flown_accel / speed
+    brake = brake_m_s2
+    stop_t = hold_s + (speed / brake if brake > 0.0 else 0.0)
+    mur_max = 0.0
+    for i in range(zmur.shape[1]):
+        mur_max = max(mur_max, zmur[kz, i])
+    length = speed * hold_s + (0.5 * speed * speed / brake if brake > 0.0 else 0.0)
+    folds = math.log(max(abs(lead) * (length + mur_max) / _LEAD_TOL_M, 1.0))
+    sampled_t = min(hold_s, folds * lag_s)
+    count = min(_LEAD_MAX_SAMPLES, math.ceil(_LEAD_SAMPLES_PER_LAG * sampled_t / lag_s - 1e-9))
+    best = math.inf
+    if count > 0:
+        step = sampled_t / count
+        a_abs = abs(flown_accel)
+        rate = a_abs / lag_s
+        hj = h
+        for j in range(count + 1):
+            best = min(best, point_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(hj),
+                                       math.sin(hj), margin_m, speed, a_abs, rate, step))
+            if j == count:
+                break
+            hm = _heading_at(h, lead, lag_s, (j + 0.5) * step)
+            h1 = _heading_at(h, lead, lag_s, (j + 1) * step)
+            f = speed * step / 6.0
+            n += f * (math.cos(hj) + 4.0 * math.cos(hm) + math.cos(h1))
+            e += f * (math.sin(hj) + 4.0 * math.sin(hm) + math.sin(h1))
+            hj = h1
+    h_from = _heading_at(h, lead, lag_s, sampled_t)
+    h_to = _heading_at(h, lead, lag_s, stop_t)
+    half = 0.5 * abs(h_to - h_from)
+    mid = 0.5 * (h_from + h_to)
+    rest = speed * (hold_s - sampled_t) + (0.5 * speed * speed / brake if brake > 0.0 else 0.0)
+    # the look-ahead points' distance along h_m from p(T): at least mu R while at v, and
+    # braking (s + mu R v' / v is concave in the distance braked) at least the stop's
+    nearest = rest * math.cos(half) if brake > 0.0 else math.inf
+    gap = segment_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(mid), math.sin(mid), nearest,
+                      rest, True, margin_m, 0.0)  # fmt: skip
+    return min(best, gap - rest * math.sin(half) - mur_max * half)
 
 
 @jit
@@ -128,7 +218,9 @@ def abandon_gap_batch(
     e: FloatArray,
     h: FloatArray,
     a: FloatArray,
+    av: FloatArray,
     speed: FloatArray,
+    lag: FloatArray,
     out: FloatArray,
 ) -> None:
     """``abandon_gap`` for every vehicle (zone row k, or 0 if shared) into ``out``;
@@ -136,6 +228,6 @@ def abandon_gap_batch(
     shared = zn.shape[0] == 1
     for k in range(n.shape[0]):
         out[k] = abandon_gap(
-            zn, ze, zmur, zreach, 0 if shared else k, n[k], e[k], h[k], a[k], speed[k],
-            profile[0], profile[1], profile[2], profile[3], profile[4],
+            zn, ze, zmur, zreach, 0 if shared else k, n[k], e[k], h[k], a[k], av[k], speed[k],
+            lag[k], profile[0], profile[1], profile[2], profile[3], profile[4],
         )

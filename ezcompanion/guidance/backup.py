@@ -31,8 +31,10 @@ assumptions named; tests/test_backup.py checks each step):
    A turn's exit sample is a control step, so flown by its rule it leaves there or earlier,
    and an earlier exit is itself certified (>= theta, the largest dip). Where an abandon
    profile is set (what the autopilot flies if the companion falls silent: the turn goes
-   on for a time, then straight for a hold time, then braking), every sample's abandon
-   path is checked as well, so every state of a certified flight is safe to abandon.
+   on for a time, then straight for a hold time, then braking; a lagging vehicle first
+   turns on to its last velocity setpoint, which leads its course by tau a_v / v), every
+   sample's abandon path is checked as well, so every state of a certified flight is safe
+   to abandon.
 5. **The shield step.** The nominal command, held over the next control step, is flown if
    some backup is certified (>= theta) from where it leads; its weight comes from the
    nominal held for a longer preview (a fixed time, so the behaviour does not depend on the
@@ -161,12 +163,12 @@ def _av_rate_bound(s: FloatArray) -> float:
 @jit_inline
 def _abandon(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
-    kz: int, n: float, e: float, h: float, a: float, speed: float,
+    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float,
 ) -> float:
     """The abandon gap of this state with the shield's profile (inf where none is set)."""
     return abandon_gap(
-        zn, ze, zmur, zreach, kz, n, e, h, a, speed, s[S_AB_TURN], s[S_AB_HOLD], s[S_AB_BRAKE],
-        s[S_EPS], s[S_AMAX],
+        zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, s[S_TAU], s[S_AB_TURN], s[S_AB_HOLD],
+        s[S_AB_BRAKE], s[S_EPS], s[S_AMAX],
     )  # fmt: skip
 
 
@@ -411,7 +413,7 @@ def straight_certificate(
                 return certified
         best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h), eps,
                                speed, amax, rate, step, best)  # fmt: skip
-        best = min(best, _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, speed))
+        best = min(best, _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed))
         if best < stop_below:
             return best
         if best <= certified:
@@ -461,7 +463,7 @@ def turn_certificate(
     for j in range(_MAX_SAMPLES):
         best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h), eps,
                                speed, amax, rate, step, best)  # fmt: skip
-        best = min(best, _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, speed))
+        best = min(best, _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed))
         if best < stop_below:
             return best
         if j == 0:

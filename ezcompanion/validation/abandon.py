@@ -29,10 +29,16 @@ class AbandonChecker:
         accel_cmd_m_s2: npt.NDArray[np.float64],
         params: GuidanceParams,
     ) -> npt.NDArray[np.bool_]:
+        speed = np.asarray(state.speed_m_s)
+        if state.course_rate_rad_s is None:  # the ideal vehicle flies what it is told
+            flown = np.asarray(accel_cmd_m_s2)
+        else:  # the flown lateral acceleration, as the shield takes it from the course rate
+            bound = params.accel_max_m_s2
+            flown = np.clip(np.asarray(state.course_rate_rad_s) * speed, -bound, bound)
         gap = abandon_gap_m(
             self.profile, params, scenarios.zones(),
             north_m=np.asarray(state.north_m), east_m=np.asarray(state.east_m),
             course_rad=np.asarray(state.course_rad), accel_lat_m_s2=accel_cmd_m_s2,
-            speed_m_s=np.asarray(state.speed_m_s),
+            flown_accel_m_s2=flown, speed_m_s=speed, lag_s=scenarios.response_lag_s,
         )  # fmt: skip
         return gap >= 0.0

@@ -4,9 +4,10 @@ The service's own loop (``GuidanceLoop``) and velocity setpoints drive the stub'
 (its velocity shaping, docs/sitl_stub.md) in process, tick by tick at 50 Hz for 4 s, from
 random places near the zones of paper scenario 1 (true clearance 0.2 to 1.5 m) with a
 random yaw, once from rest and once at the nominal 1 m/s (the flight of
-``tests/test_resume_from_hover.py``). Only starts the law certifies count (the backup's
-certificate >= 0 on the first tick). Prints how many of those entered a zone, and the
-worst. The figures of docs/service.md, "Resuming from a hover":
+``tests/test_resume_from_hover.py``). Only starts the law certifies count (on the first
+tick the held backup's certificate >= 0, or, where the nominal flies, the certificate it
+leaves; before a hover started on a clear line, only the first). Prints how many of
+those entered a zone, and the worst. The figures of docs/service.md, "Resuming from a hover":
 
     python bench/bench_hover_start.py --seed 3 --draws 3000
     python bench/bench_hover_start.py --seed 2 --draws 4000 --abandon-check

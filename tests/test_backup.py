@@ -712,9 +712,9 @@ def test_the_abandon_gap_bounds_the_path_flown_when_the_companion_falls_silent(
     look-ahead mu R v'/v shrinking with the speed v'; a stopped vehicle is inside the reach
     disc): its least gap is never below the closed form's."""
     profile = ABANDON_PROFILES[name]
-    params = dataclasses.replace(PARAMS, shield_margin_m=0.0)
+    params = PARAMS
     at = {"north_m": np.array(north), "east_m": np.array(east), "course_rad": np.array(course)}
-    got = float(
+    got = params.shield_margin_m + float(
         abandon_gap_m(profile, params, zones, **at, accel_lat_m_s2=np.array(0.0),
                       flown_accel_m_s2=np.array(0.0), speed_m_s=np.array(1.0))
     )
@@ -778,13 +778,51 @@ def test_the_abandon_gap_bounds_a_lagging_vehicle_that_turns_on_to_the_setpoint(
     it turns on to that and flies it (the hold, then braking). The closed form, told the
     flown a_v and the lag, is never above the least gap of that flight."""
     profile = ABANDON_PROFILES[name]
-    params = dataclasses.replace(PARAMS, shield_margin_m=0.0, response_lag_s=lag_s)
+    params = dataclasses.replace(PARAMS, response_lag_s=lag_s)
     flown = flown_ratio * params.accel_max_m_s2
     at = {"north_m": np.array(north), "east_m": np.array(east), "course_rad": np.array(course)}
-    got = float(
+    got = params.shield_margin_m + float(
         abandon_gap_m(profile, params, zones, **at, accel_lat_m_s2=np.array(0.0),
                       flown_accel_m_s2=np.array(flown), speed_m_s=np.array(speed))
     )  # fmt: skip
     best = flown_abandon_gap(zones, north, east, course, speed, flown, lag_s, profile.hold_s,
                              profile.brake_m_s2)  # fmt: skip
     assert got <= best + 1e-5
+
+
+# a start from rest --------------------------------------------------------------------------
+
+
+def line_gap(zones: ZoneSet, north: float, east: float, course: float) -> float:
+    """Least distance from the line p + x u, x >= 0, to the reach discs, with numpy."""
+    u = np.array([math.cos(course), math.sin(course)])
+    d = np.stack([zones.north_m[0] - north, zones.east_m[0] - east], axis=1)
+    along = np.maximum(d @ u, 0.0)
+    return float((np.linalg.norm(d - along[:, None] * u, axis=1) - zones.reach_m[0]).min())
+
+
+@settings(max_examples=80, deadline=None)
+@given(zones=layouts(), north=st.floats(-8, 8), east=st.floats(-8, 8),
+       yaw=st.floats(-math.pi, math.pi))  # fmt: skip
+def test_a_hover_starts_on_its_yaw_or_the_nearest_course_whose_line_is_clear(
+    zones: ZoneSet, north: float, east: float, yaw: float
+) -> None:
+    """From rest a velocity setpoint is flown along a line, and while slower than v the
+    look-ahead lies on that line too: ``rest_course`` gives the yaw where its line clears
+    the margin by 2 theta, else the course nearest the yaw whose line does (5-degree steps),
+    else the yaw."""
+    s = settings_for(PARAMS)
+    z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m)
+    theta = bk.acceptance_level_m(s, zones.mu_range_m, zones.reach_m, 0, 1.0, 0.02)
+    need = PARAMS.shield_margin_m + 2.0 * theta  # no lag: no reserve
+    course = bk.rest_course(s, *z, 0, north, east, yaw, 1.0, 0.02)
+    turns = [sign * j * math.pi / 36 for j in range(1, 37) for sign in (1, -1)]
+    offsets = [0.0, *turns[:-1]]  # as the kernel tries them: -180 degrees is +180
+    clear = [line_gap(zones, north, east, yaw + o) >= need - 1e-9 for o in offsets]
+    if course == yaw:
+        assert clear[0] or not any(clear)
+    else:
+        taken = min(range(len(offsets)), key=lambda k: abs(yaw + offsets[k] - course))
+        assert abs(yaw + offsets[taken] - course) < 1e-12
+        assert line_gap(zones, north, east, course) >= need - 1e-9
+        assert not any(clear[:taken])

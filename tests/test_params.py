@@ -51,6 +51,7 @@ def test_bad_defender_names_the_field(changes: dict[str, float], field: str) -> 
         ({"margin_m": -0.2}, "margin_m"),
         ({"reference_limit_ratio": 1.0}, "reference_limit_ratio"),
         ({"command_limit_1_s": 0.5}, "command_limit_1_s"),
+        ({"shield_margin_m": 0.0}, "shield_margin_m"),  # the give-way rule needs a margin
     ],
 )
 def test_bad_guidance_parameter_names_the_field(changes: dict[str, float], field: str) -> None:

@@ -123,6 +123,8 @@ _EXIT_EVERY = 1
 _EXIT_SEARCH_RAD = math.pi
 # The nominal's weight looks this many samples ahead (a fixed time, whatever the step).
 _PREVIEW_SAMPLES = 4
+# A hovering vehicle's course is tried this many ways round (5 degrees apart).
+_REST_COURSES = 72
 # STRAIGHT's certificate tries its closed-form tail every this many samples (four times
 # as seldom where the caller wants it exact).
 _TAIL_EVERY = 4
@@ -700,3 +702,39 @@ def shield_batch(
                 s, zn, ze, zmur, zreach, 0 if shared else k, n[k], e[k], h[k], a[k], av[k],
                 speed[k], nominal[k], dt, int(current[k]), weight_before[k], out, k,
             )  # fmt: skip
+
+
+# ---------------------------------------------------------------------------------------
+# 6. a start from rest
+
+
+@jit
+def rest_course(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, n: float, e: float, yaw: float, speed: float, dt: float,
+) -> float:
+    """The course to start a hovering vehicle on (its velocity has no direction yet, and a
+    copter's can grow in any): ``yaw`` where the line from here along it clears
+    ``2 theta`` (with a lag, plus the reserve), else the course nearest the yaw, in steps of
+    ``2 pi / _REST_COURSES``, whose line does, else ``yaw``.
+
+    From rest a velocity setpoint along u is flown along the line p + s u, s >= 0 (the
+    velocity grows along it), and slower than v the look-ahead mu R v' / v lies between p
+    and p + mu R u: the line's gap from s = 0 (``segment_gap``) bounds every look-ahead point
+    of that start, and of its abandon path, which runs along the same line. Once at speed on
+    that course, STRAIGHT's certificate is at least the line's gap less its samples' dips
+    (<= theta): certified, with the reserve the nominal needs. Away from the yaw the nose
+    does not follow at once: nothing here needs it to."""  # fmt: skip
+    theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
+    need = 2.0 * theta + (s[S_ROBUST] if s[S_TAU] > 0.0 else 0.0)
+    step = 2.0 * math.pi / _REST_COURSES
+    for j in range(_REST_COURSES // 2 + 1):
+        for sign in (1.0, -1.0):
+            if sign < 0.0 and (j == 0 or 2 * j == _REST_COURSES):
+                continue  # the yaw and its opposite are tried once
+            h = yaw + sign * j * step
+            gap = segment_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h), 0.0,
+                              math.inf, True, s[S_EPS], 0.0)  # fmt: skip
+            if gap >= need:
+                return h
+    return yaw

@@ -26,7 +26,7 @@ import numpy.typing as npt
 from ezcompanion.errors import StateError
 from ezcompanion.guidance._jit import jit
 from ezcompanion.guidance.actuator import advance_one
-from ezcompanion.guidance.backup import BACKUP_NONE, pack_shield, shield_batch
+from ezcompanion.guidance.backup import BACKUP_NONE, pack_shield, rest_course, shield_batch
 from ezcompanion.guidance.law import (
     O_AC,
     O_ALPHA,
@@ -235,6 +235,18 @@ class GuidanceController:
             certificate_m=views[2],
             certificate_ahead_m=views[3],
         )
+
+    def course_from_rest(
+        self, *, north_m: float, east_m: float, yaw_rad: float, speed_m_s: float, dt_s: float
+    ) -> float:
+        """The course to start a hovering vehicle on (``backup.rest_course``): the yaw, or
+        the course nearest it whose line from here is clear for ever; the yaw for a law
+        without the shield."""
+        if not self._shielded:
+            return yaw_rad
+        z = self.zones
+        return float(rest_course(self._shield, z.north_m, z.east_m, z.mu_range_m, z.reach_m, 0,
+                                 north_m, east_m, yaw_rad, speed_m_s, dt_s))  # fmt: skip
 
     def step_one(
         self,

@@ -198,7 +198,14 @@ class GuidanceParams:
         for name in ("abandon_turn_s", "abandon_hold_s", "abandon_brake_m_s2"):
             _non_negative(name, getattr(self, name))
         _positive("shield_band_m", self.shield_band_m)
-        _non_negative("shield_margin_m", self.shield_margin_m)
+        _finite("shield_margin_m", self.shield_margin_m)
+        if self.shield_margin_m <= 0.0:
+            raise ConfigError(
+                "shield_margin_m", self.shield_margin_m,
+                "must be > 0: a held backup gives way once its certificate is below -margin, "
+                "which under the model it never is only for a margin above the certificates' "
+                "own widening (docs/guidance.md, step 5)",
+            )  # fmt: skip
         _non_negative("shield_weight_fall_1_s", self.shield_weight_fall_1_s)
         _non_negative("shield_robust_m", self.shield_robust_m)
         _non_negative("safety_fade_turn_radii", self.safety_fade_turn_radii)

@@ -48,6 +48,7 @@ class GuidanceLoop:
         self.captured = False
         self.miss_distance_m = math.inf
         self._last_tick_s: float | None = None
+        self._rest_course_rad: float | None = None  # the course a hover was started on
         self._assumed: dict[str, float] = {}  # guidance fields found from the vehicle
         self._measured: dict[str, float] = {}  # measured in flight: over the scenario's if worse
         self.speed_factor = 1.0  # flown over commanded speed, as measured (identify_monitor)
@@ -154,6 +155,27 @@ class GuidanceLoop:
         bound = _RESUME_BOUND_FRACTION * self.scenario.guidance.accel_max_m_s2
         self.controller.reset(max(-bound, min(bound, speed * rate)))
 
+    def _course_from_rest(self, state: VehicleState, yaw_rad: float, speed_m_s: float,
+                          dt_s: float, start: bool) -> float:
+        """A hovering vehicle's course: on the first tick of a (re)start, the one
+        ``GuidanceController.course_from_rest`` picks (the yaw, or the course nearest it
+        whose line is clear), kept while the vehicle is slow and that line from where it is
+        stays clear; otherwise the yaw. Picked only at a start, from rest: once the vehicle
+        moves, a new course each tick would not be the line it flies."""  # fmt: skip
+        pick = self.controller.course_from_rest
+        if start:
+            chosen = pick(north_m=state.north_m, east_m=state.east_m, yaw_rad=yaw_rad,
+                          speed_m_s=speed_m_s, dt_s=dt_s)  # fmt: skip
+            self._rest_course_rad = chosen if chosen != yaw_rad else None
+        kept = self._rest_course_rad
+        if kept is None:
+            return yaw_rad
+        if pick(north_m=state.north_m, east_m=state.east_m, yaw_rad=kept, speed_m_s=speed_m_s,
+                dt_s=dt_s) != kept:  # its line is no longer clear
+            self._rest_course_rad = None
+            return yaw_rad
+        return kept
+
     def tick(self, state: VehicleState | None, now_s: float) -> TickCommand | Hold:
         """One law step on ``state`` at clock time ``now_s``."""
         if self.captured:
@@ -169,6 +191,10 @@ class GuidanceLoop:
         if last is None:
             self._resume_from(state, minimum)
         dt = self.period_s if last is None else min(max(now_s - last, 1e-4), 5.0 * self.period_s)
+        if state.ground_speed_m_s < minimum:
+            course = self._course_from_rest(state, course, speed, dt, last is None)
+        else:
+            self._rest_course_rad = None
         self._last_tick_s = now_s
         step = self.controller.step_one(
             north_m=state.north_m, east_m=state.east_m, course_rad=course, speed_m_s=speed,

@@ -718,16 +718,8 @@ def test_the_abandon_gap_bounds_the_path_flown_when_the_companion_falls_silent(
         abandon_gap_m(profile, params, zones, **at, accel_lat_m_s2=np.array(0.0),
                       flown_accel_m_s2=np.array(0.0), speed_m_s=np.array(1.0))
     )
-    v, b, hold = 1.0, profile.brake_m_s2, profile.turn_s + profile.hold_s
-    t = np.linspace(0.0, hold + (v / b if b > 0 else 0.0), 20001)
-    speed = np.where(t <= hold, v, np.maximum(v - b * (t - hold), 0.0))
-    along = np.where(t <= hold, v * t, v * hold + v * (t - hold) - 0.5 * b * (t - hold) ** 2)
-    best = math.inf
-    for i in range(len(zones)):
-        ahead = along + float(zones.mu_range_m[0, i]) * speed / v
-        qn = north + ahead * math.cos(course) - zones.north_m[0, i]
-        qe = east + ahead * math.sin(course) - zones.east_m[0, i]
-        best = min(best, float((np.hypot(qn, qe) - zones.reach_m[0, i]).min()))
+    best = flown_abandon_gap(zones, north, east, course, 1.0, 0.0, 0.0,
+                             profile.turn_s + profile.hold_s, profile.brake_m_s2)  # fmt: skip
     assert got <= best + 1e-6
 
 
@@ -738,9 +730,9 @@ def flown_abandon_gap(
     """The least gap of the abandon path as the model flies it, densely: the setpoint's
     course is where the lagged turn ends (the flown a_v decays as e^(-t / tau), so the
     heading goes on by tau a_v / v), straight at v for the hold, then braking; the
-    look-ahead mu R v' / v shrinks with the speed v'. Positions by the trapezoid on 40,001
-    points (an error of micrometres here)."""  # fmt: skip
-    stop_t = hold_s + speed / brake_m_s2
+    look-ahead mu R v' / v shrinks with the speed v' (no braking: the hold's end is the
+    horizon). Positions by the trapezoid on 40,001 points (micrometres here)."""  # fmt: skip
+    stop_t = hold_s + (speed / brake_m_s2 if brake_m_s2 > 0.0 else 0.0)
     t = np.linspace(0.0, stop_t, 40001)
     lead = lag_s * flown / speed
     heading = course + (lead * (1.0 - np.exp(-t / lag_s)) if lag_s > 0.0 else 0.0 * t)

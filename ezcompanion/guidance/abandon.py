@@ -177,6 +177,8 @@ def _lagged_straight(
     folds = math.log(max(abs(lead) * (length + mur_max) / _LEAD_TOL_M, 1.0))
     sampled_t = min(hold_s, folds * lag_s)
     count = min(_LEAD_MAX_SAMPLES, math.ceil(_LEAD_SAMPLES_PER_LAG * sampled_t / lag_s - 1e-9))
+    if count <= 0:
+        sampled_t = 0.0  # nothing sampled: the segment bound starts here
     best = math.inf
     if count > 0:
         step = sampled_t / count
@@ -199,6 +201,10 @@ def _lagged_straight(
     half = 0.5 * abs(h_to - h_from)
     mid = 0.5 * (h_from + h_to)
     rest = speed * (hold_s - sampled_t) + (0.5 * speed * speed / brake if brake > 0.0 else 0.0)
+    if half > 0.5 * math.pi:  # courses spread over more than a half turn: within D + mu R
+        disc = segment_gap(zn, ze, zmur, zreach, kz, n, e, 1.0, 0.0, 0.0, 0.0, True, margin_m,
+                           0.0)  # fmt: skip
+        return min(best, disc - rest - mur_max)
     # the look-ahead points' distance along h_m from p(T): at least mu R while at v, and
     # braking (s + mu R v' / v is concave in the distance braked) at least the stop's
     nearest = rest * math.cos(half) if brake > 0.0 else math.inf

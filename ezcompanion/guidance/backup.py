@@ -709,32 +709,47 @@ def shield_batch(
 
 
 @jit
+def rest_need_m(s: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int, speed: float,
+                dt: float) -> float:
+    """How far a line from rest must clear the margin (``rest_line_gap_m``) for STRAIGHT,
+    flown at speed along it, to be certified with the reserve: 2 theta (its samples' dips
+    take at most theta), and with a lag the reserve too."""  # fmt: skip
+    theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
+    return float(2.0 * theta + (s[S_ROBUST] if s[S_TAU] > 0.0 else 0.0))
+
+
+@jit
+def rest_line_gap_m(s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray,
+                    zreach: FloatArray, kz: int, n: float, e: float, h: float) -> float:
+    """The gap (margin subtracted) of the line p + x u(h), x >= 0, to the reach discs.
+
+    From rest a velocity setpoint along u is flown along that line (the velocity grows
+    along it), and slower than v the look-ahead mu R v' / v lies between p and p + mu R u:
+    so this bounds every look-ahead point of that start, and of its abandon path, which
+    runs along the same line. At speed on the line with no turn (a = a_v = 0), STRAIGHT's
+    certificate is at least this less its samples' dips (<= theta)."""  # fmt: skip
+    return float(segment_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h), 0.0,
+                             math.inf, True, s[S_EPS], 0.0))  # fmt: skip
+
+
+@jit
 def rest_course(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
-    kz: int, n: float, e: float, yaw: float, speed: float, dt: float,
+    kz: int, n: float, e: float, yaw: float, speed: float, dt: float, drift_m: float,
 ) -> float:
-    """The course to start a hovering vehicle on (its velocity has no direction yet, and a
-    copter's can grow in any): ``yaw`` where the line from here along it clears
-    ``2 theta`` (with a lag, plus the reserve), else the course nearest the yaw, in steps of
-    ``2 pi / _REST_COURSES``, whose line does, else ``yaw``.
-
-    From rest a velocity setpoint along u is flown along the line p + s u, s >= 0 (the
-    velocity grows along it), and slower than v the look-ahead mu R v' / v lies between p
-    and p + mu R u: the line's gap from s = 0 (``segment_gap``) bounds every look-ahead point
-    of that start, and of its abandon path, which runs along the same line. Once at speed on
-    that course, STRAIGHT's certificate is at least the line's gap less its samples' dips
-    (<= theta): certified, with the reserve the nominal needs. Away from the yaw the nose
-    does not follow at once: nothing here needs it to."""  # fmt: skip
-    theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
-    need = 2.0 * theta + (s[S_ROBUST] if s[S_TAU] > 0.0 else 0.0)
+    """The course to start a vehicle at rest on (its velocity has no direction yet, and a
+    copter's can grow in any): ``yaw`` where its line (``rest_line_gap_m``) clears
+    ``rest_need_m`` plus ``drift_m`` (what a velocity left over from before can carry the
+    vehicle off the line), else the course nearest the yaw, in steps of
+    ``2 pi / _REST_COURSES`` (+5, -5, +10 degrees, ...), whose line does; nan where none
+    does."""  # fmt: skip
+    need = rest_need_m(s, zmur, zreach, kz, speed, dt) + drift_m
     step = 2.0 * math.pi / _REST_COURSES
     for j in range(_REST_COURSES // 2 + 1):
         for sign in (1.0, -1.0):
             if sign < 0.0 and (j == 0 or 2 * j == _REST_COURSES):
                 continue  # the yaw and its opposite are tried once
             h = yaw + sign * j * step
-            gap = segment_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h), 0.0,
-                              math.inf, True, s[S_EPS], 0.0)  # fmt: skip
-            if gap >= need:
+            if rest_line_gap_m(s, zn, ze, zmur, zreach, kz, n, e, h) >= need:
                 return h
-    return yaw
+    return math.nan

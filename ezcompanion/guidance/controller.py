@@ -26,7 +26,14 @@ import numpy.typing as npt
 from ezcompanion.errors import StateError
 from ezcompanion.guidance._jit import jit
 from ezcompanion.guidance.actuator import advance_one
-from ezcompanion.guidance.backup import BACKUP_NONE, pack_shield, rest_course, shield_batch
+from ezcompanion.guidance.backup import (
+    BACKUP_NONE,
+    pack_shield,
+    rest_course,
+    rest_line_gap_m,
+    rest_need_m,
+    shield_batch,
+)
 from ezcompanion.guidance.law import (
     O_AC,
     O_ALPHA,
@@ -237,16 +244,32 @@ class GuidanceController:
         )
 
     def course_from_rest(
-        self, *, north_m: float, east_m: float, yaw_rad: float, speed_m_s: float, dt_s: float
-    ) -> float:
-        """The course to start a hovering vehicle on (``backup.rest_course``): the yaw, or
-        the course nearest it whose line from here is clear for ever; the yaw for a law
-        without the shield."""
+        self, *, north_m: float, east_m: float, yaw_rad: float, speed_m_s: float, dt_s: float,
+        drift_m: float,
+    ) -> float | None:
+        """The course to start a vehicle at rest on (``backup.rest_course``): the yaw, or the
+        course nearest it whose line from here is clear for ever by the need plus
+        ``drift_m``; None where none is, or for a law without the shield."""  # fmt: skip
         if not self._shielded:
-            return yaw_rad
+            return None
         z = self.zones
-        return float(rest_course(self._shield, z.north_m, z.east_m, z.mu_range_m, z.reach_m, 0,
-                                 north_m, east_m, yaw_rad, speed_m_s, dt_s))  # fmt: skip
+        course = float(rest_course(
+            self._shield, z.north_m, z.east_m, z.mu_range_m, z.reach_m, 0, north_m, east_m,
+            yaw_rad, speed_m_s, dt_s, drift_m,
+        ))  # fmt: skip
+        return None if math.isnan(course) else course
+
+    def rest_line_clear(
+        self, *, north_m: float, east_m: float, course_rad: float, speed_m_s: float,
+        dt_s: float, drift_m: float,
+    ) -> bool:
+        """Whether the line from here along ``course_rad`` still clears what
+        ``course_from_rest`` asked of it."""  # fmt: skip
+        z = self.zones
+        gap = rest_line_gap_m(self._shield, z.north_m, z.east_m, z.mu_range_m, z.reach_m, 0,
+                              north_m, east_m, course_rad)  # fmt: skip
+        return bool(gap >= rest_need_m(self._shield, z.mu_range_m, z.reach_m, 0, speed_m_s,
+                                       dt_s) + drift_m)  # fmt: skip
 
     def step_one(
         self,

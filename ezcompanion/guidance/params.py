@@ -202,9 +202,9 @@ class GuidanceParams:
         if self.shield_margin_m <= 0.0:
             raise ConfigError(
                 "shield_margin_m", self.shield_margin_m,
-                "must be > 0: a held backup gives way once its certificate is below -margin, "
-                "which under the model it never is only for a margin above the certificates' "
-                "own widening (docs/guidance.md, step 5)",
+                "must be > 0 (necessary, not sufficient): a held backup gives way once its "
+                "certificate is below -margin, which under the model it never is only for a "
+                "margin above the certificates' own widening (docs/guidance.md, step 5)",
             )  # fmt: skip
         _non_negative("shield_weight_fall_1_s", self.shield_weight_fall_1_s)
         _non_negative("shield_robust_m", self.shield_robust_m)

@@ -19,6 +19,9 @@ __all__ = ["GuidanceLoop", "Hold", "TickCommand"]
 # Below this fraction of the flown speed the velocity has no usable direction: the yaw
 # stands in for the course, and the measured course rate says nothing of a turn.
 _MIN_SPEED_FRACTION = 0.5
+# Below this fraction of the flown speed a vehicle starting guidance is at rest: its
+# course is free (``GuidanceController.course_from_rest``).
+_REST_SPEED_FRACTION = 0.1
 # A measured turn restarts the actuator state at most at this fraction of the bound (the
 # actuator model holds |a| < a_max strictly).
 _RESUME_BOUND_FRACTION = 0.98
@@ -156,24 +159,26 @@ class GuidanceLoop:
         self.controller.reset(max(-bound, min(bound, speed * rate)))
 
     def _course_from_rest(self, state: VehicleState, yaw_rad: float, speed_m_s: float,
-                          dt_s: float, start: bool) -> float:
-        """A hovering vehicle's course: on the first tick of a (re)start, the one
+                          dt_s: float, start: bool) -> float | None:
+        """A slow vehicle's course when it started from rest: on the first tick of a
+        (re)start, slower than ``_REST_SPEED_FRACTION`` of the flown speed, the course
         ``GuidanceController.course_from_rest`` picks (the yaw, or the course nearest it
-        whose line is clear), kept while the vehicle is slow and that line from where it is
-        stays clear; otherwise the yaw. Picked only at a start, from rest: once the vehicle
+        whose line is clear), with the velocity left over times the lag as the drift off
+        the line; kept while the vehicle is slow and that line from where it is stays clear,
+        then dropped (None: the yaw as before). Picked only at a start: once the vehicle
         moves, a new course each tick would not be the line it flies."""  # fmt: skip
-        pick = self.controller.course_from_rest
+        controller = self.controller
+        drift = state.ground_speed_m_s * self.scenario.guidance.response_lag_s
+        at = {"north_m": state.north_m, "east_m": state.east_m, "speed_m_s": speed_m_s,
+              "dt_s": dt_s, "drift_m": drift}  # fmt: skip
         if start:
-            chosen = pick(north_m=state.north_m, east_m=state.east_m, yaw_rad=yaw_rad,
-                          speed_m_s=speed_m_s, dt_s=dt_s)  # fmt: skip
-            self._rest_course_rad = chosen if chosen != yaw_rad else None
+            resting = state.ground_speed_m_s < _REST_SPEED_FRACTION * self.flown_speed_m_s
+            self._rest_course_rad = (
+                controller.course_from_rest(yaw_rad=yaw_rad, **at) if resting else None
+            )
         kept = self._rest_course_rad
-        if kept is None:
-            return yaw_rad
-        if pick(north_m=state.north_m, east_m=state.east_m, yaw_rad=kept, speed_m_s=speed_m_s,
-                dt_s=dt_s) != kept:  # its line is no longer clear
-            self._rest_course_rad = None
-            return yaw_rad
+        if kept is not None and not controller.rest_line_clear(course_rad=kept, **at):
+            kept = self._rest_course_rad = None
         return kept
 
     def tick(self, state: VehicleState | None, now_s: float) -> TickCommand | Hold:
@@ -191,14 +196,18 @@ class GuidanceLoop:
         if last is None:
             self._resume_from(state, minimum)
         dt = self.period_s if last is None else min(max(now_s - last, 1e-4), 5.0 * self.period_s)
+        rate = state.course_rate_rad_s
+        rest = None
         if state.ground_speed_m_s < minimum:
-            course = self._course_from_rest(state, course, speed, dt, last is None)
+            rest = self._course_from_rest(state, course, speed, dt, last is None)
         else:
             self._rest_course_rad = None
+        if rest is not None:  # the course is ours, and the turn the model's own (from 0)
+            course, rate = rest, None
         self._last_tick_s = now_s
         step = self.controller.step_one(
             north_m=state.north_m, east_m=state.east_m, course_rad=course, speed_m_s=speed,
-            dt_s=dt, course_rate_rad_s=state.course_rate_rad_s,
+            dt_s=dt, course_rate_rad_s=rate,
         )  # fmt: skip
         self.miss_distance_m = min(self.miss_distance_m, float(step.law.range_to_target_m))
         self.captured = bool(step.captured)

@@ -571,8 +571,8 @@ def test_straights_closed_form_bounds_hold_along_its_flight(
                       - math.hypot(n - n0, e - e0) * math.sin(w))  # fmt: skip
     assert abs(h - (h0 + mid)) <= w + 1e-6
     assert lateral <= drift + 1e-6
-    lower = bk._tube_gap(s, *z, n0, e0, h0 + mid, w, delta, drift, False)
-    upper = bk._tube_gap(s, *z, n0, e0, h0 + mid, w, delta, drift, True)
+    lower, _ = bk._tube_gap(s, *z, n0, e0, h0 + mid, w, delta, drift, False, 0, -math.inf)
+    upper, _ = bk._tube_gap(s, *z, n0, e0, h0 + mid, w, delta, drift, True, 0, -math.inf)
     assert lower <= least + 1e-6
     # (the flight is sampled at its control steps: its least gap may sit between them, up
     # to the look-ahead point's speed, at most 2 v, over half a step)
@@ -585,6 +585,34 @@ def test_straights_closed_form_bounds_hold_along_its_flight(
 def scaled(params: GuidanceParams, length: float, time: float) -> GuidanceParams:
     """Every dimensional field scaled by its unit (from its name): the package's scaler."""
     return scale_params(params, ScaleFactors(length=length, time=time))
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    zones=layouts(),
+    n0=st.floats(-8, 8), e0=st.floats(-8, 8), h0=st.floats(-math.pi, math.pi),
+    a0=st.floats(-0.99, 0.99), level=st.floats(-2.0, 2.0), upper=st.booleans(),
+)  # fmt: skip
+def test_a_screen_that_stops_at_the_first_zone_below_its_level_decides_as_the_full_one(
+    zones: ZoneSet, n0: float, e0: float, h0: float, a0: float, level: float, upper: bool
+) -> None:
+    """The exit screen stops at the first zone below its level, from any zone round: it is
+    below the level exactly where the least value over every zone is, equal to that least
+    value where it is not, and the zone it names gives the value it returns."""
+    s = settings_for(PARAMS)
+    delta, mid, w, drift = bk._straight_to_come(s, a0, a0, 1.0, 0.02)
+    z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
+    args = (s, *z, n0, e0, h0 + mid, w, delta, drift, upper)
+    full, _ = bk._tube_gap(*args, 0, -math.inf)
+    for first in range(zones.north_m.shape[1]):
+        value, which = bk._tube_gap(*args, first, level)
+        assert (value < level) == (full < level)
+        if value >= level:
+            assert value == full
+        if math.isfinite(value):
+            alone, _ = bk._tube_gap(s, *(x[:, which : which + 1] for x in z[:4]), 0, n0, e0,
+                                    h0 + mid, w, delta, drift, upper, 0, -math.inf)  # fmt: skip
+            assert alone == value
 
 
 @pytest.mark.parametrize("law", [LawName.BACKUP, LawName.ROBUST])

@@ -331,21 +331,32 @@ def _straight_to_come(
 def _tube_gap(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h_final: float, w: float, delta: float, drift: float,
-    upper: bool,
-) -> float:
+    upper: bool, first: int, below: float,
+) -> tuple[float, int]:
     """The look-ahead points of STRAIGHT's flight from here against the ray of look-ahead
     points along the final heading (``_straight_to_come``): each lies within
     rho_i = drift + (|d_i - p| + reach_i + mu_i R_i + drift) tan(w) + 2 mu_i R_i delta of
     the ray from p + mu_i R_i u(h_final). ``upper`` False: the least gap of the ray less
     rho_i, a lower bound on the flight's; True: the ray's gap at its point nearest each zone
     plus rho_i, an upper bound (some look-ahead point of the flight passes that point). Only
-    where the headings stay within a right angle of the ray (else -inf, or inf)."""
+    where the headings stay within a right angle of the ray (else -inf, or inf).
+
+    Returns the least value over the zones and the zone that gave it. The zones are taken
+    from zone ``first`` round, and the loop stops at the first value below ``below`` (-inf:
+    all zones): then the least value is known to be below it, which is all a caller that
+    compares it with ``below`` needs (a screen starting at the zone that stopped it last
+    time looks at one zone where the same zone still blocks)."""
     if 2.0 * delta + w >= 1.2:
-        return math.inf if upper else -math.inf
+        return (math.inf if upper else -math.inf), first
     ch, sh = math.cos(h_final), math.sin(h_final)
     slope = math.tan(w)
     best = math.inf
-    for i in range(zn.shape[1]):
+    which = first
+    count = zn.shape[1]
+    for j in range(count):
+        i = first + j
+        if i >= count:
+            i -= count
         mur = zmur[kz, i]
         wn = zn[kz, i] - n
         we = ze[kz, i] - e
@@ -355,8 +366,12 @@ def _tube_gap(
         g = math.sqrt(dn * dn + de * de) - zreach[kz, i] - s[S_EPS]
         rho = drift + (math.sqrt(wn * wn + we * we) + zreach[kz, i] + mur + drift) * slope
         rho += 2.0 * mur * delta
-        best = min(best, g + rho if upper else g - rho)
-    return best
+        value = g + rho if upper else g - rho
+        if value < best:
+            best, which = value, i
+            if best < below:
+                break
+    return best, which
 
 
 @jit_inline
@@ -378,7 +393,8 @@ def _straight_tail(
                        math.inf, True, s[S_EPS], delta)  # fmt: skip
     if hold > 0.0:
         return cone
-    tube = _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, h + mid, w, delta, drift, False)
+    tube, _ = _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, h + mid, w, delta, drift, False, 0,
+                        -math.inf)  # fmt: skip
     return max(cone, tube)
 
 
@@ -434,11 +450,14 @@ def straight_certificate(
 def _straight_upper_bound(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
-) -> float:
+    first: int, below: float,
+) -> tuple[float, int]:
     """An upper bound on the least gap of STRAIGHT's flight from this state, so on its
-    certificate (which is below that gap): cheap, to screen a turn's exits."""
+    certificate (which is below that gap): cheap, to screen a turn's exits. Stops below
+    ``below``, from zone ``first`` round (``_tube_gap``)."""
     delta, mid, w, drift = _straight_to_come(s, a, av, speed, dt)
-    return _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, h + mid, w, delta, drift, True)
+    return _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, h + mid, w, delta, drift, True, first,
+                     below)  # fmt: skip
 
 
 @jit
@@ -462,23 +481,26 @@ def turn_certificate(
     best = math.inf
     turned = 0.0
     converged = False
+    screen_level = exit_level - _SCREEN_SLACK * speed * speed / amax
+    blocker = 0  # the zone that stopped the last screen: the first one the next looks at
     for j in range(_MAX_SAMPLES):
         best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h), eps,
                                speed, amax, rate, step, best)  # fmt: skip
         best = min(best, _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed))
         if best < stop_below:
             return best
+        leave = -math.inf
         if j == 0:
             leave = exit_now
-        elif j % _EXIT_EVERY == 0 and _straight_upper_bound(
-            s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt
-        ) >= exit_level - _SCREEN_SLACK * speed * speed / amax:
-            # (any subset of the samples keeps the argument; the screen drops only exits
-            # whose certificate is surely below the level)
-            leave = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
-                                         dt, exit_level, max(exit_level, enough))  # fmt: skip
-        else:
-            leave = -math.inf
+        elif j % _EXIT_EVERY == 0:
+            upper, blocker = _straight_upper_bound(s, zn, ze, zmur, zreach, kz, n, e, h, a, av,
+                                                   speed, dt, blocker, screen_level)  # fmt: skip
+            if upper >= screen_level:
+                # (any subset of the samples keeps the argument; the screen drops only exits
+                # whose certificate is surely below the level)
+                leave = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av,
+                                             speed, dt, exit_level,
+                                             max(exit_level, enough))  # fmt: skip
         if leave >= exit_level:
             return min(best, leave)
         if converged and turned >= _EXIT_SEARCH_RAD:
@@ -621,15 +643,18 @@ def shield_one(
     accept = theta + (s[S_ROBUST] if s[S_TAU] > 0.0 else 0.0)
     band = s[S_BAND]
     certs = np.empty(_N_BACKUPS)
-    # the nominal held for the preview sets the weight; held for one step, it must keep a
-    # certificate >= accept to be flown at all
-    preview_s = max(dt, _PREVIEW_SAMPLES * sample_ticks(s, speed, dt) * dt)
-    preview, _, _, _ = _ahead(s, zn, ze, zmur, zreach, kz, nominal, n, e, h, a, av, speed, dt,
-                              preview_s, accept + band, certs)  # fmt: skip
+    # held for one step, the nominal must keep a certificate >= accept to be flown at all;
+    # where it does, the nominal held for the preview sets its weight (where it does not,
+    # the weight is 0 whatever the preview says, so the preview is not flown)
     ahead, which, a_next, av_next = _ahead(s, zn, ze, zmur, zreach, kz, nominal, n, e, h, a, av,
                                            speed, dt, dt, accept, certs)  # fmt: skip
-    x = min(max((preview - accept) / band, 0.0), 1.0)
-    weight = x * x * (3.0 - 2.0 * x) if ahead >= accept else 0.0
+    weight = 0.0
+    if ahead >= accept:
+        preview_s = max(dt, _PREVIEW_SAMPLES * sample_ticks(s, speed, dt) * dt)
+        preview, _, _, _ = _ahead(s, zn, ze, zmur, zreach, kz, nominal, n, e, h, a, av, speed,
+                                  dt, preview_s, accept + band, certs)  # fmt: skip
+        x = min(max((preview - accept) / band, 0.0), 1.0)
+        weight = x * x * (3.0 - 2.0 * x)
     fall = s[S_FALL]
     if fall > 0.0 and weight_before >= 0.0 and ahead >= accept:
         # memory: the weight falls at most this fast (what it leads to is checked below)

@@ -32,7 +32,12 @@ from ezcompanion.guidance import (
 )
 from ezcompanion.guidance import backup as bk
 from ezcompanion.guidance import lookahead as lk
-from ezcompanion.guidance.abandon import ABANDON_PROFILES, AbandonProfile, abandon_gap_m
+from ezcompanion.guidance.abandon import (
+    ABANDON_PROFILES,
+    AbandonProfile,
+    abandon_gap,
+    abandon_gap_m,
+)
 from ezcompanion.guidance.controller import GuidanceStep
 from ezcompanion.guidance.scaling import ScaleFactors, scale_params
 from ezcompanion.sim.engine import SimResult, simulate
@@ -763,7 +768,8 @@ def flown_abandon_gap(
     stop_t = hold_s + (speed / brake_m_s2 if brake_m_s2 > 0.0 else 0.0)
     t = np.linspace(0.0, stop_t, 40001)
     lead = lag_s * flown / speed
-    heading = course + (lead * (1.0 - np.exp(-t / lag_s)) if lag_s > 0.0 else 0.0 * t)
+    with np.errstate(over="ignore"):  # a lag of a few ulps: t / tau is inf, the turn instant
+        heading = course + (lead * (1.0 - np.exp(-t / lag_s)) if lag_s > 0.0 else 0.0 * t)
     v = np.where(t <= hold_s, speed, np.maximum(speed - brake_m_s2 * (t - hold_s), 0.0))
     vn, ve = v * np.cos(heading), v * np.sin(heading)
     dt = np.diff(t)
@@ -793,10 +799,12 @@ def flown_abandon_gap(
         st.builds(AbandonProfile, turn_s=st.just(0.0), hold_s=st.floats(0.1, 3.0),
                   brake_m_s2=st.sampled_from([0.0, 0.02, 3.0])),
     ),
+    below=st.floats(-1.0, 4.0),
 )  # fmt: skip
 def test_the_abandon_gap_bounds_a_lagging_vehicle_that_turns_on_to_the_setpoint(
     zones: ZoneSet, north: float, east: float, course: float, speed: float,
     flown_ratio: float, lag_s: float, accel_max: float, profile: AbandonProfile,
+    below: float,
 ) -> None:
     """A vehicle that lags its velocity setpoints by tau is turning (a_v) when the
     companion falls silent: the velocity it was sent leads its course by tau a_v / v, so
@@ -804,7 +812,10 @@ def test_the_abandon_gap_bounds_a_lagging_vehicle_that_turns_on_to_the_setpoint(
     end is the horizon). The closed form, told the flown a_v and the lag, is never above
     the least gap of that flight: ArduCopter's and PX4's profiles and others, turns still
     to come of up to 30 rad (a_max 3, tau 2 s, 0.2 m/s), where the courses spread over more
-    than a half turn."""
+    than a half turn. Told a gap of its caller's (``below``, what the shield's certificates
+    pass), it returns the least of the two, still never above the flight's, and never
+    below what it gives alone (it skips the sampled turn where its closed form from here
+    already clears ``below``)."""
     params = dataclasses.replace(PARAMS, response_lag_s=lag_s, accel_max_m_s2=accel_max)
     flown = flown_ratio * params.accel_max_m_s2
     at = {"north_m": np.array(north), "east_m": np.array(east), "course_rad": np.array(course)}
@@ -815,6 +826,14 @@ def test_the_abandon_gap_bounds_a_lagging_vehicle_that_turns_on_to_the_setpoint(
     best = flown_abandon_gap(zones, north, east, course, speed, flown, lag_s, profile.hold_s,
                              profile.brake_m_s2)  # fmt: skip
     assert got <= best + 1e-5
+    margin = params.shield_margin_m
+    told = margin + abandon_gap(
+        zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0, north, east, course,
+        0.0, flown, speed, lag_s, profile.turn_s, profile.hold_s, profile.brake_m_s2, margin,
+        accel_max, below - margin,
+    )  # fmt: skip
+    assert told <= min(below, best + 1e-5) + 1e-12
+    assert told >= min(below, got) - 1e-12
 
 
 def test_the_abandon_gap_bounds_a_slow_vehicle_whose_courses_spread_over_a_half_turn() -> None:

@@ -20,7 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ezcompanion.guidance._jit import jit, jit_inline
-from ezcompanion.guidance.lookahead import arc_end, point_gap, segment_gap
+from ezcompanion.guidance.lookahead import arc_end, point_gap_below, segment_gap
 from ezcompanion.guidance.params import GuidanceParams
 from ezcompanion.guidance.zones import ZoneSet
 
@@ -100,9 +100,11 @@ def abandon_gap(
     zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
     n: float, e: float, heading: float, accel: float, flown_accel: float, speed: float,
     lag_s: float, turn_s: float, hold_s: float, brake_m_s2: float, margin_m: float,
-    accel_max: float,
+    accel_max: float, below: float,
 ) -> float:
-    """Least gap of the path the autopilot flies if no setpoint follows this state: the turn
+    """The least of ``below`` (inf: none) and the gap of the path the autopilot flies if no
+    setpoint follows this state (a caller that takes the least with a gap of its own passes
+    it: the zones that cannot come below it are skipped, on one compare each): the turn
     goes on for ``turn_s`` (sampled at ``_ABANDON_ARC_SAMPLES`` points, each less
     its first-order dip), then straight for ``hold_s``, then braking at
     ``brake_m_s2`` to a stop (or, without braking, the hold's end is the horizon):
@@ -110,28 +112,28 @@ def abandon_gap(
     mu R ahead, in closed form (a braking vehicle's look-ahead shrinks to its reach disc).
     A velocity setpoint (``turn_s`` 0) flown with a lag ``lag_s`` leads the course by
     tau a_v / v (``flown_accel`` a_v): the vehicle turns on to it as its lag lets the turn
-    die out (``_lagged_straight``). inf where no profile is set."""
+    die out (``_lagged_straight``). ``below`` where no profile is set."""
     hold = hold_s
     if hold <= 0.0:
-        return math.inf
+        return below
     turn = turn_s
-    best = math.inf
+    best = below
     if turn > 0.0:
         step = turn / _ABANDON_ARC_SAMPLES
         amax = accel_max
         for j in range(_ABANDON_ARC_SAMPLES):
             nj, ej, hj = arc_end(n, e, heading, accel, speed, (j + 0.5) * step)
             # a midpoint sample: only the first-order dip holds (an infinite rate bound)
-            gap = point_gap(zn, ze, zmur, zreach, kz, nj, ej, math.cos(hj), math.sin(hj),
-                             margin_m, speed, amax, math.inf, step)  # fmt: skip
-            best = min(best, gap)
+            best = point_gap_below(zn, ze, zmur, zreach, kz, nj, ej, math.cos(hj),
+                                   math.sin(hj), margin_m, speed, amax, math.inf, step,
+                                   best)  # fmt: skip
     n1, e1, h1 = arc_end(n, e, heading, accel, speed, turn)
     brake = brake_m_s2
     stop = speed * hold + (0.5 * speed * speed / brake if brake > 0.0 else 0.0)
     lead = lag_s * flown_accel / speed if turn <= 0.0 and lag_s > 0.0 else 0.0
     if lead != 0.0:
-        return min(best, _lagged_straight(zn, ze, zmur, zreach, kz, n1, e1, h1, flown_accel,
-                                          speed, lag_s, hold, brake, margin_m))  # fmt: skip
+        return _lagged_straight(zn, ze, zmur, zreach, kz, n1, e1, h1, flown_accel, speed, lag_s,
+                                hold, brake, margin_m, best)  # fmt: skip
     return min(best, segment_gap(
         zn, ze, zmur, zreach, kz, n1, e1, math.cos(h1), math.sin(h1), speed * hold, stop,
         True, margin_m, 0.0,
@@ -148,9 +150,10 @@ def _heading_at(h: float, lead: float, lag_s: float, t: float) -> float:
 def _lagged_straight(
     zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
     n: float, e: float, h: float, flown_accel: float, speed: float, lag_s: float,
-    hold_s: float, brake_m_s2: float, margin_m: float,
+    hold_s: float, brake_m_s2: float, margin_m: float, below: float,
 ) -> float:
-    """Least gap of a lagging vehicle's abandon path, from below. Its setpoint leads its
+    """The least of ``below`` and the gap of a lagging vehicle's abandon path, from below
+    (zones that cannot come below it skipped, ``point_gap_below``). Its setpoint leads its
     course h by L = tau a_v / v, and as the lag lets the turn die out (a_v e^(-t / tau),
     the model's lag with the command gone) its course is h + L (1 - e^(-t / tau)):
     monotone, within [h, h + L].
@@ -179,15 +182,21 @@ def _lagged_straight(
     count = min(_LEAD_MAX_SAMPLES, math.ceil(_LEAD_SAMPLES_PER_LAG * sampled_t / lag_s - 1e-9))
     if count <= 0:
         sampled_t = 0.0  # nothing sampled: the segment bound starts here
-    best = math.inf
+    h_to = _heading_at(h, lead, lag_s, stop_t)
+    best = below
+    if count > 0 and _lagged_tail(zn, ze, zmur, zreach, kz, n, e, h, h_to, length, brake > 0.0,
+                                  margin_m, mur_max) >= below:  # fmt: skip
+        # the closed form from here on (T = 0) already clears ``below``: the sampled turn,
+        # which only sharpens a lower bound, cannot change the least with it
+        return below
     if count > 0:
         step = sampled_t / count
         a_abs = abs(flown_accel)
         rate = a_abs / lag_s
         hj = h
         for j in range(count + 1):
-            best = min(best, point_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(hj),
-                                       math.sin(hj), margin_m, speed, a_abs, rate, step))
+            best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, math.cos(hj), math.sin(hj),
+                                   margin_m, speed, a_abs, rate, step, best)  # fmt: skip
             if j == count:
                 break
             hm = _heading_at(h, lead, lag_s, (j + 0.5) * step)
@@ -197,20 +206,33 @@ def _lagged_straight(
             e += f * (math.sin(hj) + 4.0 * math.sin(hm) + math.sin(h1))
             hj = h1
     h_from = _heading_at(h, lead, lag_s, sampled_t)
-    h_to = _heading_at(h, lead, lag_s, stop_t)
+    rest = speed * (hold_s - sampled_t) + (0.5 * speed * speed / brake if brake > 0.0 else 0.0)
+    tail = _lagged_tail(zn, ze, zmur, zreach, kz, n, e, h_from, h_to, rest, brake > 0.0,
+                        margin_m, mur_max)  # fmt: skip
+    return min(best, tail)
+
+
+@jit_inline
+def _lagged_tail(
+    zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
+    n: float, e: float, h_from: float, h_to: float, rest_m: float, braked: bool,
+    margin_m: float, mur_max: float,
+) -> float:
+    """The closed form of ``_lagged_straight`` from p(T) = (n, e), its courses to come
+    monotone from ``h_from`` to ``h_to``, ``rest_m`` of path left (braking to a stop at its
+    end where ``braked``)."""
     half = 0.5 * abs(h_to - h_from)
     mid = 0.5 * (h_from + h_to)
-    rest = speed * (hold_s - sampled_t) + (0.5 * speed * speed / brake if brake > 0.0 else 0.0)
     if half > 0.5 * math.pi:  # courses spread over more than a half turn: within D + mu R
         disc = segment_gap(zn, ze, zmur, zreach, kz, n, e, 1.0, 0.0, 0.0, 0.0, True, margin_m,
                            0.0)  # fmt: skip
-        return min(best, disc - rest - mur_max)
+        return float(disc - rest_m - mur_max)
     # the look-ahead points' distance along h_m from p(T): at least mu R while at v, and
     # braking (s + mu R v' / v is concave in the distance braked) at least the stop's
-    nearest = rest * math.cos(half) if brake > 0.0 else math.inf
+    nearest = rest_m * math.cos(half) if braked else math.inf
     gap = segment_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(mid), math.sin(mid), nearest,
-                      rest, True, margin_m, 0.0)  # fmt: skip
-    return min(best, gap - rest * math.sin(half) - mur_max * half)
+                      rest_m, True, margin_m, 0.0)  # fmt: skip
+    return float(gap - rest_m * math.sin(half) - mur_max * half)
 
 
 @jit
@@ -235,5 +257,5 @@ def abandon_gap_batch(
     for k in range(n.shape[0]):
         out[k] = abandon_gap(
             zn, ze, zmur, zreach, 0 if shared else k, n[k], e[k], h[k], a[k], av[k], speed[k],
-            lag[k], profile[0], profile[1], profile[2], profile[3], profile[4],
+            lag[k], profile[0], profile[1], profile[2], profile[3], profile[4], math.inf,
         )

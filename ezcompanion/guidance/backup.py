@@ -165,12 +165,13 @@ def _av_rate_bound(s: FloatArray) -> float:
 @jit_inline
 def _abandon(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
-    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float,
+    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, below: float,
 ) -> float:
-    """The abandon gap of this state with the shield's profile (inf where none is set)."""
+    """The least of ``below`` and the abandon gap of this state with the shield's profile
+    (``below`` where none is set)."""
     return abandon_gap(
         zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, s[S_TAU], s[S_AB_TURN], s[S_AB_HOLD],
-        s[S_AB_BRAKE], s[S_EPS], s[S_AMAX],
+        s[S_AB_BRAKE], s[S_EPS], s[S_AMAX], below,
     )  # fmt: skip
 
 
@@ -431,7 +432,7 @@ def straight_certificate(
                 return certified
         best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h), eps,
                                speed, amax, rate, step, best)  # fmt: skip
-        best = min(best, _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed))
+        best = _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, best)
         if best < stop_below:
             return best
         if best <= certified:
@@ -486,7 +487,7 @@ def turn_certificate(
     for j in range(_MAX_SAMPLES):
         best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h), eps,
                                speed, amax, rate, step, best)  # fmt: skip
-        best = min(best, _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed))
+        best = _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, best)
         if best < stop_below:
             return best
         leave = -math.inf

@@ -17,7 +17,9 @@ Last, each law's tick as the service calls it (``GuidanceLoop.tick``, 3 and 300 
 each tick timed, median and p99), the same tick through the batch kernels as it ran before
 ``guidance.single`` (timed in turn with it), and its compiled parts timed alone on the same
 inputs in the same run: the one-vehicle kernel the tick calls, and the batch path's kernels
-(law, actuator, shield) summed (``--service``: only that).
+(law, actuator, shield) summed; then the backup law's tick at 3 zones as the service runs
+it beside ArduCopter and PX4: with the profile's response lag, and with the abandon check
+on as well (``--service``: only these).
 
     python bench/bench_law.py [--repeat N] [--service]
 """
@@ -25,6 +27,7 @@ inputs in the same run: the one-vehicle kernel the tick calls, and the batch pat
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import time
 from pathlib import Path
@@ -33,7 +36,7 @@ from typing import Any
 import numpy as np
 from _timing import per_call_s
 
-from ezcompanion.config import load_scenario
+from ezcompanion.config import Scenario, load_scenario
 from ezcompanion.guidance import (
     Defender,
     GuidanceController,
@@ -48,6 +51,7 @@ from ezcompanion.guidance.controller import _advance_batch
 from ezcompanion.guidance.law import O_AC, O_SIZE, Z_SIZE, evaluate_batch
 from ezcompanion.guidance.single import stack_zones, step_one
 from ezcompanion.records import TickCommand, VehicleState
+from ezcompanion.service.autopilots import ARDUCOPTER, PX4_COPTER
 from ezcompanion.service.loop import GuidanceLoop
 from ezcompanion.sim.engine import simulate
 
@@ -189,15 +193,7 @@ def service_tick(repeat: int) -> None:
         zones = scenario.zones() if count == 3 else zones_ring(count)
         target = Target(north_m=-5000.0, east_m=3000.0)  # far: never captured here
         size = 250 if count < 300 else 40
-        states = [
-            VehicleState(
-                north_m=8.0 - 0.832 * 0.02 * k, east_m=-4.0 + 0.555 * 0.02 * k, down_m=-20.0,
-                velocity_north_m_s=-0.832, velocity_east_m_s=0.555, yaw_rad=2.55,
-                position_time_s=0.02 * k, attitude_time_s=0.02 * k, position_source="local",
-                course_rate_rad_s=0.0,
-            )
-            for k in range(size)
-        ]  # fmt: skip
+        states = _straight_track(size)
         passes = max(2, repeat if count < 300 else repeat // 3)
         for law in (LawName.PAPER, LawName.ROBUST, LawName.BACKUP):
             loop = GuidanceLoop(scenario, law=law, loop_rate_hz=50.0, stale_after_s=1.0)
@@ -221,6 +217,45 @@ def service_tick(repeat: int) -> None:
                 f"{_us(parts)} {np.median(tick) / np.median(kernel):10.2f}x "
                 f"{np.median(tick) / np.median(parts):9.2f}x{vs}"
             )
+    profiles(scenario, ticks[(3, LawName.ROBUST)], passes=max(2, repeat))
+
+
+def profiles(scenario: Scenario, robust_s: float, passes: int) -> None:
+    """The backup law's tick at 3 zones as the service runs it beside each copter
+    autopilot: with the profile's response lag (the service always gives the law the lag),
+    and with the abandon check on too (``companion.abandon_check``: the profile's hold and
+    braking), beside the robust tick measured above."""
+    print("beside an autopilot (3 zones, backup): the profile's lag, then the abandon check too")
+    zones, target = scenario.zones(), Target(north_m=-5000.0, east_m=3000.0)
+    states = _straight_track(250)
+    for profile in (ARDUCOPTER, PX4_COPTER):
+        lagged = {"response_lag_s": profile.response_lag_s}
+        abandon = {**lagged, "abandon_turn_s": profile.abandon_turn_s,
+                   "abandon_hold_s": profile.abandon_straight_s,
+                   "abandon_brake_m_s2": profile.abandon_brake_m_s2}  # fmt: skip
+        for label, change in (("lag", lagged), ("lag, abandon check", abandon)):
+            params = dataclasses.replace(scenario.guidance, **change)
+            flown = dataclasses.replace(scenario, guidance=params)
+            loop = GuidanceLoop(flown, law=LawName.BACKUP, loop_rate_hz=50.0, stale_after_s=1.0)
+            loop.controller = GuidanceController(
+                zones=zones, target=target, params=params, law=LawName.BACKUP
+            )
+            (tick,) = _timed_ticks((loop,), states, passes)
+            print(f"  {f'{profile.name}, {label}':32s} {_us(tick)}   backup / robust "
+                  f"{np.median(tick) / robust_s:.1f}x")  # fmt: skip
+
+
+def _straight_track(size: int) -> list[VehicleState]:
+    """A straight flight past the paper's zones at 50 Hz, as measured states."""
+    return [
+        VehicleState(
+            north_m=8.0 - 0.832 * 0.02 * k, east_m=-4.0 + 0.555 * 0.02 * k, down_m=-20.0,
+            velocity_north_m_s=-0.832, velocity_east_m_s=0.555, yaw_rad=2.55,
+            position_time_s=0.02 * k, attitude_time_s=0.02 * k, position_source="local",
+            course_rate_rad_s=0.0,
+        )
+        for k in range(size)
+    ]  # fmt: skip
 
 
 def _us(times: list[float]) -> str:

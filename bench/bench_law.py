@@ -222,9 +222,9 @@ def service_tick(repeat: int) -> None:
 
 def profiles(scenario: Scenario, robust_s: float, passes: int) -> None:
     """The backup law's tick at 3 zones as the service runs it beside each copter
-    autopilot: with the profile's response lag (the service always gives the law the lag),
-    and with the abandon check on too (``companion.abandon_check``: the profile's hold and
-    braking), beside the robust tick measured above."""
+    autopilot: with the profile's response lag (which the service gives the law where the
+    scenario states none), and with the abandon check on too (``companion.abandon_check``:
+    the profile's hold and braking), beside the robust tick measured above."""
     print("beside an autopilot (3 zones, backup): the profile's lag, then the abandon check too")
     zones, target = scenario.zones(), Target(north_m=-5000.0, east_m=3000.0)
     states = _straight_track(250)

@@ -104,7 +104,8 @@ def abandon_gap(
 ) -> float:
     """The least of ``below`` (inf: none) and the gap of the path the autopilot flies if no
     setpoint follows this state (a caller that takes the least with a gap of its own passes
-    it: the zones that cannot come below it are skipped, on one compare each): the turn
+    it: at the sampled points the zones that cannot come below it are skipped, on one
+    compare each): the turn
     goes on for ``turn_s`` (sampled at ``_ABANDON_ARC_SAMPLES`` points, each less
     its first-order dip), then straight for ``hold_s``, then braking at
     ``brake_m_s2`` to a stop (or, without braking, the hold's end is the horizon):

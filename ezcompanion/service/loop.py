@@ -176,11 +176,12 @@ class GuidanceLoop:
         drift = state.ground_speed_m_s * self.scenario.guidance.response_lag_s
         at = {"north_m": state.north_m, "east_m": state.east_m, "speed_m_s": speed_m_s,
               "dt_s": dt_s, "drift_m": drift}  # fmt: skip
-        if start:
+        if start:  # a course just picked clears the same check by construction
             resting = state.ground_speed_m_s < _REST_SPEED_FRACTION * self.flown_speed_m_s
             self._rest_course_rad = (
                 controller.course_from_rest(yaw_rad=yaw_rad, **at) if resting else None
             )
+            return self._rest_course_rad
         kept = self._rest_course_rad
         if kept is not None and not controller.rest_line_clear(course_rad=kept, **at):
             kept = self._rest_course_rad = None

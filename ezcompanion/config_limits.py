@@ -21,6 +21,7 @@ guidance lengths (margin_m...)  within the frame (1e5 m)
 floors (gradient, range)       (0, 1] m                 numerical guards, never large
 response_lag_s                 [0, 60] s
 actuator_n                     even, [2, 32]            (a/a_max)^n underflows beyond
+shield_rungs                   integer, [0, 12]         the backup law's lower rungs (0: none)
 simulation dt_s                (0, 1] s
 simulation duration_s          (0, 86400] s, and at most 1e6 steps of dt_s
 origin alt_m                   [-1000, 100000] m
@@ -127,6 +128,7 @@ GUIDANCE_LIMITS: dict[str, dict[str, Bound]] = {
         "gradient_floor_m": FLOOR,
         "range_floor_m": FLOOR,
         "actuator_n": Bound(2, 32),
+        "shield_rungs": Bound(0, 12),
     },
     "SimulationSettings": {
         "dt_s": Bound(0.0, 1.0, low_open=True),

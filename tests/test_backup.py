@@ -478,6 +478,96 @@ def test_a_held_backup_that_enters_a_zone_gives_way_to_the_least_entry() -> None
     assert held == bk.BACKUP_STRAIGHT
 
 
+def best_value(
+    zones: ZoneSet, params: GuidanceParams, start: tuple[float, float, float, float], dt: float,
+    speed: float = 1.0,
+) -> tuple[float, float, float]:
+    """(the best backup's value at ``start``, the lower rungs' turns included where no
+    backup is certified; the best of the single backups; theta), as the shield computes
+    them."""
+    s = settings_for(params)
+    z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
+    theta = bk.acceptance_level_m(s, zones.mu_range_m, zones.reach_m, 0, speed, dt)
+    certs = np.full(bk.N_POLICIES, -math.inf)
+    n, e, h, a = start
+    bk.backup_certificates(s, *z, n, e, h, a, a, speed, dt, math.inf, certs)
+    single = float(certs[: bk.BACKUP_RUNG0].max())
+    if single < theta:
+        bk.rung_certificates(s, *z, n, e, h, a, a, speed, dt, theta,
+                             float(certs[bk.BACKUP_STRAIGHT]), single, certs)  # fmt: skip
+    return float(certs.max()), single, theta
+
+
+@st.composite
+def close_starts(draw: st.DrawFn) -> Engagement:
+    """An engagement that starts next to a zone, heading into it: where no backup may be
+    certified (the user's start: the vehicle is already short of the margin, or will be)."""
+    zones, params, _start, nominal, dt = draw(engagements())
+    i = draw(st.integers(0, zones.north_m.shape[1] - 1))
+    bearing = draw(st.floats(-math.pi, math.pi))
+    out = float(zones.reach_m[0, i] + zones.mu_range_m[0, i]) + draw(st.floats(0.0, 0.6))
+    north = float(zones.north_m[0, i]) + out * math.cos(bearing)
+    east = float(zones.east_m[0, i]) + out * math.sin(bearing)
+    course = bearing + math.pi + draw(st.floats(-0.8, 0.8))  # towards the defender, roughly
+    start = (north, east, course, draw(st.floats(-0.5, 0.5)))
+    return zones, params, start, nominal, dt
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.filter_too_much,
+                                                                  HealthCheck.too_slow])
+@given(case=close_starts())
+def test_with_no_backup_certified_the_flight_comes_no_nearer_than_the_best_value(
+    case: Engagement,
+) -> None:
+    """The degraded claim (docs/guidance.md, step 5): where no backup is certified at the
+    start, the shield holds the backup of best value, the lower rungs' turns included (a
+    turn of rung r looks for its exit at l = theta - r eps / 2, leaves at l - theta, and is
+    worth min(its certificate, l - theta)), and the flight's gap less the margin never
+    comes below that
+    value less theta (and the tail's widening, 0.01 m): it changes backup only for one
+    better by 2 theta, and the nominal only flies where a backup is certified again. So a
+    value >= theta - margin keeps the vehicle outside every zone."""
+    zones, params, start, nominal, dt = case
+    value, single, theta = best_value(zones, params, start, dt)
+    assume(value < theta)  # nothing certified: outside the first claim
+    assume(value > single + 2.0 * theta)  # and a lower rung is the best backup
+    least, _weights, _, _ = run_shield(zones, params, start, nominal, dt)
+    assert least - params.shield_margin_m >= value - theta - 0.01
+
+
+def test_a_start_short_of_the_margin_turns_away_at_a_lower_rung_and_stays_out() -> None:
+    """Run 1038 of the seed-2027 campaign (lag 1.2 s, 0.83 m/s, from rest): no backup is
+    certified (the best -0.985 m), yet the oracle's witness (hard left 0.5 s, then
+    straight) stays out by 0.020 m. The left turn leaves for STRAIGHT only where STRAIGHT is
+    certified by the margin, so it turned past that exit and circled into the next zone:
+    the law entered by 0.49 m. Its lower rungs' turns leave earlier: the best is worth
+    -0.065 m, within the margin, and the vehicle stays outside every zone (by 0.040 m)."""
+    zones = ZoneSet.from_defenders(
+        [
+            Defender(north_m=-1.3195680393314846, east_m=5.534616036341758,
+                     range_m=1.5002957978565168, capture_radius_m=0.4371053896534097,
+                     speed_ratio=0.5198571251510644),
+            Defender(north_m=1.736662063866131, east_m=7.691103907871941,
+                     range_m=1.0600545863961397, capture_radius_m=0.2671589993968428,
+                     speed_ratio=0.787804922798859),
+            Defender(north_m=-0.5179727901061719, east_m=10.383352407505647,
+                     range_m=1.681834138418342, capture_radius_m=0.39423758989173807,
+                     speed_ratio=0.723422168157357),
+            Defender(north_m=-6.16324322755931, east_m=6.151405657841613,
+                     range_m=1.5278106552554882, capture_radius_m=0.23737465925601636,
+                     speed_ratio=0.7887331350839727),
+        ]
+    )  # fmt: skip
+    params = dataclasses.replace(PARAMS, response_lag_s=1.2)
+    start = (0.7322610551188573, 7.652939285281809, 3.481106286174934, 0.0)
+    speed, dt = 0.8255385788000575, 0.02
+    value, _single, theta = best_value(zones, params, start, dt, speed)
+    assert value < theta - params.shield_margin_m / 2.0  # no rung-0 or rung-1 backup
+    assert value >= theta - params.shield_margin_m  # but one without the margin
+    least, _w, _c, _a = run_shield(zones, params, start, [0.0] * 600, dt, speed)
+    assert least >= 0.0  # outside every zone (the single backups alone: -0.49 m)
+
+
 def test_along_its_own_flow_a_backup_certificate_never_drops_by_more_than_theta() -> None:
     """The tail property, sampled: fly a certified backup step by step under its own rule
     (a turn becomes STRAIGHT at the first step where STRAIGHT is certified). STRAIGHT's

@@ -55,6 +55,12 @@ assumptions named; tests/test_backup.py checks each step):
    stays within theta and the tail's widening of where it started). The claim then no
    longer speaks for it, so it gives way to the backup whose flight enters least, better
    by 2 theta, certified or not, rather than circle inside the zone.
+   *Short of the margin* (no backup certified: the user's start, or outside the model) a
+   turn that leaves only where STRAIGHT is certified by the full margin may turn past the
+   exit that would have kept it out; there the turns are tried again leaving at lower
+   levels (``rung_certificates``), each worth min(its certificate, its exit level - theta),
+   and the best value is held: the flight then comes no nearer than that value less theta
+   (and the widening), so a value >= theta - margin keeps it outside every zone.
 
 Pure and compiled like the law (:mod:`ezcompanion.guidance.law`); one vehicle per call of
 ``shield_one``, any batch through ``shield_batch``.
@@ -77,14 +83,19 @@ from ezcompanion.guidance.lookahead import (
     point_gap_below,
     segment_gap,
 )
-from ezcompanion.guidance.params import GuidanceParams
+from ezcompanion.guidance.params import SHIELD_RUNGS_MAX, GuidanceParams
 
 __all__ = [
     "BACKUP_LEFT",
     "BACKUP_NONE",
     "BACKUP_RIGHT",
+    "BACKUP_RUNG0",
     "BACKUP_STRAIGHT",
+    "N_POLICIES",
+    "exit_level_m",
     "pack_shield",
+    "rung_certificates",
+    "turn_side",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -92,6 +103,14 @@ FloatArray = npt.NDArray[np.float64]
 # Backup policies (``GuidanceStep`` reports them; -1: none, the law is not shielded)
 BACKUP_NONE, BACKUP_LEFT, BACKUP_RIGHT, BACKUP_STRAIGHT = -1, 0, 1, 2
 _N_BACKUPS = 3
+# Where no backup is certified, the turns are tried again leaving for STRAIGHT at lower
+# levels, theta - r RUNG_STEP eps for r = 1 .. ``shield_rungs`` (eps the margin; 6 by
+# default: down to theta - 3 eps): policy BACKUP_RUNG0 + 2 (r - 1) + side, side 0 for LEFT,
+# 1 for RIGHT (``exit_level_m``). (12 rungs of eps / 4 kept one more of 265 oracle-safe
+# uncertified starts out, at twice the cost: a 12 ms step at worst against 6.6 ms.)
+RUNG_STEP = 0.5
+BACKUP_RUNG0 = _N_BACKUPS
+N_POLICIES = _N_BACKUPS + 2 * SHIELD_RUNGS_MAX
 
 # Packed shield settings (private to the kernels)
 (
@@ -108,8 +127,9 @@ _N_BACKUPS = 3
     S_AB_BRAKE,
     S_FALL,
     S_ROBUST,
+    S_RUNGS,
     S_SIZE,
-) = range(14)
+) = range(15)
 
 # The sampled part of a flow ends when the heading change still to come is bounded by this
 # (it is then accounted for in closed form), or after this many samples; a turn looks for
@@ -150,6 +170,7 @@ def pack_shield(params: GuidanceParams, **abandon: float) -> FloatArray:
     p[S_AB_BRAKE] = abandon.get("abandon_brake_m_s2", params.abandon_brake_m_s2)
     p[S_FALL] = params.shield_weight_fall_1_s
     p[S_ROBUST] = params.shield_robust_m
+    p[S_RUNGS] = params.shield_rungs
     return p
 
 
@@ -466,13 +487,17 @@ def turn_certificate(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, policy: int, n: float, e: float, h: float, a: float, av: float, speed: float,
     dt: float, exit_now: float, exit_level: float, stop_below: float, enough: float,
+    every_step: bool,
 ) -> float:
     """Certificate of LEFT or RIGHT: turn hard (a_c = -+C held) until a sample where the
     STRAIGHT certificate is at least ``exit_level``, then STRAIGHT; with no such sample
     before it has turned half a revolution after converging, the circle for ever (closed form).
     Samples every ``sample_ticks`` control steps ``dt``, so every sample is a control step
     (``exit_now``: the STRAIGHT certificate at this state, already known); each exit's
-    certificate is exact up to ``enough`` (the caller needs no more)."""  # fmt: skip
+    certificate is exact up to ``enough`` (the caller needs no more). With ``every_step``
+    the exit is looked for at every control step, not only at the samples: the first one
+    the flown rule can take, wherever the samples fall (each sample's dip covers the steps
+    up to the next)."""  # fmt: skip
     amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
     cmd = s[S_CMD] * (-1.0 if policy == BACKUP_LEFT else 1.0)
     ticks = sample_ticks(s, speed, dt)
@@ -508,10 +533,20 @@ def turn_certificate(
             break
         converged = converged or _residual_turn_rad(s, a, av, limit, speed) < _RESIDUAL_RAD
         h0 = h
-        for _ in range(ticks):
+        for tick in range(ticks):
             a1 = advance_one(a, cmd, dt, amax, p1, int(s[S_N]), s[S_CMD])
             n, e, h, av = _fly(n, e, h, a, a1, av, speed, tau, dt)
             a = a1
+            if every_step and tick < ticks - 1:
+                upper, blocker = _straight_upper_bound(
+                    s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, blocker, screen_level
+                )
+                if upper >= screen_level:
+                    leave = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av,
+                                                 speed, dt, exit_level,
+                                                 max(exit_level, enough))  # fmt: skip
+                    if leave >= exit_level:
+                        return min(best, leave)
         if converged:
             turned += abs(h - h0)
     # the circle: the residual heading change after the sampled part, about a*
@@ -560,8 +595,68 @@ def backup_certificates(
             out[policy] = -math.inf
             continue
         out[policy] = turn_certificate(s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av,
-                                       speed, dt, straight, theta, best, enough)  # fmt: skip
+                                       speed, dt, straight, theta, best, enough,
+                                       False)  # fmt: skip
         best = max(best, out[policy])
+
+
+@jit_inline
+def turn_side(policy: int) -> int:
+    """BACKUP_LEFT or BACKUP_RIGHT for a turn policy of any rung, BACKUP_STRAIGHT for
+    STRAIGHT."""
+    if policy < _N_BACKUPS:
+        return policy
+    return (policy - BACKUP_RUNG0) % 2
+
+
+@jit_inline
+def rung_level_m(s: FloatArray, rung: int, theta: float) -> float:
+    """The level a turn of rung r looks for its exit at: theta - r RUNG_STEP eps."""
+    return float(theta - RUNG_STEP * rung * s[S_EPS])
+
+
+@jit_inline
+def exit_level_m(s: FloatArray, policy: int, theta: float) -> float:
+    """The level STRAIGHT's certificate must reach for a turn policy, flown, to leave for
+    it: theta for LEFT and RIGHT; for a turn of rung r theta below its certificate's exit
+    level, so that the exit its certificate counts on is taken though the certificate
+    recomputed there falls short of that level (by less than theta)."""
+    if policy < _N_BACKUPS:
+        return theta
+    return rung_level_m(s, (policy - BACKUP_RUNG0) // 2 + 1, theta) - theta
+
+
+@jit
+def rung_certificates(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
+    theta: float, straight: float, below: float, out: FloatArray,
+) -> None:
+    """The values of the lower rungs' turns into ``out[BACKUP_RUNG0:]`` (``shield_rungs``
+    of them each way), for a state where no backup is certified (``straight``: STRAIGHT's
+    certificate there).
+
+    A turn of rung r turns hard until the first control step where STRAIGHT's certificate
+    is at least l = theta - r RUNG_STEP eps (looked for at every step, so that where the
+    samples fall does not move it), then flies STRAIGHT: its certificate c
+    (``turn_certificate`` with that exit level) bounds its flight from below. Flown by its
+    rule it leaves at the first control step where STRAIGHT is at least l - theta
+    (``exit_level_m``): there or earlier, at an exit only known to be >= l - theta; so the
+    flight stays at least min(c, l - theta) from every zone less the margin, and that is
+    the value. It is below theta: a rung
+    never counts as certified, it only says how far short of the margin the vehicle may
+    come (>= -eps: outside every zone). A turn that hardly beats ``below`` (the best so
+    far) stops early, below it."""  # fmt: skip
+    best = below
+    for rung in range(1, int(s[S_RUNGS]) + 1):
+        level = rung_level_m(s, rung, theta)
+        for side in (BACKUP_LEFT, BACKUP_RIGHT):
+            value = min(level - theta, turn_certificate(
+                s, zn, ze, zmur, zreach, kz, side, n, e, h, a, av, speed, dt, straight,
+                level, best, math.inf, True,
+            ))  # fmt: skip
+            out[BACKUP_RUNG0 + 2 * (rung - 1) + side] = value
+            best = max(best, value)
 
 
 # ---------------------------------------------------------------------------------------
@@ -581,9 +676,10 @@ def _fly_step(
     sub = dt / steps
     amax, p1, nn, cmd = s[S_AMAX], s[S_P1], int(s[S_N]), s[S_CMD]
     rate = _av_rate_bound(s)
-    if policy == BACKUP_LEFT:
+    side = turn_side(policy) if policy >= 0 else policy
+    if side == BACKUP_LEFT:
         command = -cmd
-    elif policy == BACKUP_RIGHT:
+    elif side == BACKUP_RIGHT:
         command = cmd
     best = math.inf
     a_end = _advance_straighten(a, dt, amax, p1, nn, cmd) if policy == BACKUP_STRAIGHT else (
@@ -612,7 +708,7 @@ def _ahead(
                                          av, speed, fly_s)  # fmt: skip
     backup_certificates(s, zn, ze, zmur, zreach, kz, n1, e1, h1, a1, av1, speed, dt, enough,
                         certs)  # fmt: skip
-    which = int(np.argmax(certs))
+    which = int(np.argmax(certs[:_N_BACKUPS]))
     return min(certs[which], gap), which, a1, av1
 
 
@@ -620,9 +716,10 @@ def _ahead(
 def backup_command(s: FloatArray, policy: int, a: float) -> float:
     """The actuator command of a backup policy at actuator state ``a``."""
     cmd = s[S_CMD]
-    if policy == BACKUP_LEFT:
+    side = turn_side(policy)
+    if side == BACKUP_LEFT:
         return float(-cmd)
-    if policy == BACKUP_RIGHT:
+    if side == BACKUP_RIGHT:
         return float(cmd)
     return float(-cmd / s[S_AMAX] * a)
 
@@ -643,7 +740,7 @@ def shield_one(
     # certificate counts on (with no lag a_v = a, the actuator state: nothing measured)
     accept = theta + (s[S_ROBUST] if s[S_TAU] > 0.0 else 0.0)
     band = s[S_BAND]
-    certs = np.empty(_N_BACKUPS)
+    certs = np.full(N_POLICIES, -math.inf)
     # held for one step, the nominal must keep a certificate >= accept to be flown at all;
     # where it does, the nominal held for the preview sets its weight (where it does not,
     # the weight is 0 whatever the preview says, so the preview is not flown)
@@ -669,13 +766,21 @@ def shield_one(
         # not: the least predicted entry
         backup_certificates(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, math.inf,
                             certs)  # fmt: skip
+        single = max(certs[BACKUP_LEFT], certs[BACKUP_RIGHT], certs[BACKUP_STRAIGHT])
+        if single < theta and s[S_RUNGS] > 0.0:
+            # none certified: the lower rungs' turns, for the least shortfall
+            rung_certificates(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, theta,
+                              certs[BACKUP_STRAIGHT], single, certs)  # fmt: skip
+        else:
+            certs[BACKUP_RUNG0:] = -math.inf
         best = int(np.argmax(certs))
-        if not 0 <= current < _N_BACKUPS or (
+        if not 0 <= current < N_POLICIES or (
             (certs[best] >= theta or certs[current] < -s[S_EPS])
             and certs[best] > certs[current] + 2.0 * theta
         ):
             current = best
-        if current != BACKUP_STRAIGHT and certs[BACKUP_STRAIGHT] >= theta:
+        if current != BACKUP_STRAIGHT and certs[BACKUP_STRAIGHT] >= exit_level_m(s, current,
+                                                                                theta):
             current = BACKUP_STRAIGHT  # a turn backup leaves here (its own rule)
         cert_now = certs[current]
         accepted = False

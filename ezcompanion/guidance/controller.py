@@ -108,10 +108,12 @@ class GuidanceStep:
     ``accel_lat_m_s2`` is the actuator state at the start of the step (what the law saw),
     ``accel_lat_cmd_m_s2`` the state at its end: the lateral acceleration to fly next.
     ``mode`` holds ``GuidanceMode`` values. The backup law's shield adds ``backup`` (the
-    executed backup policy, ``ezcompanion.guidance.backup.BACKUP_*``; -1 for other laws),
+    executed backup policy, ``ezcompanion.guidance.backup.BACKUP_*``, or a turn of a
+    lower rung, ``BACKUP_RUNG0`` and above, where none is certified; -1 for other laws),
     ``shield_weight`` (the nominal command's share: 1 unshielded, 0 the backup alone),
-    ``certificate_m`` (the executed backup's certificate at the step's start: >= 0 means
-    a bounded manoeuvre keeps the vehicle out of every zone for ever, under the model) and
+    ``certificate_m`` (the executed backup's certificate at the step's start, a lower
+    rung's value: >= 0 means a bounded manoeuvre keeps the vehicle out of every zone for
+    ever, under the model) and
     ``certificate_ahead_m`` (the best one step ahead on the nominal); NaN for other laws.
     """
 

@@ -33,7 +33,9 @@ from enum import StrEnum
 
 from ezcompanion.errors import ConfigError
 
-__all__ = ["BlendMode", "Defender", "GuidanceParams", "LawName", "Target"]
+__all__ = ["SHIELD_RUNGS_MAX", "BlendMode", "Defender", "GuidanceParams", "LawName", "Target"]
+
+SHIELD_RUNGS_MAX = 12  # the backup law's lower rungs at most (``shield_rungs``)
 
 
 class LawName(StrEnum):
@@ -155,6 +157,9 @@ class GuidanceParams:
     # certificate this far above the acceptance level: a reserve for the measured a_v's
     # error (0: none)
     shield_robust_m: float = 0.03
+    # ... and where no backup is certified, its turns are tried again leaving for STRAIGHT
+    # at this many lower levels, theta - r eps / 2 (0: none; docs/guidance.md, step 5)
+    shield_rungs: int = 6
     # ... and its nominal's own safety share fades out within this many turn radii
     # (v^2 / a_max) beyond one of the target, so that it arrives (0: no fade)
     safety_fade_turn_radii: float = 4.0
@@ -208,6 +213,13 @@ class GuidanceParams:
             )  # fmt: skip
         _non_negative("shield_weight_fall_1_s", self.shield_weight_fall_1_s)
         _non_negative("shield_robust_m", self.shield_robust_m)
+        rungs = self.shield_rungs
+        if not isinstance(rungs, int) or isinstance(rungs, bool) or not (
+            0 <= rungs <= SHIELD_RUNGS_MAX
+        ):
+            raise ConfigError(
+                "shield_rungs", rungs, f"must be an integer in [0, {SHIELD_RUNGS_MAX}]"
+            )
         _non_negative("safety_fade_turn_radii", self.safety_fade_turn_radii)
         _finite("prediction_step_ratio", self.prediction_step_ratio)
         if not 0.0 < self.prediction_step_ratio <= 0.25:

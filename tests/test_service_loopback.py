@@ -246,6 +246,35 @@ def test_each_setpoint_profile_flies_the_stub(
     assert intercepted and min(clearance) > 0.0 and accel <= 1.0
 
 
+def test_a_vehicle_its_autopilots_failsafe_took_is_not_asked_back(tmp_path: Path) -> None:
+    """Once guidance has started, the guided mode is not asked for again: a vehicle out of
+    it is the pilot's, a ground station's or the autopilot's own failsafe's. Against PX4
+    SITL the companion asked for OFFBOARD every second after PX4's offboard-loss failsafe
+    had taken the vehicle to RTL, and PX4 went back to OFFBOARD. Here telemetry freezes,
+    the companion stops its setpoints, the loopback PX4 fails safe to POSCTL after 1 s, and
+    when telemetry returns the vehicle stays where its failsafe put it, and no more
+    setpoints reach it."""
+    config = scenario_file(
+        tmp_path,
+        sitl_stub={
+            "faults": {"freeze_start_s": 1.5, "freeze_duration_s": 3.0, "freeze_mode": "stale"}
+        },
+    )
+    flight = fly(config, tmp_path, profile="px4", start_mode="AUTO.LOITER", max_time_s=12.0)
+    modes = flight.events.of_kind(EventKind.MODE)
+    engaged = flight.events.of_kind(EventKind.ENGAGED)[0].time_s
+    asked = [e.time_s for e in modes if "requested" in e.data]
+    assert asked and max(asked) <= engaged  # asked for OFFBOARD before guidance only
+    left = [e for e in modes if "left_for" in e.data]
+    assert [e.data["left_for"] for e in left] == ["POSCTL"], [e.message for e in modes]
+    assert [e.data["mode"] for e in modes if "mode" in e.data][-1] == "POSCTL"  # it stayed
+    assert not flight.outcome.intercepted
+    # nor is it streamed to (PX4: "Velocity setpoint ignored: not in OFFBOARD"), but for
+    # the one stop the pause sends (a forged mode change would otherwise fly on)
+    after = flight.events.of_kind(EventKind.STATUSTEXT)
+    assert len([e for e in after if e.time_s >= left[0].time_s and "ignored" in e.message]) <= 1
+
+
 def test_telemetry_freeze_stops_the_setpoints_and_the_autopilot_timeout_takes_over(
     tmp_path: Path,
 ) -> None:

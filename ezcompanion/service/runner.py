@@ -328,7 +328,12 @@ class CompanionService:
             return
         if now + EPSILON_S >= self._next_heartbeat_s or self._beacon_due():
             self._send_heartbeat(now)
-        self.session.periodic(now, waiting=self.phase is Phase.WAITING)
+        # the guided mode is asked for only until guidance first starts: after that a vehicle
+        # out of it was taken by the pilot, a ground station or the autopilot's own failsafe,
+        # whose word is the last (docs/field.md, "You keep the last word")
+        self.session.periodic(
+            now, waiting=self.phase is Phase.WAITING and self._engaged_at_s is None
+        )
         self._follow_session(now)
         self._check_distrust(now)
         if self._ticking() and self.schedule.is_due(now):
@@ -430,6 +435,13 @@ class CompanionService:
             self.engagement.pause(now, brake=True)
             self.schedule.reset()
             self.phase = Phase.WAITING
+            guided = session.guided_mode[0] if session.guided_mode else "the guided mode"
+            self.events.emit(
+                EventKind.MODE, now, f"the vehicle left {guided} for {session.mode}: guidance "
+                f"paused; {guided} is not asked for again (the mode is the pilot's or the "
+                f"autopilot's: put it back in {guided} to resume)",
+                left_for=session.mode,
+            )  # fmt: skip
 
     def _assume_abandon(self, now: float) -> None:
         """Give the law the path the vehicle flies if this setpoint is its last: the
@@ -515,13 +527,16 @@ class CompanionService:
 
     def _ticking(self) -> bool:
         """Guiding, or (PX4 only) streaming ahead of OFFBOARD, which PX4 refuses to enter
-        until setpoints arrive; it ignores them until then."""
+        until setpoints arrive; it ignores them until then. Only before guidance first
+        starts, as the mode is asked for: a vehicle taken out of OFFBOARD after that is not
+        streamed to either."""
         if self.phase is Phase.GUIDING:
             return True
         session = self._session
         mode = session.guided_mode if session is not None else None
         return (
             self.phase is Phase.WAITING
+            and self._engaged_at_s is None
             and self.settings.engage
             and mode is not None
             and mode[0] == "OFFBOARD"

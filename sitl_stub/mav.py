@@ -108,9 +108,36 @@ def roll_of_quaternion(q: list[float]) -> float:
     return math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
 
 
-def ned_to_lla(north_m: float, east_m: float, down_m: float, origin: tuple[float, float, float]
-               ) -> tuple[float, float, float]:
-    """Local NED of ``origin = (lat_deg, lon_deg, alt_m)`` to WGS84 (pymap3d)."""
+# ArduPilot's flat earth: metres per degree (LATLON_TO_M, libraries/AP_Math/definitions.h)
+_ARDUPILOT_M_PER_DEG = 111318.84502145034
+_PX4_RADIUS_M = 6371000.0  # CONSTANTS_RADIUS_OF_EARTH (src/lib/geo/geo.h)
+
+
+def ned_to_lla(north_m: float, east_m: float, down_m: float, origin: tuple[float, float, float],
+               autopilot: int | None = None) -> tuple[float, float, float]:
+    """Local NED of ``origin = (lat_deg, lon_deg, alt_m)`` to latitude, longitude and
+    altitude as ``autopilot`` (a MAV_AUTOPILOT) makes its global position from its local one:
+    ArduPilot offsets the origin on a flat earth (``Location::offset_latlng``: north over
+    LATLON_TO_M, east also over the cosine of the mean latitude), PX4 reprojects on a sphere
+    of 6,371 km (``MapProjection::reproject``, azimuthal equidistant); any other, WGS84
+    (pymap3d). Measured on ArduPlane 4.5.1 SITL: its flat earth reproduces its local position
+    from its global one to 0.01 m where WGS84 is 0.8 m off at 241 m north."""
+    lat0, lon0, alt0 = origin
+    if autopilot == mav.MAV_AUTOPILOT_ARDUPILOTMEGA:
+        dlat = north_m / _ARDUPILOT_M_PER_DEG
+        scale = max(math.cos(math.radians(lat0 + 0.5 * dlat)), 0.01)
+        lon = lon0 + east_m / (_ARDUPILOT_M_PER_DEG * scale)
+        return lat0 + dlat, (lon + 180.0) % 360.0 - 180.0, alt0 - down_m
+    if autopilot == mav.MAV_AUTOPILOT_PX4:
+        x, y = north_m / _PX4_RADIUS_M, east_m / _PX4_RADIUS_M
+        c = math.hypot(x, y)
+        if c == 0.0:
+            return lat0, lon0, alt0 - down_m
+        ref_lat, ref_lon = math.radians(lat0), math.radians(lon0)
+        lat = math.asin(math.cos(c) * math.sin(ref_lat) + x * math.sin(c) * math.cos(ref_lat) / c)
+        lon = ref_lon + math.atan2(y * math.sin(c), c * math.cos(ref_lat) * math.cos(c)
+                                   - x * math.sin(ref_lat) * math.sin(c))
+        return math.degrees(lat), math.degrees(lon), alt0 - down_m
     lat, lon, alt = pymap3d.ned2geodetic(north_m, east_m, down_m, *origin)
     return float(lat), float(lon), float(alt)
 

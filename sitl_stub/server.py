@@ -103,7 +103,8 @@ class SitlStub:
             self._link.enable_signing(key)
         self._scheduler = StreamScheduler(s.streams, self.config.max_stream_rate_hz)
         self.autopilot = Autopilot(self.config, self._scheduler, self._link.mav)
-        self._encoder = TelemetryEncoder(self._link, self.config.origin, self._wind)
+        self._encoder = TelemetryEncoder(self._link, self.config.origin, self._wind,
+                                         self.autopilot.spec.autopilot)
         self._truth = TruthWriter(self._truth_out, self._wind) if self._truth_out else None
         if self._truth is not None:
             self._truth.write(self._state, self.autopilot.mode.name, self.autopilot.armed)

@@ -122,10 +122,11 @@ class StreamScheduler:
 class TelemetryEncoder:
     """Builds telemetry messages from a vehicle state (local NED of the scenario's origin)."""
 
-    def __init__(self, link: StubLink, origin: GeoOrigin, wind: Wind) -> None:
+    def __init__(self, link: StubLink, origin: GeoOrigin, wind: Wind, autopilot: int) -> None:
         self._mav = link.mav
         self._origin = origin
         self._wind = wind
+        self._autopilot = autopilot  # whose map from local to global positions
 
     def encode(self, name: str, state: VehicleState, stamp_s: float,
                offset_north_m: float = 0.0, offset_east_m: float = 0.0) -> Message:
@@ -137,7 +138,8 @@ class TelemetryEncoder:
         height, climb = state.height_m, state.climb_m_s
         if name == "GLOBAL_POSITION_INT":
             o = self._origin
-            lat, lon, alt = ned_to_lla(north, east, -height, (o.lat_deg, o.lon_deg, o.alt_m))
+            lat, lon, alt = ned_to_lla(north, east, -height, (o.lat_deg, o.lon_deg, o.alt_m),
+                                       self._autopilot)
             return self._mav.global_position_int_encode(
                 t_ms, e7(lat), e7(lon), mm(alt), mm(height), cm_s(vn), cm_s(ve), cm_s(-climb),
                 hdg_cdeg(state.heading_rad),

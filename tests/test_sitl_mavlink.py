@@ -59,8 +59,9 @@ def test_default_streams_and_consistent_units(gcs: Gcs) -> None:
         if g.time_boot_ms not in local or g.time_boot_ms not in att:
             continue
         lp, a = local[g.time_boot_ms], att[g.time_boot_ms]
-        north, east, down = wire.geodetic_to_ned(
-            g.lat * 1e-7, g.lon * 1e-7, g.alt / 1000.0,
+        # the copter is an ArduPilot: its global position is its local one on a flat earth
+        north, east, down = wire.geodetic_to_local(
+            wire.Projection.ARDUPILOT, g.lat * 1e-7, g.lon * 1e-7, g.alt / 1000.0,
             origin_lat_deg=-35.363261, origin_lon_deg=149.165230, origin_alt_m=584.0)
         assert north == pytest.approx(lp.x, abs=0.02)
         assert east == pytest.approx(lp.y, abs=0.02)

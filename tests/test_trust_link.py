@@ -11,6 +11,7 @@ does not show.
 from __future__ import annotations
 
 import contextlib
+import math
 import socket
 import threading
 import time
@@ -25,6 +26,7 @@ from test_service_loopback import CONFIG, SPEEDUP, Flight, fly
 from ezcompanion.config import load_scenario
 from ezcompanion.service.demo import free_udp_port, judge_truth
 from ezcompanion.service.events import EventKind
+from ezcompanion.wire.projection import ARDUPILOT_M_PER_DEG
 
 SCENARIO = CONFIG / "paper_scenario1.yaml"
 # 20 Hz telemetry and ticks: a third of the CPU of 50 Hz, for a machine shared by others
@@ -122,7 +124,8 @@ def test_an_origin_change_during_the_engagement_is_a_failsafe_never_applied(
         assert wait_for(service, EventKind.ENGAGED)
         time.sleep(1.0 / SPEEDUP)
         o = load_scenario(SCENARIO).origin
-        east_deg = 1.0 / 111_320.0 / 0.815  # 1 m east at about -35 deg latitude
+        # 1 m east as the vehicle (an ArduPilot) maps it: on its flat earth
+        east_deg = 1.0 / ARDUPILOT_M_PER_DEG / math.cos(math.radians(o.lat_deg))
         msg = M.MAVLink_gps_global_origin_message(
             round(o.lat_deg * 1e7), round((o.lon_deg + east_deg) * 1e7), round(o.alt_m * 1000), 0)
         relay.inject(frame(mav, msg))
@@ -132,7 +135,9 @@ def test_an_origin_change_during_the_engagement_is_a_failsafe_never_applied(
     assert flight.service.vehicle_telemetry is not None
     assert flight.service.vehicle_telemetry.origin_known
     alarms = [e for e in flight.events.of_kind(EventKind.ALARM) if e.data["cause"] == "origin"]
-    assert alarms and "moved by 1.0" in alarms[0].message
+    assert alarms  # 1 m, to the 1e-7 degree of the wire (1.1 cm)
+    moved = float(alarms[0].message.split("moved by ")[1].split(" m")[0])
+    assert moved == pytest.approx(1.0, abs=0.012)
     failsafes = flight.events.of_kind(EventKind.FAILSAFE)
     assert failsafes and failsafes[0].data["reason"] == "origin"
     assert [e.data["cause"] for e in flight.events.of_kind(EventKind.ABORTED)] == ["origin"]

@@ -58,6 +58,7 @@ from ezcompanion.wire import (
     Frame,
     Link,
     Message,
+    Projection,
     guided_mode,
     is_fixed_wing,
     mavlink,
@@ -278,6 +279,8 @@ class VehicleSession(StreamRequests):
         if first:
             self.heartbeat = msg
             self.fixed_wing = is_fixed_wing(msg)
+            # its global positions are compared with its local ones as it maps them
+            self.telemetry.projection = Projection.of_autopilot(int(msg.autopilot))
             names = autopilot_profile(msg).parameter_names
             if names and self.settings.abandon_check:
                 self.parameters.ask(names, source, now)

@@ -1,8 +1,9 @@
 """Telemetry to one typed vehicle state in SI units, each position earning its trust.
 
 Decodes LOCAL_POSITION_NED (preferred), GLOBAL_POSITION_INT (through the scenario's
-geodetic origin, converted by pymap3d in :mod:`ezcompanion.wire`), ATTITUDE, VFR_HUD and
-GPS_GLOBAL_ORIGIN. Wire units are converted only through ``ezcompanion.wire``.
+geodetic origin, mapped as the vehicle's autopilot maps its own: ArduPilot's flat earth,
+PX4's azimuthal equidistant sphere, WGS84 for others, :mod:`ezcompanion.wire.projection`),
+ATTITUDE, VFR_HUD and GPS_GLOBAL_ORIGIN. Wire units are converted only through ``ezcompanion.wire``.
 
 What the law uses, and why:
 
@@ -58,9 +59,10 @@ from ezcompanion.frames import wrap_pi
 from ezcompanion.records import Hold, VehicleState
 from ezcompanion.wire import (
     Message,
+    Projection,
     cm_s_to_m_s,
     e7_to_deg,
-    geodetic_to_ned,
+    geodetic_to_local,
     is_finite,
     mm_to_m,
     ms_to_s,
@@ -134,7 +136,10 @@ class TelemetryState:
     """Accumulates telemetry; :meth:`update` takes each message, :meth:`snapshot` reads.
 
     ``origin`` is the geodetic position of the scenario's local NED origin;
-    ``accel_bound_m_s2`` the most the vehicle can accelerate (the gate's bound).
+    ``accel_bound_m_s2`` the most the vehicle can accelerate (the gate's bound);
+    ``projection`` how the vehicle's autopilot maps its global positions to its local frame,
+    which global positions are mapped by to be compared with local ones (set when the
+    vehicle is found: ``ezcompanion.wire.projection``).
     """
 
     origin: GeoOrigin
@@ -142,6 +147,7 @@ class TelemetryState:
     # vehicle tells it (GPS_GLOBAL_ORIGIN); global positions wait for it
     adopt_origin: bool = False
     accel_bound_m_s2: float = 2.0
+    projection: Projection = Projection.WGS84
     gate_position_m: float = 0.5
     stale_after_s: float = 0.25  # local positions older than this: every global one counts
     cross_check_period_s: float = CROSS_CHECK_PERIOD_S
@@ -280,7 +286,8 @@ class TelemetryState:
         lat, lon = e7_to_deg(msg.lat), e7_to_deg(msg.lon)
         if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0) or (msg.lat, msg.lon) == (0, 0):
             return False
-        north, east, down = geodetic_to_ned(
+        north, east, down = geodetic_to_local(
+            self.projection,
             lat,
             lon,
             mm_to_m(msg.alt),
@@ -320,7 +327,8 @@ class TelemetryState:
         if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
             return False
         # Where the vehicle's local origin lies in the scenario's local frame.
-        offset = geodetic_to_ned(
+        offset = geodetic_to_local(
+            self.projection,
             lat,
             lon,
             mm_to_m(msg.altitude),

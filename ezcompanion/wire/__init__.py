@@ -8,7 +8,8 @@ companion sends. The rest of the project works in SI units and radians (see
 :mod:`ezcompanion.frames`) and converts only here.
 
 One idea per module: ``dialect`` (pymavlink loaded as MAVLink 2, ``ardupilotmega``),
-``units`` (wire units, geodetic conversions), ``signing``, ``link`` (the connection) and
+``units`` (wire units, geodetic conversions on WGS84), ``projection`` (each autopilot's own
+map from latitude/longitude to its local frame), ``signing``, ``link`` (the connection) and
 ``commands`` (setpoints and modes). Importing the package sets ``MAVLINK20=1`` for the
 process before pymavlink is loaded, as pymavlink chooses its wire version from that
 variable.
@@ -31,6 +32,7 @@ from ezcompanion.wire.commands import (
 )
 from ezcompanion.wire.dialect import Address, Message, mavlink, mavutil
 from ezcompanion.wire.link import URL_SCHEMES, Frame, Link, LinkStats, is_serial_device, open_link
+from ezcompanion.wire.projection import Projection, geodetic_to_local
 from ezcompanion.wire.signing import signing_key_from_hex, signing_key_from_passphrase
 from ezcompanion.wire.units import (
     cdeg_to_rad,
@@ -63,12 +65,14 @@ __all__ = [
     "Link",
     "LinkStats",
     "Message",
+    "Projection",
     "cdeg_to_rad",
     "cm_s_to_m_s",
     "course_command",
     "deg_to_e7",
     "e7_to_deg",
     "euler_from_quaternion",
+    "geodetic_to_local",
     "geodetic_to_ned",
     "guided_mode",
     "heading_cdeg",

@@ -643,13 +643,16 @@ def rung_certificates(
     rule it leaves at the first control step where STRAIGHT is at least l - theta
     (``exit_level_m``): there or earlier, at an exit only known to be >= l - theta; so the
     flight stays at least min(c, l - theta) from every zone less the margin, and that is
-    the value. It is below theta: a rung
-    never counts as certified, it only says how far short of the margin the vehicle may
-    come (>= -eps: outside every zone). A turn that hardly beats ``below`` (the best so
-    far) stops early, below it."""  # fmt: skip
+    the value. It is below theta: a rung never counts as certified, it only says how far
+    short of the margin the vehicle may come (>= -eps: outside every zone). A turn that
+    cannot beat ``below`` (the best so far) stops early, below it, and the rungs stop where
+    their cap, l - theta, is no more than the best: their slots keep what the caller put
+    there (-inf in the shield: a held turn of such a rung gives way to the better one)."""
     best = below
     for rung in range(1, int(s[S_RUNGS]) + 1):
         level = rung_level_m(s, rung, theta)
+        if best >= level - theta:
+            break  # this rung and every lower one are worth at most their cap, below the best
         for side in (BACKUP_LEFT, BACKUP_RIGHT):
             value = min(level - theta, turn_certificate(
                 s, zn, ze, zmur, zreach, kz, side, n, e, h, a, av, speed, dt, straight,

@@ -106,8 +106,9 @@ _N_BACKUPS = 3
 # Where no backup is certified, the turns are tried again leaving for STRAIGHT at lower
 # levels, theta - r RUNG_STEP eps for r = 1 .. ``shield_rungs`` (eps the margin; 6 by
 # default: down to theta - 3 eps): policy BACKUP_RUNG0 + 2 (r - 1) + side, side 0 for LEFT,
-# 1 for RIGHT (``exit_level_m``). (12 rungs of eps / 4 kept one more of 265 oracle-safe
-# uncertified starts out, at twice the cost: a 12 ms step at worst against 6.6 ms.)
+# 1 for RIGHT (``exit_level_m``). (On a first version, which left at the rung's level itself,
+# 12 rungs of eps / 4 kept one more of 265 oracle-safe uncertified starts out, at twice the
+# cost.)
 RUNG_STEP = 0.5
 BACKUP_RUNG0 = _N_BACKUPS
 N_POLICIES = _N_BACKUPS + 2 * SHIELD_RUNGS_MAX
@@ -482,6 +483,25 @@ def _straight_upper_bound(
                      below)  # fmt: skip
 
 
+@jit_inline
+def _exit_here(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
+    blocker: int, screen_level: float, exit_level: float, enough: float,
+) -> tuple[float, int]:
+    """STRAIGHT's certificate here, as a turn's exit (exact up to ``enough``), and the zone
+    that stopped the screen; -inf where the screen, an upper bound on it, is below
+    ``screen_level`` (any subset of the exits keeps the argument; the screen drops only
+    exits whose certificate is surely below the level)."""
+    upper, blocker = _straight_upper_bound(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
+                                           dt, blocker, screen_level)  # fmt: skip
+    if upper < screen_level:
+        return -math.inf, blocker
+    leave = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
+                                 exit_level, max(exit_level, enough))  # fmt: skip
+    return leave, blocker
+
+
 @jit
 def turn_certificate(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
@@ -519,14 +539,8 @@ def turn_certificate(
         if j == 0:
             leave = exit_now
         elif j % _EXIT_EVERY == 0:
-            upper, blocker = _straight_upper_bound(s, zn, ze, zmur, zreach, kz, n, e, h, a, av,
-                                                   speed, dt, blocker, screen_level)  # fmt: skip
-            if upper >= screen_level:
-                # (any subset of the samples keeps the argument; the screen drops only exits
-                # whose certificate is surely below the level)
-                leave = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av,
-                                             speed, dt, exit_level,
-                                             max(exit_level, enough))  # fmt: skip
+            leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
+                                        blocker, screen_level, exit_level, enough)  # fmt: skip
         if leave >= exit_level:
             return min(best, leave)
         if converged and turned >= _EXIT_SEARCH_RAD:
@@ -538,15 +552,11 @@ def turn_certificate(
             n, e, h, av = _fly(n, e, h, a, a1, av, speed, tau, dt)
             a = a1
             if every_step and tick < ticks - 1:
-                upper, blocker = _straight_upper_bound(
-                    s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, blocker, screen_level
-                )
-                if upper >= screen_level:
-                    leave = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av,
-                                                 speed, dt, exit_level,
-                                                 max(exit_level, enough))  # fmt: skip
-                    if leave >= exit_level:
-                        return min(best, leave)
+                leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
+                                            dt, blocker, screen_level, exit_level,
+                                            enough)  # fmt: skip
+                if leave >= exit_level:
+                    return min(best, leave)
         if converged:
             turned += abs(h - h0)
     # the circle: the residual heading change after the sampled part, about a*
@@ -774,8 +784,6 @@ def shield_one(
             # none certified: the lower rungs' turns, for the least shortfall
             rung_certificates(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, theta,
                               certs[BACKUP_STRAIGHT], single, certs)  # fmt: skip
-        else:
-            certs[BACKUP_RUNG0:] = -math.inf
         best = int(np.argmax(certs))
         if not 0 <= current < N_POLICIES or (
             (certs[best] >= theta or certs[current] < -s[S_EPS])

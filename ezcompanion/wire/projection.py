@@ -25,9 +25,8 @@ from __future__ import annotations
 import math
 from enum import StrEnum
 
-import pymap3d
-
 from ezcompanion.wire.dialect import mavlink
+from ezcompanion.wire.units import geodetic_to_ned
 
 __all__ = ["ARDUPILOT_M_PER_DEG", "PX4_EARTH_RADIUS_M", "Projection", "geodetic_to_local"]
 
@@ -65,10 +64,10 @@ def geodetic_to_local(
     """A global position to ``(north_m, east_m, down_m)`` about an origin, as the
     autopilot of ``projection`` maps it."""
     if projection is Projection.WGS84:
-        north, east, down = pymap3d.geodetic2ned(
-            lat_deg, lon_deg, alt_m, origin_lat_deg, origin_lon_deg, origin_alt_m
-        )
-        return float(north), float(east), float(down)
+        return geodetic_to_ned(
+            lat_deg, lon_deg, alt_m, origin_lat_deg=origin_lat_deg,
+            origin_lon_deg=origin_lon_deg, origin_alt_m=origin_alt_m,
+        )  # fmt: skip
     down = origin_alt_m - alt_m
     dlon = (lon_deg - origin_lon_deg + 180.0) % 360.0 - 180.0
     if projection is Projection.ARDUPILOT:

@@ -13,7 +13,7 @@ Layout (every key optional; see ``docs/sitl_stub.md``)::
       model: measured               # measured | ideal (docs/sitl_stub.md)
       velocity_lag_s: null          # null: the model's (measured: copter 0.6, PX4 1.2)
       speed_ratio: null             # flown / commanded (measured: PX4 0.8, plane 23.4/22)
-      heading_accel_ratio: null     # plane course command (measured 0.54)
+      heading_accel_ratio: null     # plane course command (measured 0.73)
       vz_hold_drift_m_s: null       # climb under vz = 0 without a height (PX4 0.1)
       failsafe_descent_m_s: null    # after PX4's offboard-loss failsafe (0.8)
       response_time_s: 0.0          # first-order lag of lateral acceleration, 0 = ideal

@@ -134,7 +134,7 @@ _PLANE = ProfileSpec(
     accepts_velocity=False, accepts_course_command=True, ardupilot_attitude_mask=True,
     supports_data_streams=True, can_hover=False,
     velocity_lag_s=0.0, shaping_accel_m_s2=None, tracking_lag_s=0.0,
-    speed_ratio=23.4 / 22.0, heading_accel_ratio=0.54, vz_hold_drift_m_s=0.0,
+    speed_ratio=23.4 / 22.0, heading_accel_ratio=0.73, vz_hold_drift_m_s=0.0,
     failsafe_descent_m_s=0.0, acks_twice=False, firmware=(4, 7, 0, 0),
 )
 

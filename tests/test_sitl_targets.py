@@ -2,8 +2,9 @@
 
 Both paper scenarios on the ArduCopter profile (0.5 s course lag) and on the PX4 profile
 (1.2 s velocity lag, 0.8 of the commanded speed, vz = 0 drifting), and scenario 1 scaled to
-a 22 m/s plane with a_max 4.5 m/s^2 (ArduPlane flying 0.54x of the course command's turn,
-23.4 m/s over ground): each must intercept with true clearance > 0 by the stub's truth.
+a 22 m/s plane with a_max 4.5 m/s^2 (ArduPlane flying 0.73x of the course command's turn
+where its roll clip binds, 23.4 m/s over ground): each must intercept with true clearance
+> 0 by the stub's truth.
 
 The stub runs as its own process (``python -m sitl_stub``, its measured defaults); the
 companion in a thread of this one, both in lockstep (``--lockstep``): the vehicle's time
@@ -123,5 +124,5 @@ def test_scenario_1_scaled_to_a_22_m_s_plane(tmp_path: Path) -> None:
     rows = guided_rows(flown.truth, "GUIDED")
     speeds = [float(r["speed_m_s"]) for r in rows[len(rows) // 2:]]
     assert min(speeds) == pytest.approx(23.4, rel=1e-3)  # the plane's own speed, not 22
-    # the outer loop turned the plane as hard as the law asked: without it, at most 0.54x
+    # the outer loop turned the plane as hard as the law asked: without it, at most 0.73x
     assert accel > 0.6

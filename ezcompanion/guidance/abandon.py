@@ -54,8 +54,9 @@ ABANDON_PROFILES = {
     "arducopter": AbandonProfile(turn_s=0.0, hold_s=3.6, brake_m_s2=2.5),
     # COM_OF_LOSS_T 1.0 s (measured 1.04-1.15 s), then POSCTL brakes at MPC_ACC_HOR 3 m/s^2
     "px4": AbandonProfile(turn_s=0.0, hold_s=1.15, brake_m_s2=3.0),
-    # the last course for ever: the course 2 s of turning ahead, then a 10 s horizon
-    "arduplane": AbandonProfile(turn_s=2.0, hold_s=8.0, brake_m_s2=0.0),
+    # the last course for ever: the course up to 6 s of turning ahead (service/setpoints.py,
+    # course_lead_rad), then the rest of a 10 s horizon
+    "arduplane": AbandonProfile(turn_s=6.0, hold_s=4.0, brake_m_s2=0.0),
 }
 
 

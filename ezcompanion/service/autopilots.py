@@ -21,9 +21,11 @@ Figures (issues 9 and 11, ArduCopter and ArduPlane V4.7.0-dev SITL, PX4 v1.16 SI
   told the full 1.2 s and a 30-degree lead clamp entered two zones (scenario 2).
 - ArduPlane: a course command is flown until another comes, for ever; the law takes a
   configured horizon of 10 s (long enough for a person to take over), the turn to the
-  commanded course (2 s ahead) first. Roll response lag about 1 s. It turns at only 0.54x
-  (a_max 4.5 m/s^2) to 0.62x (9.81) of what a GUIDED_CHANGE_HEADING limit asks
-  (``turn_ratio`` 0.54: the course setpoints' outer loop starts from 1 / 0.54).
+  commanded course (2 to 6 s of turning ahead) first. Roll response lag 0.4 to 0.6 s. With
+  the roll clip of a GUIDED_CHANGE_HEADING limit binding, it turns at 0.72 to 0.73 of what
+  the limit asks (4.5.1 SITL; ``turn_ratio`` 0.73: the course setpoints' outer loop starts
+  from 1 / 0.73); with the course only 2 s ahead the clip did not bind and it turned at
+  0.51 to 0.54 of it.
 
 The law uses ``response_lag_s`` unless the scenario states its own. With
 ``companion.abandon_check`` (off by default) or a scenario's own ``abandon_hold_s``, every
@@ -102,7 +104,7 @@ PX4_COPTER = AutopilotProfile(
     abandon_brake_m_s2=3.0, timeout_parameter="COM_OF_LOSS_T", timeout_overshoot_s=0.15,
 )  # fmt: skip
 ARDUPLANE = AutopilotProfile(
-    name="ArduPlane", response_lag_s=1.0, turn_ratio=0.54, abandon_turn_s=2.0, abandon_hold_s=8.0,
+    name="ArduPlane", response_lag_s=1.0, turn_ratio=0.73, abandon_turn_s=6.0, abandon_hold_s=4.0,
     abandon_brake_m_s2=0.0,
 )  # fmt: skip
 

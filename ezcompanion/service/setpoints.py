@@ -34,11 +34,13 @@ Streamed every tick, well inside the autopilots' timeouts (ArduCopter 3 s, PX4 1
 
 ``course`` (ArduPlane): MAV_CMD_GUIDED_CHANGE_HEADING as COMMAND_INT, p1 = 0 (course over
 ground), p2 = the course to turn to, p3 = the lateral-acceleration limit. We ask for the
-course 2 s of turning ahead (course + omega * 2 s, at most 90 degrees ahead so the wrapped
-course never turns the plane the wrong way) with the limit |a| times a gain, so the autopilot
-turns at the rate we want (its own heading loop would turn harder; the limit binds) and flies
-straight when a = 0. ArduPlane flies only 0.54x of the limit, so the gain starts at 1 / 0.54
-and an outer loop trims it on the measured course rate (CourseSetpoints). It has no
+course at least 2 s of turning ahead, and further (up to 6 s, at most 90 degrees, so the
+wrapped course never turns the plane the wrong way) where ArduPlane's heading loop, which
+demands a roll of GUIDED_P times the course error, would otherwise stay below the roll clip
+of the limit (``course_lead_rad``), with the limit |a| times a gain: so the clip binds and
+the autopilot turns at the rate we want, and it flies straight when a = 0. ArduPlane flies
+0.73x of the limit (4.5.1 SITL), so the gain starts at 1 / 0.73 and an outer loop trims it
+on the measured course rate (CourseSetpoints). It has no
 timeout on ArduPlane and is acknowledged each time, so it is
 sent at most 10 times a second. (The roll-only SET_ATTITUDE_TARGET alternative is held for
 only 3 s and turned slower than its bank angle predicts, so it would need its own outer loop
@@ -71,6 +73,14 @@ _MAX_COMPENSATED_LEAD_RAD = math.radians(85.0)
 _HEIGHT_GAIN_1_S = 1.0  # height hold: vz = gain * error ...
 _MAX_CLIMB_M_S = 1.0  # ... within this
 _COURSE_HORIZON_S = 2.0
+# ArduPlane's GUIDED heading loop demands a roll of GUIDED_P (default 5000 cd/rad: 50 degrees
+# per radian) times the course error and only clips it at atan(p3 / g): the course is asked
+# far enough ahead that the demand passes the clip by this factor, so that p3 sets the turn,
+# but never more than _COURSE_HORIZON_MAX_S of turning ahead (the abandon path's turn)
+_GUIDED_P_RAD_PER_RAD = math.radians(50.0)
+_CLIP_MARGIN = 1.5
+_COURSE_HORIZON_MAX_S = 6.0
+_GRAVITY_M_S2 = 9.80665
 _COURSE_MIN_INTERVAL_S = 0.1
 _MIN_ACCEL_LIMIT_RATIO = 0.02  # of a_max: the smallest limit we hand the autopilot
 _MAX_COURSE_LEAD_RAD = 0.5 * math.pi  # a course command never more than 90 degrees ahead
@@ -210,13 +220,12 @@ class VelocitySetpoints(Setpoints):
 class CourseSetpoints(Setpoints):
     """ArduPlane's course command, with an outer loop on the measured turn.
 
-    The course asked for is the measured course plus omega * 2 s (at most 90 degrees ahead,
-    so that wrapping it to [0, 360) never turns the plane the wrong way), and the
-    lateral-acceleration limit p3 is |a| times a gain. ArduPlane flies only 0.54x (a_max
-    4.5 m/s^2) to 0.62x (9.81) of p3 (issue 11: roll to 75% of its limit, and 72% of the
-    turn that roll predicts), so the gain starts at 1 / ``turn_ratio`` (the profile's) and
-    an integrator trims it on the measured course rate until the flown |a| = v |course
-    rate| follows the law's |a|.
+    The course asked for is the measured course plus ``course_lead_rad`` (omega * 2 s, or
+    further where ArduPlane's heading loop would leave its roll below the clip of p3), and
+    the lateral-acceleration limit p3 is |a| times a gain. ArduPlane turns at 0.72 to 0.73
+    of what p3's roll clip predicts (4.5.1 SITL: 72% of g tan(roll) / v), so the gain starts
+    at 1 / ``turn_ratio`` (the profile's) and an integrator trims it on the measured course
+    rate until the flown |a| = v |course rate| follows the law's |a|.
     """
 
     kind = SetpointKind.COURSE
@@ -255,12 +264,10 @@ class CourseSetpoints(Setpoints):
         if command.time_s - self._last_sent_s < _COURSE_MIN_INTERVAL_S:
             return None
         self._last_sent_s = command.time_s
-        lead = command.turn_rate_rad_s * _COURSE_HORIZON_S
-        lead = min(max(lead, -_MAX_COURSE_LEAD_RAD), _MAX_COURSE_LEAD_RAD)
-        course = command.course_rad + lead
         floor = _MIN_ACCEL_LIMIT_RATIO * self.accel_max_m_s2
         limit = min(max(abs(command.accel_lat_m_s2) * self._gain, floor),
                     _GAIN_MAX * self.accel_max_m_s2)
+        course = command.course_rad + course_lead_rad(command.turn_rate_rad_s, limit)
         return course_command(
             self.link,
             target_system=self.target_system,
@@ -268,6 +275,24 @@ class CourseSetpoints(Setpoints):
             course_rad=float(wrap_pi(course)),
             accel_limit_m_s2=limit,
         )
+
+
+def course_lead_rad(turn_rate_rad_s: float, limit_m_s2: float) -> float:
+    """How far ahead of the course to ask ArduPlane to turn to: the course
+    ``_COURSE_HORIZON_S`` of turning ahead, or more where that leaves the roll its heading
+    loop demands (GUIDED_P times the error) below the clip of the limit ``p3``
+    (atan(p3 / g)), so that the clip, not the error, sets the turn; at most
+    ``_COURSE_HORIZON_MAX_S`` of turning and 90 degrees ahead (so that the wrapped course
+    never turns the plane the wrong way). Measured on ArduPlane 4.5.1 SITL: with the course
+    2 s ahead the roll stayed below the clip and the plane turned at 0.51 to 0.54 of the
+    commanded a whatever p3 was; with the clip binding, at 0.72 to 0.73 of p3."""
+    rate = abs(turn_rate_rad_s)
+    if rate == 0.0:
+        return 0.0
+    clip = _CLIP_MARGIN * math.atan(limit_m_s2 / _GRAVITY_M_S2) / _GUIDED_P_RAD_PER_RAD
+    lead = min(max(rate * _COURSE_HORIZON_S, clip), rate * _COURSE_HORIZON_MAX_S,
+               _MAX_COURSE_LEAD_RAD)  # fmt: skip
+    return math.copysign(lead, turn_rate_rad_s)
 
 
 def make_setpoints(

@@ -526,7 +526,7 @@ def test_with_no_backup_certified_the_flight_comes_no_nearer_than_the_best_value
     comes below that
     value less theta (and the tail's widening, 0.01 m): it changes backup only for one
     better by 2 theta, and the nominal only flies where a backup is certified again. So a
-    value >= theta - margin keeps the vehicle outside every zone."""
+    value of theta - margin plus the widening keeps the vehicle outside every zone."""
     zones, params, start, nominal, dt = case
     value, single, theta = best_value(zones, params, start, dt)
     assume(value < theta)  # nothing certified: outside the first claim

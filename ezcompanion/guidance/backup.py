@@ -60,7 +60,8 @@ assumptions named; tests/test_backup.py checks each step):
    exit that would have kept it out; there the turns are tried again leaving at lower
    levels (``rung_certificates``), each worth min(its certificate, its exit level - theta),
    and the best value is held: the flight then comes no nearer than that value less theta
-   (and the widening), so a value >= theta - margin keeps it outside every zone.
+   (and the widening), so a value of theta - margin plus the widening keeps it outside
+   every zone.
 
 Pure and compiled like the law (:mod:`ezcompanion.guidance.law`); one vehicle per call of
 ``shield_one``, any batch through ``shield_batch``.
@@ -654,7 +655,7 @@ def rung_certificates(
     (``exit_level_m``): there or earlier, at an exit only known to be >= l - theta; so the
     flight stays at least min(c, l - theta) from every zone less the margin, and that is
     the value. It is below theta: a rung never counts as certified, it only says how far
-    short of the margin the vehicle may come (>= -eps: outside every zone). A turn that
+    short of the margin the vehicle may come. A turn that
     cannot beat ``below`` (the best so far) stops early, below it, and the rungs stop where
     their cap, l - theta, is no more than the best: their slots keep what the caller put
     there (-inf in the shield: a held turn of such a rung gives way to the better one)."""

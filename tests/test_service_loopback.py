@@ -278,14 +278,16 @@ def test_a_vehicle_its_autopilots_failsafe_took_is_not_asked_back(tmp_path: Path
     had taken the vehicle to RTL, and PX4 went back to OFFBOARD. Here telemetry freezes,
     the companion stops its setpoints, the loopback PX4 fails safe to POSCTL after 1 s, and
     when telemetry returns the vehicle stays where its failsafe put it, and no more
-    setpoints reach it."""
+    setpoints reach it. In lockstep, so that the freeze (vehicle time) comes after the
+    engagement (OFFBOARD about 2 s in) however loaded the machine."""
     config = scenario_file(
         tmp_path,
         sitl_stub={
-            "faults": {"freeze_start_s": 1.5, "freeze_duration_s": 3.0, "freeze_mode": "stale"}
+            "faults": {"freeze_start_s": 4.0, "freeze_duration_s": 4.0, "freeze_mode": "stale"}
         },
     )
-    flight = fly(config, tmp_path, profile="px4", start_mode="AUTO.LOITER", max_time_s=12.0)
+    flight = fly(config, tmp_path, profile="px4", start_mode="AUTO.LOITER", max_time_s=15.0,
+                 lockstep=True)  # fmt: skip
     modes = flight.events.of_kind(EventKind.MODE)
     engaged = flight.events.of_kind(EventKind.ENGAGED)[0].time_s
     asked = [e.time_s for e in modes if "requested" in e.data]

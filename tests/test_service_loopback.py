@@ -415,3 +415,18 @@ def test_the_tlog_reads_back_with_pymavlink(tmp_path: Path) -> None:
     assert seen.get("LOCAL_POSITION_NED", 0) > 50 and seen.get("HEARTBEAT", 0) > 5
     sent = flight.outcome.setpoints_sent + flight.outcome.brakes_sent
     assert seen.get("SET_POSITION_TARGET_LOCAL_NED", 0) == sent
+
+
+def test_at_the_end_a_vehicle_still_guided_is_told_to_stop(tmp_path: Path) -> None:
+    """The intercept ends guidance with a zero-velocity setpoint, before the end mode:
+    against PX4 SITL the last setpoint at an intercept was a full 1 m/s one, which an
+    autopilot without an end mode flies on (PX4 1 s, ArduCopter 3 s)."""
+    from pymavlink import mavutil
+
+    flight = fly(CONFIG / "paper_scenario1.yaml", tmp_path, lockstep=True, on_exit="none")
+    assert flight.outcome.intercepted and flight.outcome.brakes_sent == 1
+    log = mavutil.mavlink_connection(str(tmp_path / "companion.tlog"))
+    last = None
+    while (msg := log.recv_match(type="SET_POSITION_TARGET_LOCAL_NED")) is not None:
+        last = msg
+    assert last is not None and (last.vx, last.vy, last.vz) == (0.0, 0.0, 0.0)

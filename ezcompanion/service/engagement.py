@@ -181,8 +181,11 @@ class Engagement:
                 self.brakes_sent += 1
 
     def finish(self, now: float) -> EngagementOutcome:
-        """The end: stop, report the outcome (``ended`` event) and keep it."""
-        self.pause(now)
+        """The end: stop, report the outcome (``ended`` event) and keep it. A vehicle still
+        being guided is told to stop where it is (the airframes that can): the last
+        velocity sent was a full one, which PX4 flew for its 1 s and ArduCopter for its 3 s
+        (GUID_TIMEOUT) past the target, unless an end mode took it first."""
+        self.pause(now, brake=self._guiding_since_s is not None)
         intercepted = self.loop.captured
         self.outcome = EngagementOutcome(
             intercepted=intercepted,

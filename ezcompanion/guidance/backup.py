@@ -108,8 +108,8 @@ _N_BACKUPS = 3
 # levels, theta - r RUNG_STEP eps for r = 1 .. ``shield_rungs`` (eps the margin; 6 by
 # default: down to theta - 3 eps): policy BACKUP_RUNG0 + 2 (r - 1) + side, side 0 for LEFT,
 # 1 for RIGHT (``exit_level_m``). (On a first version, which left at the rung's level itself,
-# 12 rungs of eps / 4 kept one more of 265 oracle-safe uncertified starts out, at twice the
-# cost.)
+# 12 rungs of eps / 4 kept one of the five oracle-safe starts it let in out, at about twice
+# the cost of a step.)
 RUNG_STEP = 0.5
 BACKUP_RUNG0 = _N_BACKUPS
 N_POLICIES = _N_BACKUPS + 2 * SHIELD_RUNGS_MAX
@@ -690,7 +690,7 @@ def _fly_step(
     sub = dt / steps
     amax, p1, nn, cmd = s[S_AMAX], s[S_P1], int(s[S_N]), s[S_CMD]
     rate = _av_rate_bound(s)
-    side = turn_side(policy) if policy >= 0 else policy
+    side = turn_side(policy)  # -1 (the command held) stays -1
     if side == BACKUP_LEFT:
         command = -cmd
     elif side == BACKUP_RIGHT:
@@ -781,7 +781,7 @@ def shield_one(
         backup_certificates(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, math.inf,
                             certs)  # fmt: skip
         single = max(certs[BACKUP_LEFT], certs[BACKUP_RIGHT], certs[BACKUP_STRAIGHT])
-        if single < theta and s[S_RUNGS] > 0.0:
+        if single < theta:
             # none certified: the lower rungs' turns, for the least shortfall
             rung_certificates(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, theta,
                               certs[BACKUP_STRAIGHT], single, certs)  # fmt: skip

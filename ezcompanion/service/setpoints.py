@@ -53,7 +53,7 @@ import math
 from abc import ABC, abstractmethod
 
 from ezcompanion.frames import wrap_pi
-from ezcompanion.service.autopilots import AutopilotProfile
+from ezcompanion.service.autopilots import ARDUPLANE, AutopilotProfile
 from ezcompanion.service.loop import TickCommand
 from ezcompanion.service.settings import SetpointKind
 from ezcompanion.wire import Link, Message, course_command, s_to_ms, velocity_setpoint
@@ -76,10 +76,10 @@ _COURSE_HORIZON_S = 2.0
 # ArduPlane's GUIDED heading loop demands a roll of GUIDED_P (default 5000 cd/rad: 50 degrees
 # per radian) times the course error and only clips it at atan(p3 / g): the course is asked
 # far enough ahead that the demand passes the clip by this factor, so that p3 sets the turn,
-# but never more than _COURSE_HORIZON_MAX_S of turning ahead (the abandon path's turn)
+# but never more of turning ahead than the abandon path's turn (ArduPlane's profile)
 _GUIDED_P_RAD_PER_RAD = math.radians(50.0)
 _CLIP_MARGIN = 1.5
-_COURSE_HORIZON_MAX_S = 6.0
+_COURSE_HORIZON_MAX_S = ARDUPLANE.abandon_turn_s
 _GRAVITY_M_S2 = 9.80665
 _COURSE_MIN_INTERVAL_S = 0.1
 _MIN_ACCEL_LIMIT_RATIO = 0.02  # of a_max: the smallest limit we hand the autopilot

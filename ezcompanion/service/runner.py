@@ -70,6 +70,9 @@ __all__ = ["CompanionService", "EngagementOutcome", "Phase"]
 
 _HEARTBEAT_PERIOD_S = 1.0
 _WAKE_S = 0.1  # clock seconds: the session's checks run at least this often
+# frames read at once, at most, before what fell due (beside a real autopilot): a socket that
+# filled while the companion was busy is taken whole before a tick
+_DRAIN_READS = 512
 
 
 class Phase(StrEnum):
@@ -305,14 +308,20 @@ class CompanionService:
         self._answer_lockstep(clock.now_s())  # in lockstep the vehicle's time goes on
 
     def _take_frames(self, link: Link, started_s: float, max_time_s: float | None) -> bool:
-        """Every frame the link holds, and after each whatever fell due, at that frame's
-        time (in lockstep the engagement is then a function of the frames alone). False
-        when the time is up or the service is done."""
-        for frame in link.recv():
-            now = self._on_frame(frame)
+        """Every frame the link holds. In lockstep, after each whatever fell due, at that
+        frame's time (the engagement is then a function of the frames alone). Otherwise
+        the frames read at once are all taken first, and what fell due, a tick among it,
+        is done after them (by the caller): a tick uses the newest sample the link held,
+        not one that waited in the socket while the companion was busy (a sample's age
+        runs from its stamp, :mod:`ezcompanion.service.state`: that one would fail closed
+        for nothing). False when the time is up or the service is done."""
+        each = self._lockstep is not None
+        for frame in link.recv(_DRAIN_READS):
+            now = self._on_frame(frame, tick=each)
             if self._time_up(now, started_s, max_time_s):
                 return False
-            self._due_work(now)
+            if each:
+                self._due_work(now)
             if self._done:
                 return False
         return True
@@ -373,8 +382,9 @@ class CompanionService:
         if answer is not None:
             self._send(answer)
 
-    def _on_frame(self, frame: Frame) -> float:
-        """Take one frame; the clock time it was taken at."""
+    def _on_frame(self, frame: Frame, tick: bool = True) -> float:
+        """Take one frame (a new position ticks at once if ``tick`` and one is due); the
+        clock time it was taken at."""
         lockstep = self._lockstep
         now = lockstep.observe(frame.message) if lockstep is not None else self.clock.now_s()
         if lockstep is not None and lockstep.overrun is not None and self.phase is not Phase.DONE:
@@ -388,7 +398,7 @@ class CompanionService:
         # A new position drives a tick at once (at most every half period; one per sample).
         if used in POSITIONS and self._ticking():
             self.schedule.sample(int(frame.message.time_boot_ms) / 1000.0)
-            if self.schedule.is_due(now):
+            if tick and self.schedule.is_due(now):
                 self._tick(now)
         return now
 

@@ -18,6 +18,15 @@ What the law uses, and why:
 - course: the direction of the ground velocity (vx, vy), not ATTITUDE.yaw (with wind or a
   copter's sideslip the nose points elsewhere); below ``min_course_speed_m_s`` yaw stands in.
   Its rate, from successive accepted velocities, is the measured course rate.
+- a sample's age: from when the vehicle sent it, not when it was read. The vehicle's
+  ``time_boot_ms`` is put on the companion's clock by the least offset seen between the two
+  (our clock at arrival less the stamp: the offset plus that sample's delay, never less than
+  the offset), let rise by ``_CLOCK_SLEW`` of the time since (a vehicle clock up to 20% slower
+  than ours, a SITL behind real time, keeps its samples young). A sample that waited in a
+  socket while the companion was stalled (a 20 s stall once sent one command from a 20 s old
+  position over TCP, every sample "fresh" on arrival) is as old as its stamp says, and the
+  loop fails closed on it. A time stamp back by more than ``_REBOOT_BACKSTEP_S`` (a reboot)
+  and a lost link start the offset afresh. Only accepted samples move it.
 
 Refused, and counted (a refused sample changes nothing):
 
@@ -91,6 +100,10 @@ _CROSS_MAX_AGE_S = 0.5
 _SAME_ORIGIN_M = 0.05
 # the course rate is smoothed over about this long
 _COURSE_RATE_TAU_S = 0.1
+# the least clock offset seen rises by this much a second: the vehicle's clock may run this
+# much slower than ours (a SITL behind real time) without ageing its samples; a stall of T
+# seconds still ages the samples that waited through it by (1 - this) T
+_CLOCK_SLEW = 0.2
 
 
 @dataclass
@@ -101,7 +114,7 @@ class _Position:
     vn_m_s: float
     ve_m_s: float
     boot_s: float  # the vehicle's time_boot_ms of the sample
-    arrived_s: float  # companion clock
+    arrived_s: float  # when the vehicle sent it, on the companion's clock (``_VehicleClock``)
 
 
 @dataclass
@@ -132,6 +145,34 @@ class _Track:
 
 
 @dataclass
+class _VehicleClock:
+    """The vehicle's ``time_boot_ms`` on the companion's clock: the least offset seen
+    (ours at arrival less the stamp), rising by ``_CLOCK_SLEW`` a second since it was
+    seen, so that a sample that waited (in a socket, a queue, a stalled companion) is as
+    old as its stamp says."""
+
+    offset_s: float = math.nan  # our clock less the vehicle's; nan before any sample
+    at_s: float = 0.0  # our clock when offset_s was last moved
+    newest_boot_s: float = -math.inf
+
+    def offset_for(self, boot_s: float, now_s: float) -> float:
+        """The offset for a sample stamped ``boot_s`` read at ``now_s`` (not kept: see
+        :meth:`keep`)."""
+        seen = now_s - boot_s  # the offset plus this sample's delay
+        if math.isnan(self.offset_s) or boot_s < self.newest_boot_s - _REBOOT_BACKSTEP_S:
+            return seen  # the first sample, or a rebooted vehicle's: a new time base
+        return min(self.offset_s + _CLOCK_SLEW * max(0.0, now_s - self.at_s), seen)
+
+    def keep(self, boot_s: float, now_s: float) -> float:
+        """Take an accepted sample's offset; when it was sent, on our clock."""
+        restarted = boot_s < self.newest_boot_s - _REBOOT_BACKSTEP_S
+        self.offset_s = self.offset_for(boot_s, now_s)
+        self.at_s = now_s
+        self.newest_boot_s = boot_s if restarted else max(self.newest_boot_s, boot_s)
+        return boot_s + self.offset_s
+
+
+@dataclass
 class TelemetryState:
     """Accumulates telemetry; :meth:`update` takes each message, :meth:`snapshot` reads.
 
@@ -155,6 +196,7 @@ class TelemetryState:
     skipped: int = 0  # global positions not converted while the local one was fresh
     alarm: Hold | None = None  # a refusal that lasts: the origin changed after the latch
     _tracks: dict[str, _Track] = field(default_factory=dict)
+    _clock: _VehicleClock = field(default_factory=_VehicleClock)
     _yaw_rad: float = 0.0
     _attitude_s: float = -math.inf
     _attitude_boot_s: float = -math.inf
@@ -197,6 +239,7 @@ class TelemetryState:
         start; a restarted vehicle's clock may have gone back). The origin and its latch
         stay: a vehicle that comes back in another frame is still refused."""
         self._tracks.clear()
+        self._clock = _VehicleClock()
         self._attitude_s = self._attitude_boot_s = -math.inf
         self._refusal = None
 
@@ -252,10 +295,11 @@ class TelemetryState:
         if self._local_offset is None:
             return False  # the vehicle's origin is not known: its local frame is not ours
         dn, de, dd = self._local_offset
+        boot_s = ms_to_s(msg.time_boot_ms)
         sample = _Position(
-            msg.x + dn, msg.y + de, msg.z + dd, msg.vx, msg.vy, ms_to_s(msg.time_boot_ms), now_s
+            msg.x + dn, msg.y + de, msg.z + dd, msg.vx, msg.vy, boot_s, self._sent_s(boot_s, now_s)
         )
-        return self._accept("local", sample)
+        return self._take("local", sample, now_s)
 
     def _on_global(self, msg: Message, now_s: float) -> bool | None:
         if self.adopt_origin and self._local_offset is None:
@@ -304,9 +348,9 @@ class TelemetryState:
             cm_s_to_m_s(msg.vx),
             cm_s_to_m_s(msg.vy),
             boot_s,
-            now_s,
+            self._sent_s(boot_s, now_s),
         )
-        return self._accept("global", sample)
+        return self._take("global", sample, now_s)
 
     def _on_attitude(self, msg: Message, now_s: float) -> bool:
         if not is_finite(msg.yaw) or abs(msg.yaw) > 2.0 * math.pi:
@@ -314,7 +358,8 @@ class TelemetryState:
         boot_s = ms_to_s(msg.time_boot_ms)
         if not _advances(self._attitude_boot_s, boot_s):
             return False
-        self._yaw_rad, self._attitude_s, self._attitude_boot_s = msg.yaw, now_s, boot_s
+        self._yaw_rad, self._attitude_boot_s = msg.yaw, boot_s
+        self._attitude_s = self._clock.keep(boot_s, now_s)
         return True
 
     def _on_vfr_hud(self, msg: Message, now_s: float) -> bool:
@@ -367,6 +412,17 @@ class TelemetryState:
         return True
 
     # --- the gate ---------------------------------------------------------------------------
+
+    def _sent_s(self, boot_s: float, now_s: float) -> float:
+        """When the vehicle sent a sample stamped ``boot_s``, read at ``now_s``, on our clock."""
+        return boot_s + self._clock.offset_for(boot_s, now_s)
+
+    def _take(self, kind: str, sample: _Position, now_s: float) -> bool:
+        """Judge a position sample; an accepted one moves the vehicle's clock."""
+        if not self._accept(kind, sample):
+            return False
+        self._clock.keep(sample.boot_s, now_s)
+        return True
 
     def _refuse(self, cause: Hold, why: str) -> bool:
         self._refusal = (cause, why)

@@ -1,0 +1,197 @@
+"""A sample is as old as the vehicle's stamp says, not as new as its arrival.
+
+Against ArduPilot SITL over TCP a companion stalled for 20 s, resumed, and sent one command
+computed from a position 20 s old: every sample that had waited in the socket was "fresh" on
+arrival. Units on :class:`TelemetryState` (hypothesis for the clock's bound), then over real
+UDP: a queue on the path that holds the vehicle's frames and lets them go at once, and a
+companion process stopped (SIGSTOP) and continued, both judged from the companion's tlog.
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from pymavlink import mavutil
+from test_service_loopback import CONFIG, SPEEDUP, fly, stub_process
+from test_service_units import known_origin, local
+from test_trust_link import LIGHT, SCENARIO, Clock, Relay, assert_honest, wait_for
+
+from ezcompanion.config import load_scenario
+from ezcompanion.records import Hold
+from ezcompanion.service.demo import free_udp_port, wait_for_line
+from ezcompanion.service.events import EventKind
+from ezcompanion.service.loop import GuidanceLoop
+
+BUDGET_S = 0.25  # stale_after_s, the default
+
+
+def test_a_sample_that_waited_through_a_stall_is_as_old_as_its_stamp() -> None:
+    t = known_origin()
+    for k in range(50):  # 1 s at 50 Hz, each read 5 ms after it was sent
+        assert t.update(local(1000 + 20 * k, 0.02 * k, 0.0), 1.005 + 0.02 * k)
+    # the companion stalls 20 s; the samples sent meanwhile waited in its socket and are
+    # read now, one after another
+    now = 1.0 + 0.02 * 49 + 20.0
+    for k in range(50, 60):
+        assert t.update(local(1000 + 20 * k, 0.02 * k, 0.0), now)
+        now += 0.0001
+    state = t.snapshot(BUDGET_S, now)
+    assert state is not None
+    # the newest was sent 19.8 s ago: as old as that, less the clock's slew over the stall
+    # (0.2 x 20 s)
+    assert state.age_s(now) > 19.8 - 0.2 * 20.0 - 0.01
+    loop = GuidanceLoop(load_scenario(CONFIG / "paper_scenario1.yaml"), loop_rate_hz=50.0,
+                        stale_after_s=BUDGET_S)  # fmt: skip
+    assert loop.tick(state, now) is Hold.STALE
+    # a sample sent now is young again
+    assert t.update(local(1000 + 20 * 60 + 20_000, 0.02 * 60 + 20.0, 0.0), now + 0.004)
+    state = t.snapshot(BUDGET_S, now + 0.004)
+    assert state is not None and state.age_s(now + 0.004) < 0.01
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    rate=st.floats(0.8, 1.5),  # the vehicle's seconds per companion second
+    delays_s=st.lists(st.floats(0.0, 0.05), min_size=2, max_size=400),
+    start_s=st.floats(0.0, 1e4),
+)
+def test_the_age_is_never_more_than_the_delay_for_a_clock_within_the_slew(
+    rate: float, delays_s: list[float], start_s: float
+) -> None:
+    """The vehicle's clock runs at ``rate`` of ours (a SITL behind or ahead of real time):
+    each sample's age is within [0, its true delay] (the least offset seen, let rise at the
+    slew, never passes the true offset plus the least delay)."""
+    t = known_origin()
+    for k, delay in enumerate(delays_s):
+        boot_ms = 1000 + 20 * k
+        sent = start_s + (boot_ms / 1000.0) / rate
+        now = sent + delay
+        assert t.update(local(boot_ms, 0.1 * k, 0.0, vn=5.0), now)  # moving: 10 cm a sample
+        state = t.snapshot(BUDGET_S, now)
+        assert state is not None
+        assert -1e-6 <= state.age_s(now) <= delay + 1e-6
+
+
+def test_a_lost_link_starts_the_vehicles_clock_afresh() -> None:
+    t = known_origin()
+    for k in range(10):
+        assert t.update(local(50_000 + 20 * k, 0.02 * k, 0.0), 1.0 + 0.02 * k)
+    t.forget_motion()  # the vehicle restarted: its clock from zero, read 30 s later
+    assert t.update(local(2000, 0.0, 0.0), 31.2)
+    state = t.snapshot(BUDGET_S, 31.2)
+    assert state is not None and state.age_s(31.2) == 0.0
+
+
+def setpoint_ages(tlog: Path) -> list[tuple[float, float]]:
+    """Every guidance setpoint (velocity not zero) the companion sent, as (wall time sent,
+    vehicle seconds between the newest LOCAL_POSITION_NED it had read and the vehicle's
+    clock then). The vehicle's clock on the wall's: the least (wall x speedup - stamp) over
+    every frame read, that is the promptest one."""
+    log = mavutil.mavlink_connection(str(tlog))
+    read: list[tuple[float, float]] = []  # (wall, stamp) of each position read
+    sent: list[tuple[float, int]] = []  # (wall, index into read of the newest before)
+    offset = math.inf
+    while (msg := log.recv_match()) is not None:
+        kind = msg.get_type()
+        stamp = getattr(msg, "time_boot_ms", None)
+        if kind != "SET_POSITION_TARGET_LOCAL_NED" and isinstance(stamp, int) and stamp > 0:
+            offset = min(offset, msg._timestamp * SPEEDUP - stamp / 1000.0)
+        if kind == "LOCAL_POSITION_NED":
+            read.append((msg._timestamp, msg.time_boot_ms / 1000.0))
+        elif kind == "SET_POSITION_TARGET_LOCAL_NED" and (msg.vx, msg.vy) != (0.0, 0.0):
+            sent.append((msg._timestamp, len(read) - 1))
+    newest = [max(stamp for _, stamp in read[: i + 1]) for i in range(len(read))]
+    return [(wall, wall * SPEEDUP - offset - newest[i]) for wall, i in sent if i >= 0]
+
+
+def test_frames_a_queue_held_and_let_go_at_once_drive_no_setpoint(tmp_path: Path) -> None:
+    # A queue on the path (a busy router, a TCP backlog) holds the vehicle's frames for
+    # 1.5 s of vehicle time, then lets them go at once. Before: the first one read drove a
+    # tick, "fresh" on arrival, and a setpoint from a position 1.5 s old went out.
+    hold_s = 1.5  # vehicle seconds: less than the 3 s link-loss budget less a heartbeat
+    held: list[bytes] = []
+    holding = threading.Event()
+    release_wall: list[float] = []
+
+    def attack(service: Any, relay: Relay, clock: Clock) -> None:
+        assert wait_for(service, EventKind.ENGAGED)
+        time.sleep(1.0 / SPEEDUP)
+
+        def hold(data: bytes) -> bytes | None:
+            clock(data)
+            if holding.is_set():
+                held.append(data)
+                return None
+            return data
+
+        relay.tamper = hold
+        holding.set()
+        time.sleep(hold_s / SPEEDUP)
+        while held:  # in order, the oldest first, then what came meanwhile
+            relay.inject(held.pop(0))
+        holding.clear()
+        release_wall.append(time.time())
+
+    port = free_udp_port()
+    relay = Relay(port)
+    clock = Clock()
+    relay.tamper = clock
+    try:
+        flight = fly(SCENARIO, tmp_path, port=port, stub_port=relay.vehicle_port,
+                     during=lambda service, *_: attack(service, relay, clock), max_time_s=25.0,
+                     **LIGHT)  # fmt: skip
+    finally:
+        relay.close()
+    assert release_wall, "the queue never let go"
+    failsafes = flight.events.of_kind(EventKind.FAILSAFE)
+    assert failsafes and failsafes[0].data["reason"] == "stale"  # the silence, then the queue
+    after = [age for wall, age in setpoint_ages(tmp_path / "companion.tlog")
+             if wall >= release_wall[0] - 0.1]  # fmt: skip
+    assert after, "guidance never resumed"
+    assert max(after) <= BUDGET_S + 0.25, f"a setpoint from a position {max(after):.2f} s old"
+    assert_honest(flight)
+
+
+def test_a_stopped_and_continued_companion_sends_nothing_from_what_waited(
+    tmp_path: Path,
+) -> None:
+    # The companion process is stopped for 1.5 s of vehicle time (a stall: swapping, a
+    # debugger, a starved CPU) while the vehicle flies on and its frames fill the socket.
+    # Before: the first one read drove a tick and a setpoint from a position 1.5 s old.
+    port = free_udp_port()
+    tlog = tmp_path / "companion.tlog"
+    companion = subprocess.Popen(
+        [sys.executable, "-m", "ezcompanion", "run", "--config", str(SCENARIO), "--connect",
+         f"udpin:127.0.0.1:{port}", "--engage", "--speedup", f"{SPEEDUP:g}", "--tlog",
+         str(tlog), "--no-telemetry", "--max-time", "12"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    assert companion.stdout is not None
+    try:
+        wait_for_line(companion.stdout, "listening:")
+        with stub_process(SCENARIO, port, tmp_path / "truth.csv", "--initial-mode", "GUIDED"):
+            wait_for_line(companion.stdout, "following velocity")
+            time.sleep(0.5 / SPEEDUP)
+            companion.send_signal(signal.SIGSTOP)
+            stopped = time.time()
+            time.sleep(1.5 / SPEEDUP)
+            continued = time.time()
+            companion.send_signal(signal.SIGCONT)
+            companion.communicate(timeout=120.0)
+    finally:
+        companion.kill()
+        companion.wait()
+    ages = setpoint_ages(tlog)
+    before = [age for wall, age in ages if wall < stopped]
+    after = [age for wall, age in ages if wall >= continued]
+    assert before and after, "guidance did not run on both sides of the stop"
+    assert max(after) <= BUDGET_S + 0.25, f"a setpoint from a position {max(after):.2f} s old"

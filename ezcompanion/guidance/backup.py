@@ -153,6 +153,10 @@ _TAIL_EVERY = 4
 # A turn's exit is screened out where an upper bound on its certificate is below the exit
 # level by this much (in units of v^2 / a_max: round-off in the bound, nothing more).
 _SCREEN_SLACK = 1e-6
+# turn_certificate's every_step, read from here so that it is a bool at run time: numba
+# compiles a kernel once more for each literal value of a bool or int argument, and a cold
+# compile of this one took 6.7 s (twice, with True and False, before)
+_EVERY_STEP = np.array([False, True])
 
 
 def pack_shield(params: GuidanceParams, **abandon: float) -> FloatArray:
@@ -398,7 +402,7 @@ def _tube_gap(
     return best, which
 
 
-@jit_inline
+@jit  # on its own, not inlined: two inlined copies took most of straight_certificate's compile
 def _straight_tail(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
@@ -484,7 +488,7 @@ def _straight_upper_bound(
                      below)  # fmt: skip
 
 
-@jit_inline
+@jit  # on its own, not inlined: two inlined copies took most of turn_certificate's compile
 def _exit_here(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
@@ -607,7 +611,7 @@ def backup_certificates(
             continue
         out[policy] = turn_certificate(s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av,
                                        speed, dt, straight, theta, best, enough,
-                                       False)  # fmt: skip
+                                       _EVERY_STEP[0])  # fmt: skip
         best = max(best, out[policy])
 
 
@@ -667,7 +671,7 @@ def rung_certificates(
         for side in (BACKUP_LEFT, BACKUP_RIGHT):
             value = min(level - theta, turn_certificate(
                 s, zn, ze, zmur, zreach, kz, side, n, e, h, a, av, speed, dt, straight,
-                level, best, math.inf, True,
+                level, best, math.inf, _EVERY_STEP[1],
             ))  # fmt: skip
             out[BACKUP_RUNG0 + 2 * (rung - 1) + side] = value
             best = max(best, value)

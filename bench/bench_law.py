@@ -217,7 +217,29 @@ def service_tick(repeat: int) -> None:
                 f"{_us(parts)} {np.median(tick) / np.median(kernel):10.2f}x "
                 f"{np.median(tick) / np.median(parts):9.2f}x{vs}"
             )
+    own_flights(passes=max(2, repeat))
     profiles(scenario, ticks[(3, LawName.ROBUST)], passes=max(2, repeat))
+
+
+def own_flights(passes: int) -> None:
+    """Each law's tick along its own flight of the paper's scenarios (the reference
+    simulator's states every 20 ms, fed back as measured), beside the straight track above.
+    That track flies on into the zones whatever the law commands, so the backup law meets
+    there, tick after tick, states it never reaches on its own: no backup certified, where
+    it also tries its lower rungs (docs/guidance.md, step 5)."""
+    print("the law's own flight (3 zones, paper scenarios 1 and 2, every 20 ms)")
+    for number in (1, 2):
+        scenario = load_scenario(CONFIG / f"paper_scenario{number}.yaml")
+        medians: dict[LawName, float] = {}
+        for law in (LawName.PAPER, LawName.ROBUST, LawName.BACKUP):
+            loop = GuidanceLoop(scenario, law=law, loop_rate_hz=50.0, stale_after_s=1.0)
+            (tick,) = _timed_ticks((loop,), _own_track(scenario, law), passes)
+            medians[law] = float(np.median(tick))
+            vs = ""
+            if law is LawName.BACKUP:
+                vs = f"   backup / robust {medians[law] / medians[LawName.ROBUST]:.1f}x"
+            print(f"  {f'scenario {number}, {law.value}':32s} {_us(tick)}  max "
+                  f"{max(tick) * 1e6:7.1f}us{vs}")  # fmt: skip
 
 
 def profiles(scenario: Scenario, robust_s: float, passes: int) -> None:
@@ -243,6 +265,27 @@ def profiles(scenario: Scenario, robust_s: float, passes: int) -> None:
             (tick,) = _timed_ticks((loop,), states, passes)
             print(f"  {f'{profile.name}, {label}':32s} {_us(tick)}   backup / robust "
                   f"{np.median(tick) / robust_s:.1f}x")  # fmt: skip
+
+
+def _own_track(scenario: Scenario, law: LawName) -> list[VehicleState]:
+    """The reference simulator's flight of ``scenario`` by ``law``, every 20 ms up to the
+    intercept, as measured states (velocity along the heading, the course rate a / v)."""
+    run = simulate(scenario, law)
+    stride = max(1, round(0.02 / float(run.t_s[1] - run.t_s[0])))
+    inside = np.flatnonzero(run.range_to_target_m <= scenario.guidance.intercept_radius_m)
+    end = int(inside[0]) if inside.size else len(run.t_s)
+    speed = scenario.start.speed_m_s
+    return [
+        VehicleState(
+            north_m=float(run.north_m[i]), east_m=float(run.east_m[i]), down_m=-20.0,
+            velocity_north_m_s=speed * math.cos(run.heading_rad[i]),
+            velocity_east_m_s=speed * math.sin(run.heading_rad[i]),
+            yaw_rad=float(run.heading_rad[i]), position_time_s=0.02 * k,
+            attitude_time_s=0.02 * k, position_source="local",
+            course_rate_rad_s=float(run.accel_lat_m_s2[i]) / speed,
+        )
+        for k, i in enumerate(range(0, end, stride))
+    ]  # fmt: skip
 
 
 def _straight_track(size: int) -> list[VehicleState]:

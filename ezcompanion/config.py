@@ -72,6 +72,7 @@ from ezcompanion.guidance import (
 
 __all__ = [
     "COMPONENT_SECTIONS",
+    "FixedPoint",
     "GeoOrigin",
     "Scenario",
     "ScenarioFrame",
@@ -128,6 +129,18 @@ class SimulationSettings:
             )  # fmt: skip
 
 
+@dataclass(frozen=True)
+class FixedPoint:
+    """A position the scenario file gave as latitude and longitude: ``path`` is
+    ``vehicle``, ``target`` or ``defenders[i]``. Placed on WGS84 when the file is read;
+    the companion places it again as the vehicle's autopilot maps its own global positions
+    (``ezcompanion.field.place_fixed``), once it knows the autopilot."""
+
+    path: str
+    lat_deg: float
+    lon_deg: float
+
+
 @dataclass(frozen=True, kw_only=True)
 class GeoOrigin:
     """The geodetic position of the local NED origin (WGS84; altitude above mean sea level).
@@ -165,6 +178,7 @@ class Scenario:
     # only places the loopback vehicle (ArduPilot SITL's default home)
     origin_given: bool = False
     frame: ScenarioFrame = ScenarioFrame.LOCAL
+    fixed: tuple[FixedPoint, ...] = ()  # the positions given as latitude and longitude
 
     def zones(self) -> ZoneSet:
         """The defenders as the law's vectorised zone set."""
@@ -290,6 +304,7 @@ def scenario_from_dict(data: object) -> Scenario:
         sections=sections,
         origin_given=place.origin is not None,
         frame=place.frame,
+        fixed=tuple(place.fixed),
     )
     if "scale" in top:
         from ezcompanion.field import scale_to_vehicle  # (it builds on this module)
@@ -318,13 +333,17 @@ class _Place:
 
     origin: GeoOrigin | None
     frame: ScenarioFrame
+    fixed: list[FixedPoint] = field(default_factory=list)  # what ``local`` placed from lat/lon
 
     def local(self, path: str, data: Mapping[str, Any]) -> dict[str, Any]:
         o = self.origin
-        return local_position(
+        out = local_position(
             path, data, origin=None if o is None else (o.lat_deg, o.lon_deg, o.alt_m),
             frame=self.frame,
         )  # fmt: skip
+        if "lat_deg" in data:  # checked by local_position
+            self.fixed.append(FixedPoint(path, float(data["lat_deg"]), float(data["lon_deg"])))
+        return out
 
 
 def scenario_to_dict(scenario: Scenario) -> dict[str, Any]:
@@ -366,7 +385,7 @@ def scenario_update(current: Scenario, data: object) -> Scenario:
     top = _mapping("scenario", data)
     if "vehicle" in top:
         whole = scenario_from_dict(top)
-        defenders, target, name = whole.defenders, whole.target, whole.name
+        defenders, target, name, fixed = whole.defenders, whole.target, whole.name, whole.fixed
     else:
         _only("", top, required={"defenders", "target"}, optional={"name"})
         place = _Place(current.origin if current.origin_given else None, current.frame)
@@ -374,7 +393,12 @@ def scenario_update(current: Scenario, data: object) -> Scenario:
         target = _target(top["target"], place)
         name = _name(top.get("name", current.name))
         config_checks.check_target(defenders, target, current.guidance)
-    return dataclasses.replace(current, name=name, defenders=defenders, target=target)
+        fixed = tuple(place.fixed)
+    # the vehicle's own stays as it was; the target's and the defenders' are the update's
+    fixed = tuple(f for f in current.fixed if f.path == "vehicle") + tuple(
+        f for f in fixed if f.path != "vehicle")
+    return dataclasses.replace(current, name=name, defenders=defenders, target=target,
+                               fixed=fixed)  # fmt: skip
 
 
 def _name(value: object) -> str:

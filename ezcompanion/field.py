@@ -8,6 +8,12 @@
   translation (and rotation) that puts the scenario's start on the vehicle at engage;
   computed once, when guidance engages, and latched: later scenario updates are placed with
   the same one, so the engagement never moves under the vehicle.
+- :func:`place_fixed`: the positions a file gave as latitude and longitude, placed as the
+  vehicle's autopilot maps its own global positions to its local frame (the frame its local
+  positions, and so the law, are in), instead of on WGS84. At 35 degrees of latitude
+  ArduPilot's flat earth and WGS84 differ by 3.3 m a kilometre from the origin: a zone
+  given by its latitude and longitude sat that far from where the vehicle's own positions
+  put it.
 """
 
 from __future__ import annotations
@@ -27,8 +33,47 @@ from ezcompanion.guidance.scaling import (
     scale_params,
     scale_target,
 )
+from ezcompanion.wire import Projection, geodetic_to_local
 
-__all__ = ["VehiclePlacement", "placement_warnings", "scale_scenario", "scale_to_vehicle"]
+__all__ = [
+    "VehiclePlacement",
+    "place_fixed",
+    "placement_warnings",
+    "scale_scenario",
+    "scale_to_vehicle",
+]
+
+
+def place_fixed(scenario: Scenario, projection: Projection) -> tuple[Scenario, float]:
+    """``scenario`` with the positions its file gave as latitude and longitude
+    (``scenario.fixed``) placed about its origin as ``projection`` maps them, and how far
+    the farthest one moved. Placed from the latitude and longitude each time, so placing
+    again changes nothing. Checked again as the file was (a target inside a zone, say):
+    ConfigError naming the position."""
+    o = scenario.origin
+    start, target = scenario.start, scenario.target
+    defenders = list(scenario.defenders)
+    moved = 0.0
+    for point in scenario.fixed:
+        north, east, _down = geodetic_to_local(
+            projection, point.lat_deg, point.lon_deg, o.alt_m, origin_lat_deg=o.lat_deg,
+            origin_lon_deg=o.lon_deg, origin_alt_m=o.alt_m,
+        )  # fmt: skip
+        if point.path == "vehicle":
+            was = (start.north_m, start.east_m)
+            start = dataclasses.replace(start, north_m=north, east_m=east)
+        elif point.path == "target":
+            was = (target.north_m, target.east_m)
+            target = dataclasses.replace(target, north_m=north, east_m=east)
+        else:  # defenders[i]
+            i = int(point.path.removeprefix("defenders[").removesuffix("]"))
+            was = (defenders[i].north_m, defenders[i].east_m)
+            defenders[i] = dataclasses.replace(defenders[i], north_m=north, east_m=east)
+        moved = max(moved, math.dist(was, (north, east)))
+    config_checks.check_defenders(tuple(defenders))
+    config_checks.check_target(tuple(defenders), target, scenario.guidance)
+    placed = dataclasses.replace(scenario, start=start, target=target, defenders=tuple(defenders))
+    return placed, moved
 
 
 def scale_scenario(scenario: Scenario, factors: ScaleFactors) -> Scenario:

@@ -57,7 +57,7 @@ from typing import Any
 from ezcompanion.config import GeoOrigin, Scenario, VehicleStart, build_dataclass, load_scenario
 from ezcompanion.config_limits import POSITION_LIMIT_M
 from ezcompanion.errors import ConfigError
-from sitl_stub.mav import key_from_hex, key_from_passphrase
+from sitl_stub.mav import key_from_hex, key_from_passphrase, lla_to_ne
 from sitl_stub.profiles import Profile, ProfileSpec, profile_spec
 from sitl_stub.transport import check_stub_url
 from sitl_stub.vehicle import VelocityShaping
@@ -254,6 +254,21 @@ class StubConfig:
     accel_max_m_s2: float
     origin: GeoOrigin
     settings: StubSettings = field(default_factory=StubSettings)
+    # the start as the file gave it in latitude and longitude, if it did: placed as the
+    # profile's autopilot maps it (``placed_start``)
+    start_lat_lon_deg: tuple[float, float] | None = None
+
+    @property
+    def placed_start(self) -> VehicleStart:
+        """The start in the vehicle's local frame: a start given as latitude and longitude
+        where the profile's autopilot maps it (where a vehicle there says it is), not on
+        WGS84 as the scenario file reader put it (3.3 m a kilometre apart on ArduPilot)."""
+        if self.start_lat_lon_deg is None:
+            return self.start
+        o = self.origin
+        north, east = lla_to_ne(*self.start_lat_lon_deg, (o.lat_deg, o.lon_deg, o.alt_m),
+                                self.spec.autopilot)  # fmt: skip
+        return dataclasses.replace(self.start, north_m=north, east_m=east)
 
     @property
     def spec(self) -> ProfileSpec:
@@ -316,9 +331,11 @@ def stub_config(scenario: Scenario, **overrides: Any) -> StubConfig:
     """The stub's configuration for ``scenario``; ``overrides`` replace section values."""
     raw = dict(scenario.sections.get("sitl_stub", {}))
     settings = StubSettings.from_mapping(raw)
+    fixed = [(f.lat_deg, f.lon_deg) for f in scenario.fixed if f.path == "vehicle"]
     config = StubConfig(
         start=scenario.start, accel_max_m_s2=scenario.guidance.accel_max_m_s2,
         origin=scenario.origin, settings=settings,
+        start_lat_lon_deg=fixed[0] if fixed else None,
     )
     changes = {k: v for k, v in overrides.items() if v is not None}
     return config.with_settings(**changes) if changes else config

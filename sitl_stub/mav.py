@@ -142,6 +142,29 @@ def ned_to_lla(north_m: float, east_m: float, down_m: float, origin: tuple[float
     return float(lat), float(lon), float(alt)
 
 
+def lla_to_ne(lat_deg: float, lon_deg: float, origin: tuple[float, float, float],
+              autopilot: int | None = None) -> tuple[float, float]:
+    """North and east about ``origin`` of a latitude and longitude, as ``autopilot`` maps
+    them: the inverse of :func:`ned_to_lla` (Newton's method on it, from WGS84's answer;
+    to a micrometre in a few steps). A vehicle at that latitude and longitude reports this
+    local position."""
+    n0, e0, _ = pymap3d.geodetic2ned(lat_deg, lon_deg, origin[2], *origin)
+    north, east = float(n0), float(e0)
+    for _ in range(20):
+        lat, lon, _ = ned_to_lla(north, east, 0.0, origin, autopilot)
+        d_lat, d_lon = lat_deg - lat, (lon_deg - lon + 180.0) % 360.0 - 180.0
+        # metres per degree here, by a step of a metre each way
+        lat_n, lon_n, _ = ned_to_lla(north + 1.0, east, 0.0, origin, autopilot)
+        lat_e, lon_e, _ = ned_to_lla(north, east + 1.0, 0.0, origin, autopilot)
+        a, b, c, d = lat_n - lat, lat_e - lat, lon_n - lon, lon_e - lon
+        det = a * d - b * c
+        step_n, step_e = (d * d_lat - b * d_lon) / det, (a * d_lon - c * d_lat) / det
+        north, east = north + step_n, east + step_e
+        if math.hypot(step_n, step_e) < 1e-7:
+            break
+    return north, east
+
+
 # --- signing ---------------------------------------------------------------------------------
 
 

@@ -68,10 +68,11 @@ class SitlStub:
             follows_setpoint_speed=config.measured, shaping=config.velocity_shaping(),
         )
         grounded = not s.start_armed and config.spec.can_hover
-        speed = 0.0 if grounded else config.start.speed_m_s
+        start = config.placed_start
+        speed = 0.0 if grounded else start.speed_m_s
         self._state = VehicleState(
-            t_s=0.0, north_m=config.start.north_m, east_m=config.start.east_m,
-            heading_rad=config.start.course_rad, speed_m_s=speed, height_m=s.height_m,
+            t_s=0.0, north_m=start.north_m, east_m=start.east_m,
+            heading_rad=start.course_rad, speed_m_s=speed, height_m=s.height_m,
         )
         self._truth_out = Path(truth_out) if truth_out is not None else None
         self._record = record_truth

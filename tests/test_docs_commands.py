@@ -64,7 +64,7 @@ from test_service_loopback import stub_process
 from ezcompanion.cli import _parser as ezcompanion_parser
 from ezcompanion.cli import main
 from ezcompanion.config import load_scenario
-from ezcompanion.service.demo import free_udp_port, judge_truth
+from ezcompanion.service.demo import as_flown, free_udp_port, judge_truth
 from ezcompanion.validation.cli import spec_from_args
 from sitl_stub.cli import _parser as stub_parser
 
@@ -455,7 +455,9 @@ def test_the_field_run_command_flies_the_field_scenario_and_leaves_it_loitering(
             sock.settimeout(60.0)
             sock.recv(1024)
         assert main(args) == 0  # intercepted
-    intercepted, _, _, clearance, _ = judge_truth(load_scenario(config), truth)
+    # the truth is in the vehicle's frame: the file's latitudes and longitudes as ArduPilot
+    # maps them, as the companion placed them
+    intercepted, _, _, clearance, _ = judge_truth(as_flown(load_scenario(config)), truth)
     assert intercepted and min(clearance) > 0.0
     assert vehicle_modes(tlog)[-1] == LOITER
 

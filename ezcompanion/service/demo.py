@@ -19,13 +19,16 @@ from pathlib import Path
 from typing import IO
 
 from ezcompanion.config import Scenario, load_scenario
+from ezcompanion.field import place_fixed
 from ezcompanion.guidance import LawName
 from ezcompanion.sim.engine import SimResult
 from ezcompanion.sim.judge import Judgement, TruthTrack, engagement_start_s, judge, read_truth
 from ezcompanion.sim.output import read_track_csv
+from ezcompanion.wire import Projection
 
 __all__ = [
     "DemoResult",
+    "as_flown",
     "free_udp_port",
     "judge_run",
     "judge_truth",
@@ -33,6 +36,10 @@ __all__ = [
     "telemetry_endpoint",
     "wait_for_line",
 ]
+
+# how each loopback vehicle's autopilot maps latitude and longitude (sitl_stub's profiles)
+_PROJECTIONS = {"copter": Projection.ARDUPILOT, "plane": Projection.ARDUPILOT,
+                "px4": Projection.PX4}  # fmt: skip
 
 # wall seconds to wait for the companion beyond the scenario's own length
 _GRACE_WALL_S = 20.0
@@ -137,6 +144,13 @@ def free_udp_port() -> int:
         return int(sock.getsockname()[1])
 
 
+def as_flown(scenario: Scenario, profile: str = "copter") -> Scenario:
+    """``scenario`` in the loopback vehicle's local frame: the positions its file gave as
+    latitude and longitude placed as the vehicle of ``profile`` maps them (its truth is in
+    that frame, and the companion places them so too)."""
+    return place_fixed(scenario, _PROJECTIONS[profile])[0]
+
+
 def judge_truth(
     scenario: Scenario, truth_csv: Path
 ) -> tuple[bool, float, float, tuple[float, ...], float]:
@@ -174,7 +188,7 @@ def run_loopback(
     and ``speedup`` is only the most it runs ahead of wall time. Without it both run their
     clocks ``speedup`` times faster than wall time, and a loaded machine shows.
     """
-    scenario = load_scenario(config)
+    scenario = as_flown(load_scenario(config), profile)
     out_dir.mkdir(parents=True, exist_ok=True)
     port = free_udp_port()
     truth = out_dir / "truth.csv"

@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING, Any
 from ezcompanion import __version__
 from ezcompanion.config import Scenario, scenario_to_dict, scenario_update
 from ezcompanion.errors import ConfigError
-from ezcompanion.field import VehiclePlacement, placement_warnings
+from ezcompanion.field import VehiclePlacement, place_fixed, placement_warnings
 from ezcompanion.guidance import LawName
 from ezcompanion.records import EventKind, TickCommand
 from ezcompanion.service.clock import Clock, LockstepClock, ScaledClock
@@ -200,6 +200,9 @@ class CompanionService:
                 f"must stay {len(self.scenario.defenders)} (the telemetry and track columns "
                 "follow the defenders by position)",
             )
+        session = self._session
+        if update.fixed and session is not None:  # as the vehicle's autopilot maps them
+            update, _ = place_fixed(update, session.telemetry.projection)
         return update
 
     def status(self) -> dict[str, Any]:
@@ -419,6 +422,8 @@ class CompanionService:
                 setpoints_sent=self.setpoints_sent,
             )
         if self.phase is Phase.SEARCHING and session.connected:
+            if self._engaged_at_s is None and not self._place_fixed(now):
+                return
             if self.engagement.setpoints is None:
                 self.engagement.setpoints = self._make_setpoints()
                 profile = session.profile  # the autopilot's measured response
@@ -452,6 +457,32 @@ class CompanionService:
                 f"autopilot's: put it back in {guided} to resume)",
                 left_for=session.mode,
             )  # fmt: skip
+
+    def _place_fixed(self, now: float) -> bool:
+        """The positions the file gave as latitude and longitude placed as the vehicle's
+        autopilot maps its own global positions (``field.place_fixed``), once it is found
+        and before guidance starts; False (and done) if the placed scenario is refused."""
+        scenario = self.scenario
+        if not scenario.fixed:
+            return True
+        projection = self.session.telemetry.projection
+        try:
+            placed, moved = place_fixed(scenario, projection)
+        except ConfigError as error:
+            self.events.emit(EventKind.ABORTED, now, f"the scenario placed as {projection} "
+                             f"maps latitude and longitude: {error}: not guided",
+                             cause="placement")  # fmt: skip
+            self.engagement.done = True
+            self.phase = Phase.DONE
+            return False
+        self.scenario = placed
+        self.loop.update_scenario(placed)
+        self.events.emit(
+            EventKind.SCENARIO, now, f"{len(placed.fixed)} positions given as latitude/"
+            f"longitude placed as {projection} maps them: moved up to {moved:.3f} m",
+            defenders=len(placed.defenders), moved_m=moved,
+        )  # fmt: skip
+        return True
 
     def _assume_abandon(self, now: float) -> None:
         """Give the law the path the vehicle flies if this setpoint is its last: the

@@ -43,6 +43,7 @@ from sitl_stub.status import (
 )
 from sitl_stub.telemetry import StreamScheduler
 from sitl_stub.vehicle import (
+    GRAVITY_M_S2,
     FollowCourse,
     LateralAccel,
     Stop,
@@ -57,7 +58,6 @@ __all__ = ["Autopilot"]
 
 _log = logging.getLogger(__name__)
 
-_GRAVITY_M_S2 = 9.80665
 _MAX_SETPOINT_SPEED_M_S = 100.0  # faster than this is absurd for these vehicles: refused
 _MAX_YAW_RATE_RAD_S = 2.0 * math.pi
 _MAX_ROLL_RAD = math.radians(80.0)
@@ -321,7 +321,7 @@ class Autopilot(CommandHandlers):
     def _roll_command(roll_rad: float) -> VehicleCommand | None:
         if abs(roll_rad) > _MAX_ROLL_RAD:
             return None
-        return LateralAccel(_GRAVITY_M_S2 * math.tan(roll_rad))
+        return LateralAccel(GRAVITY_M_S2 * math.tan(roll_rad))
 
     def _follow(self, label: str, command: FollowCourse | None, t_s: float) -> None:
         """A course command (GUIDED_CHANGE_HEADING) in force from ``t_s``; None cancels."""

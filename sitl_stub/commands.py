@@ -167,11 +167,16 @@ class CommandHandlers:
         if int(kind) not in (_R.HEADING_TYPE_COURSE_OVER_GROUND, _R.HEADING_TYPE_HEADING):
             return int(_R.MAV_RESULT_DENIED)
         over_ground = int(kind) == _R.HEADING_TYPE_COURSE_OVER_GROUND
-        # ArduPlane rolls to ~75% of what the limit asks and turns at ~72% of what that roll
-        # predicts: the flown lateral acceleration is heading_accel_ratio of the limit
+        # ArduPlane turns at ~72% of what its roll predicts (heading_accel_ratio), and rolls
+        # GUIDED_P times the course error, clipped at atan(p3 / g) and its roll limit (the
+        # measured model; the ideal one closes the stub's own course loop)
         ratio = self.config.model_value("heading_accel_ratio")
+        spec = self.spec
+        roll_gain = spec.heading_roll_gain if self.config.measured else None
         command = FollowCourse(math.radians(heading_deg), over_ground=over_ground,
-                               accel_limit_m_s2=ratio * max(accel, 0.05), since_s=t_s)
+                               accel_limit_m_s2=ratio * max(accel, 0.05), since_s=t_s,
+                               roll_gain=roll_gain, roll_limit_rad=spec.roll_limit_rad,
+                               turn_ratio=ratio)  # fmt: skip
         label = "following course" if over_ground else "following heading"
         self._follow(label, command, t_s)
         return int(_R.MAV_RESULT_ACCEPTED)

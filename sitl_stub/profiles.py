@@ -10,6 +10,7 @@ hovers, a plane circles).
 from __future__ import annotations
 
 import enum
+import math
 from dataclasses import dataclass
 
 from sitl_stub.mav import mav as mavlink
@@ -71,6 +72,11 @@ class ProfileSpec:
     tracking_lag_s: float  # with shaping: the vehicle's velocity behind the shaped reference
     speed_ratio: float  # flown / commanded speed (plane: ground speed / cruise airspeed)
     heading_accel_ratio: float  # flown / commanded lateral acceleration of a course command
+    # ArduPlane's GUIDED heading loop (measured model): a roll of this times the course
+    # error (GUIDED_P, 5000 cd/rad), within the roll limit (LIM_ROLL_CD, 4500 cd); None: the
+    # stub's own course loop (course_gain_1_s)
+    heading_roll_gain: float | None = None
+    roll_limit_rad: float = math.radians(45.0)
     vz_hold_drift_m_s: float  # climb while told vz = 0 without a height (up)
     failsafe_descent_m_s: float  # descent after the offboard-loss failsafe (no RC)
     acks_twice: bool  # every COMMAND_ACK is sent twice (PX4 v1.16)
@@ -136,6 +142,7 @@ _PLANE = ProfileSpec(
     velocity_lag_s=0.0, shaping_accel_m_s2=None, tracking_lag_s=0.0,
     speed_ratio=23.4 / 22.0, heading_accel_ratio=0.73, vz_hold_drift_m_s=0.0,
     failsafe_descent_m_s=0.0, acks_twice=False, firmware=(4, 7, 0, 0),
+    heading_roll_gain=math.radians(50.0),  # GUIDED_P 5000 cd/rad: 50 degrees per radian
 )
 
 _PX4 = ProfileSpec(

@@ -43,6 +43,7 @@ from ezcompanion.frames import wrap_pi
 from ezcompanion.sim.kinematics import Wind, course_and_ground_speed, rk4_step, unicycle_rates
 
 __all__ = [
+    "GRAVITY_M_S2",
     "FollowCourse",
     "LateralAccel",
     "ShapedReference",
@@ -58,6 +59,7 @@ __all__ = [
     "step",
 ]
 
+GRAVITY_M_S2 = 9.80665  # standard gravity (what ArduPilot uses, GRAVITY_MSS)
 _HOVER_M_S = 1e-6  # below this speed the vehicle hovers: no translation, yaw at yaw_rate_max
 _STOPPED_M_S = 1e-3  # braking under velocity shaping: within 1 mm/s, stopped and held
 
@@ -90,6 +92,11 @@ class FollowCourse:
     since_s: float = 0.0
     gain_1_s: float | None = None
     speed_m_s: float | None = None
+    # ArduPlane's heading loop instead of the gain: a roll of roll_gain times the error
+    # (rad/rad) within roll_limit_rad, turning at turn_ratio g tan(roll)
+    roll_gain: float | None = None
+    roll_limit_rad: float = math.radians(45.0)
+    turn_ratio: float = 1.0
 
     def reference_rad(self, t_s: float) -> float:
         """The course to fly at ``t_s``."""
@@ -201,8 +208,12 @@ def desired_accel(state: VehicleState, command: VehicleCommand, params: VehicleP
     if isinstance(command, FollowCourse):
         current = state.course_rad(params.wind) if command.over_ground else state.heading_rad
         error = float(wrap_pi(command.reference_rad(state.t_s) - current))
-        gain = params.course_gain_1_s if command.gain_1_s is None else command.gain_1_s
-        wanted = gain * state.speed_m_s * error
+        if command.roll_gain is not None:
+            roll = min(command.roll_gain * abs(error), command.roll_limit_rad)
+            wanted = math.copysign(command.turn_ratio * GRAVITY_M_S2 * math.tan(roll), error)
+        else:
+            gain = params.course_gain_1_s if command.gain_1_s is None else command.gain_1_s
+            wanted = gain * state.speed_m_s * error
         bound = min(bound, command.accel_limit_m_s2)
     elif isinstance(command, TurnRate):
         wanted = command.rate_rad_s * state.speed_m_s

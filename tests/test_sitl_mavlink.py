@@ -82,7 +82,10 @@ def test_default_streams_and_consistent_units(gcs: Gcs) -> None:
 @pytest.mark.parametrize(("profile", "limit_hz"), [("copter", 200.0), ("plane", 40.0)])
 def test_set_message_interval_limits(gcs: Gcs, profile: str, limit_hz: float) -> None:
     attitude = M.MAVLINK_MSG_ID_ATTITUDE
-    with running_stub(gcs, profile=profile, speedup=2.0, record_truth=False):
+    # a stream goes out once a physics step at most, stamped with its state: 200 Hz needs
+    # 5 ms steps (the default 10 ms gives 100 Hz)
+    with running_stub(gcs, profile=profile, speedup=2.0, record_truth=False,
+                      physics_dt_s=1.0 / limit_hz):  # fmt: skip
         ack = gcs.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, attitude, 1e6 / 25.0)
         assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
         gcs.drain()

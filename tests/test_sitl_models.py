@@ -20,7 +20,7 @@ from sitl_stub import StubConfig, stub_config
 from sitl_stub.autopilot import Autopilot
 from sitl_stub.server import SitlStub
 from sitl_stub.telemetry import StreamScheduler
-from sitl_stub.vehicle import VehicleState, step
+from sitl_stub.vehicle import FollowCourse, VehicleState, desired_accel, step
 
 _GCS = M.MAVLink(None, srcSystem=255, srcComponent=190)
 _PARSER = M.MAVLink(None)
@@ -195,6 +195,47 @@ def test_plane_turns_short_of_the_course_command_and_flies_fast() -> None:
                                        0, 0, 0, heading_deg, 4.5, 0, 0, 0, 0.0))
     ideal.run(2.0)
     assert max(abs(s.accel_lat_m_s2) for s in ideal.history) == pytest.approx(4.5)
+
+
+@pytest.mark.parametrize("error_deg", [2.0, 5.0, 10.0])
+def test_plane_rolls_guided_p_times_a_small_course_error(error_deg: float) -> None:
+    # ArduPlane's GUIDED heading loop: a roll of GUIDED_P (5000 cd/rad) times the course
+    # error, below the clip atan(p3 / g), turning at 0.73 g tan(roll): 7.5 times softer than
+    # the stub's own loop (course_gain_1_s 2 /s at 22 m/s) for a small error (issue 11)
+    f = flight("plane", speed_m_s=22.0)
+    guided(f)
+    course = f.state.course_rad(f.stub.params.wind)
+    heading_deg = math.degrees(course + math.radians(error_deg)) % 360.0
+    f.send(_GCS.command_int_encode(1, 1, M.MAV_FRAME_GLOBAL, M.MAV_CMD_GUIDED_CHANGE_HEADING,
+                                   0, 0, 0, heading_deg, 9.0, 0, 0, 0, 0.0))
+    f.run(0.01)  # one step: the demand for this error, before the turn has reduced it
+    roll = math.radians(50.0) * math.radians(error_deg)
+    expected = 0.73 * 9.80665 * math.tan(roll)
+    assert 0.73 * 9.80665 * math.tan(roll) < 0.73 * 9.0  # below the clip
+    command = f.autopilot.command_at(f.state.t_s, f.state)
+    assert isinstance(command, FollowCourse)
+    error = math.remainder(command.course_rad - f.state.course_rad(f.stub.params.wind),
+                           2 * math.pi)  # fmt: skip
+    demand = desired_accel(f.state, command, f.stub.params)
+    assert demand == pytest.approx(0.73 * 9.80665 * math.tan(math.radians(50.0) * error),
+                                   rel=1e-9)  # fmt: skip
+    assert demand == pytest.approx(expected, rel=0.05)
+    stiff = 2.0 * 22.0 * error  # the stub's own loop at the same error
+    assert stiff / demand > 6.0
+
+
+def test_a_stream_faster_than_the_physics_is_stamped_with_the_state_it_describes() -> None:
+    # 40 Hz over 50 ms physics steps: two positions of one state went out 25 ms apart in
+    # their stamps, 0.58 m off at 23 m/s, and the companion's gate refused the plane's
+    # positions (issue 11: the plane22 scenario aborted after 3 s on the loopback plane)
+    config = stub_config(load_scenario(SCENARIO), profile="plane")
+    scheduler = StreamScheduler(config.settings.streams, 40.0)
+    local_id = M.MAVLINK_MSG_ID_LOCAL_POSITION_NED
+    assert scheduler.set_message_interval(local_id, 25_000.0, 0.0) == M.MAV_RESULT_ACCEPTED
+    stamps = []
+    for k in range(1, 41):
+        stamps += [s for s, name in scheduler.pop_due(0.05 * k) if name == "LOCAL_POSITION_NED"]
+    assert stamps == pytest.approx([0.05 * k for k in range(1, 41)])  # one a step, its time
 
 
 def test_px4_acknowledges_every_command_twice() -> None:

@@ -26,6 +26,13 @@ cp "$OUT-backup/tables.md" "$OUT-backup/summary.txt" docs/validation/backup_2k/
     --chatter-runs 100 --abandon px4 --no-figures --no-progress --out "$OUT-backup-10k" $WHERE
 mkdir -p docs/validation/backup_10k
 cp "$OUT-backup-10k/tables.md" "$OUT-backup-10k/summary.txt" docs/validation/backup_10k/
+# the default (backup) law as it runs by default (no abandon check), 10,000 runs of another
+# fresh seed, the lower rungs in
+# shellcheck disable=SC2086
+"$BIN/ezcompanion" validate --runs 10000 --seed 2029 --law backup --map-runs 0 --chatter-runs 0 \
+    --no-figures --no-progress --out "$OUT-backup-2029" $WHERE
+mkdir -p docs/validation/backup_10k_2029
+cp "$OUT-backup-2029/tables.md" "$OUT-backup-2029/summary.txt" docs/validation/backup_10k_2029/
 # the shield's weight without and with its memory, the same 2,000 runs (no reserve)
 "$BIN/ezcompanion" validate --runs 2000 --seed 2026 --law backup --set shield_weight_fall_1_s=0 \
     --set shield_robust_m=0 --map-runs 500 --chatter-runs 0 --abandon px4 --no-figures \

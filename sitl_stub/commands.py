@@ -171,11 +171,10 @@ class CommandHandlers:
         # GUIDED_P times the course error, clipped at atan(p3 / g) and its roll limit (the
         # measured model; the ideal one closes the stub's own course loop)
         ratio = self.config.model_value("heading_accel_ratio")
-        spec = self.spec
-        roll_gain = spec.heading_roll_gain if self.config.measured else None
         command = FollowCourse(math.radians(heading_deg), over_ground=over_ground,
                                accel_limit_m_s2=ratio * max(accel, 0.05), since_s=t_s,
-                               roll_gain=roll_gain, roll_limit_rad=spec.roll_limit_rad,
+                               roll_gain=self.config.heading_roll_gain,
+                               roll_limit_rad=self.spec.roll_limit_rad,
                                turn_ratio=ratio)  # fmt: skip
         label = "following course" if over_ground else "following heading"
         self._follow(label, command, t_s)
@@ -202,7 +201,8 @@ class CommandHandlers:
         """The parameters the stub answers for: its setpoint timeout, under the imitated
         autopilot's name (ArduCopter GUID_TIMEOUT, PX4 COM_OF_LOSS_T), and ArduCopter's
         velocity shaping (WPNAV_ACCEL in cm/s/s, PSC_JERK_XY in m/s/s/s) where it is
-        modelled. ArduPlane's course command has no timeout: nothing."""
+        modelled; ArduPlane's heading loop gain (GUIDED_P, cd/rad) where it is (its course
+        command has no timeout)."""
         timeout = self.config.timeout_s("setpoint")
         if self.spec.profile is Profile.PX4:
             return {"COM_OF_LOSS_T": timeout}
@@ -212,7 +212,8 @@ class CommandHandlers:
                 return {"GUID_TIMEOUT": timeout}
             return {"GUID_TIMEOUT": timeout, "WPNAV_ACCEL": 100.0 * shaping.accel_max_m_s2,
                     "PSC_JERK_XY": shaping.jerk_max_m_s3}
-        return {}
+        gain = self.config.heading_roll_gain
+        return {} if gain is None else {"GUIDED_P": 100.0 * math.degrees(gain)}
 
     def _on_param_request_read(self, msg: Message, t_s: float, state: VehicleState) -> None:
         if not self._for_us(msg):

@@ -14,6 +14,7 @@ Layout (every key optional; see ``docs/sitl_stub.md``)::
       velocity_lag_s: null          # null: the model's (measured: copter 0.6, PX4 1.2)
       speed_ratio: null             # flown / commanded (measured: PX4 0.8, plane 23.4/22)
       heading_accel_ratio: null     # plane course command (measured 0.73)
+      guided_p: null                # plane: ArduPlane's GUIDED_P, cd/rad (null: 5000)
       vz_hold_drift_m_s: null       # climb under vz = 0 without a height (PX4 0.1)
       failsafe_descent_m_s: null    # after PX4's offboard-loss failsafe (0.8)
       response_time_s: 0.0          # first-order lag of lateral acceleration, 0 = ideal
@@ -154,6 +155,7 @@ class StubSettings:
     velocity_lag_s: float | None = None
     speed_ratio: float | None = None
     heading_accel_ratio: float | None = None
+    guided_p: float | None = None  # ArduPlane's GUIDED_P (cd/rad): its heading loop's roll gain
     vz_hold_drift_m_s: float | None = None
     failsafe_descent_m_s: float | None = None
     response_time_s: float = 0.0
@@ -194,6 +196,8 @@ class StubSettings:
             if getattr(self, name) is not None:
                 _check(name, getattr(self, name), low=low, high=high)
         _check("course_gain_1_s", self.course_gain_1_s, low=0.0, high=100.0, low_open=True)
+        if self.guided_p is not None:
+            _check("guided_p", self.guided_p, low=0.0, high=1e5, low_open=True)
         _check("yaw_rate_max_deg_s", self.yaw_rate_max_deg_s, low=0.0, high=3600.0, low_open=True)
         _check("loiter_radius_m", self.loiter_radius_m, low=0.0, high=1e5, low_open=True)
         _check("height_m", self.height_m, low=-1000.0, high=1e5)
@@ -295,6 +299,16 @@ class StubConfig:
         if name == "velocity_lag_s":
             return 1.0 / self.settings.course_gain_1_s
         return _IDEAL[name]
+
+    @property
+    def heading_roll_gain(self) -> float | None:
+        """ArduPlane's heading loop in the measured model: its roll per course error (rad/rad,
+        from ``guided_p`` or the profile's 5000 cd/rad); None: the stub's own course loop."""
+        gain = self.spec.heading_roll_gain
+        if not self.measured or gain is None:
+            return None
+        guided_p = self.settings.guided_p
+        return gain if guided_p is None else math.radians(guided_p / 100.0)
 
     def velocity_shaping(self) -> VelocityShaping | None:
         """ArduCopter's velocity shaping in the measured model, else None: WPNAV_ACCEL from

@@ -25,6 +25,7 @@ from ezcompanion.service.autopilots import ARDUCOPTER, ARDUPLANE, PX4_COPTER
 from ezcompanion.service.setpoints import (
     CourseSetpoints,
     VelocitySetpoints,
+    course_turn_share,
     make_setpoints,
     turn_bound_m_s2,
 )
@@ -166,14 +167,15 @@ def test_course_command_never_turns_the_wrong_way(link: wire.Link, course: float
         assert turn * omega > 0.0  # the same way round as the law's turn
 
 
-def arduplane_turn_m_s2(asked_minus_course_rad: float, limit_m_s2: float, speed_m_s: float
-                        ) -> float:
+def arduplane_turn_m_s2(asked_minus_course_rad: float, limit_m_s2: float, speed_m_s: float,
+                        guided_p: float = 5000.0) -> float:
     """ArduPlane 4.5.1's GUIDED heading loop (ArduPlane/mode_guided.cpp, measured in SITL):
     a roll of GUIDED_P (5000 cd/rad: 50 degrees per radian) times the course error, clipped
     at atan(p3 / g) and the 65-degree roll limit, flown as 0.72 g tan(roll)."""
     g = 9.80665
     error = math.remainder(asked_minus_course_rad, 2 * math.pi)
-    roll = min(math.radians(50.0) * abs(error), math.atan(limit_m_s2 / g), math.radians(65.0))
+    roll = min(math.radians(guided_p / 100.0) * abs(error), math.atan(limit_m_s2 / g),
+               math.radians(65.0))  # fmt: skip
     return math.copysign(0.72 * g * math.tan(roll), error)
 
 
@@ -197,6 +199,32 @@ def test_the_course_ahead_lets_arduplanes_roll_clip_set_the_turn(
     if speed >= 20.0:  # the plane measured (slower, the 2 s error asks a larger roll)
         old = arduplane_turn_m_s2(accel / speed * 2.0, 4.0 * accel, speed)  # even at p3 = 4 a
         assert old < 0.7 * accel
+
+
+@pytest.mark.parametrize("guided_p", [1500.0, 2500.0, 5000.0, 10000.0])
+def test_a_planes_heading_loop_flies_the_share_of_the_turn_its_guided_p_allows(
+    link: wire.Link, guided_p: float
+) -> None:
+    """ArduPlane's GUIDED_P, read from the vehicle, says how much of the law's hardest turn
+    (4.5 m/s^2 at 22 m/s) its heading loop can fly with the course asked at most 6 s of
+    turning ahead (``course_turn_share``), and the writer brings a model of that loop to
+    it: all of it from about 3,000 cd/rad up, 0.93 at 2,500, 0.52 at 1,500. (Reading it
+    does not move the course asked: the 1.5 margin over the clip, or the cap, binds first.)"""
+    accel, speed = 4.5, 22.0
+    read = ARDUPLANE.with_parameters({"GUIDED_P": guided_p})
+    assert read.heading_roll_gain == pytest.approx(math.radians(guided_p / 100.0))
+    w = make_setpoints(SetpointKind.COURSE, link, target_system=1, target_component=1,
+                       accel_max_m_s2=accel)  # fmt: skip
+    w.use_profile(read)
+    flown = 0.0
+    for i in range(1500):
+        msg = w.message(tick(0.02 * i, 0.0, speed, accel, rate_rad_s=flown / speed))
+        if msg is not None:
+            flown = arduplane_turn_m_s2(math.radians(msg.param2), msg.param3, speed,
+                                        guided_p)  # fmt: skip
+    share = course_turn_share(read.heading_roll_gain, accel, speed, 0.72)  # the model's 0.72
+    assert flown / accel == pytest.approx(share, rel=0.03)
+    assert (share < 0.95) is (guided_p < 3000.0)
 
 
 def test_outer_loop_gain_converges_to_the_inverse_of_the_flown_share(link: wire.Link) -> None:

@@ -23,6 +23,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+import yaml
+from test_service_loopback import fly as fly_service
 
 from ezcompanion.config import load_scenario
 from ezcompanion.service.demo import free_udp_port, judge_truth
@@ -126,3 +128,24 @@ def test_scenario_1_scaled_to_a_22_m_s_plane(tmp_path: Path) -> None:
     assert min(speeds) == pytest.approx(23.4, rel=1e-3)  # the plane's own speed, not 22
     # the outer loop turned the plane as hard as the law asked: without it, at most 0.73x
     assert accel > 0.6
+
+
+@pytest.mark.parametrize(("guided_p", "warned"), [(1500.0, True), (5000.0, False)])
+def test_a_plane_too_soft_to_turn_as_the_law_asks_is_warned_of(
+    guided_p: float, warned: bool, tmp_path: Path
+) -> None:
+    """The loopback plane answers GUIDED_P as ArduPlane does and flies its heading loop with
+    it; the companion reads it and, where the loop cannot fly the law's hardest turn with
+    the course asked at most 6 s of turning ahead, says so with the share it can fly."""
+    data = yaml.safe_load((CONFIG / "paper_scenario1_plane22.yaml").read_text())
+    data["sitl_stub"]["guided_p"] = guided_p
+    config = tmp_path / "plane.yaml"
+    config.write_text(yaml.safe_dump(data))
+    flight = fly_service(config, tmp_path, profile="plane", start_mode="GUIDED",
+                         max_time_s=2.0, lockstep=True)
+    read = [e for e in flight.events.of_kind(EventKind.PARAMETER) if e.data["name"] == "GUIDED_P"]
+    assert [e.data["value"] for e in read] == [guided_p]
+    warnings = [e for e in flight.events.of_kind(EventKind.WARNING) if "GUIDED_P" in e.message]
+    assert bool(warnings) is warned
+    if warned:  # 22 m/s cruise, flown at 23.4: 4.5 m/s^2 asks more roll than 15 deg/rad gives
+        assert warnings[0].data["turn_share"] == pytest.approx(0.5, abs=0.05)

@@ -37,6 +37,7 @@ default 3 s leaves no room to intercept (docs/guidance.md, "Safe to abandon").
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
@@ -65,12 +66,22 @@ class AutopilotProfile:
     brake_delay_s: float = 0.0
     shaping_parameters: tuple[str, str] | None = None  # (accel in cm/s/s, jerk in m/s^3)
     tracking_lag_s: float = 0.0
+    # ArduPlane's GUIDED heading loop: a roll of this times the course error (rad/rad), and
+    # the parameter that sets it (GUIDED_P, in cd/rad); None: no such loop
+    heading_roll_gain: float | None = None
+    heading_gain_parameter: str | None = None
+
+    @property
+    def steering_parameter_names(self) -> tuple[str, ...]:
+        """The parameters the setpoints are shaped by (read whether or not the abandon
+        check is on): the heading loop's gain."""
+        return () if self.heading_gain_parameter is None else (self.heading_gain_parameter,)
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
-        """The parameters the abandon path is read from."""
+        """The parameters the abandon path and the setpoints are read from."""
         timeout = () if self.timeout_parameter is None else (self.timeout_parameter,)
-        return timeout + (self.shaping_parameters or ())
+        return timeout + (self.shaping_parameters or ()) + self.steering_parameter_names
 
     @property
     def abandon_straight_s(self) -> float:
@@ -79,9 +90,13 @@ class AutopilotProfile:
         return self.abandon_hold_s + self.brake_delay_s
 
     def with_parameters(self, values: Mapping[str, float]) -> AutopilotProfile:
-        """This profile with the hold the vehicle's own timeout parameter gives, and the
-        braking its shaping parameters give, where it answered for them."""
+        """This profile with the hold the vehicle's own timeout parameter gives, the
+        braking its shaping parameters give and the roll gain of its heading loop, where it
+        answered for them."""
         profile = self
+        gain = self.heading_gain_parameter
+        if gain is not None and gain in values:  # cd/rad: a hundredth of a degree per radian
+            profile = replace(profile, heading_roll_gain=math.radians(values[gain] / 100.0))
         name = self.timeout_parameter
         if name is not None and name in values:
             profile = replace(profile, abandon_hold_s=values[name] + self.timeout_overshoot_s)
@@ -105,7 +120,8 @@ PX4_COPTER = AutopilotProfile(
 )  # fmt: skip
 ARDUPLANE = AutopilotProfile(
     name="ArduPlane", response_lag_s=1.0, turn_ratio=0.73, abandon_turn_s=6.0, abandon_hold_s=4.0,
-    abandon_brake_m_s2=0.0,
+    abandon_brake_m_s2=0.0, heading_roll_gain=math.radians(50.0),  # GUIDED_P 5000 cd/rad
+    heading_gain_parameter="GUIDED_P",
 )  # fmt: skip
 
 

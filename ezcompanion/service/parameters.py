@@ -28,6 +28,9 @@ PARAMETER_RANGES = {
     "COM_OF_LOSS_T": (0.0, 60.0),  # PX4: offboard loss timeout
     "WPNAV_ACCEL": (50.0, 500.0),  # ArduCopter: horizontal acceleration (cm/s/s)
     "PSC_JERK_XY": (1.0, 20.0),  # ArduCopter: horizontal jerk (m/s/s/s)
+    # ArduPlane: the GUIDED heading loop's roll per course error (cd/rad; default 5000). Its
+    # docs give no range: 5 to 200 degrees of roll per radian is ours
+    "GUIDED_P": (500.0, 20000.0),
 }
 _RETRY_S = 0.5
 _TRIES = 6

@@ -39,6 +39,7 @@ from ezcompanion.errors import ConfigError
 from ezcompanion.field import VehiclePlacement, place_fixed, placement_warnings
 from ezcompanion.guidance import LawName
 from ezcompanion.records import EventKind, TickCommand
+from ezcompanion.service.autopilots import AutopilotProfile
 from ezcompanion.service.clock import Clock, LockstepClock, ScaledClock
 from ezcompanion.service.ending import ExitReport, leave_vehicle
 from ezcompanion.service.engagement import Engagement, EngagementOutcome
@@ -48,8 +49,8 @@ from ezcompanion.service.inbox import ScenarioInbox
 from ezcompanion.service.lockstep import Lockstep, check_loopback_url
 from ezcompanion.service.loop import GuidanceLoop
 from ezcompanion.service.session import POSITIONS, VehicleSession
-from ezcompanion.service.setpoints import Setpoints, make_setpoints
-from ezcompanion.service.settings import CompanionSettings, signing_key
+from ezcompanion.service.setpoints import Setpoints, course_turn_share, make_setpoints
+from ezcompanion.service.settings import CompanionSettings, SetpointKind, signing_key
 from ezcompanion.service.state import TelemetryState
 from ezcompanion.service.ticks import EPSILON_S, TickSchedule
 from ezcompanion.service.tlog import TlogWriter
@@ -73,6 +74,8 @@ _WAKE_S = 0.1  # clock seconds: the session's checks run at least this often
 # frames read at once, at most, before what fell due (beside a real autopilot): a socket that
 # filled while the companion was busy is taken whole before a tick
 _DRAIN_READS = 512
+# a plane's heading loop that flies less than this of the law's hardest turn is warned of
+_TURN_SHARE_WARN = 0.95
 
 
 class Phase(StrEnum):
@@ -443,6 +446,10 @@ class CompanionService:
             if self._engaged_at_s is None:
                 self._engaged_at_s = now
             session.telemetry.latch_origin()  # the frame is fixed for the engagement
+            profile = session.profile  # with its parameters, settled by now
+            if profile is not None and self.engagement.setpoints is not None:
+                self.engagement.setpoints.use_parameters(profile)
+                self._check_heading_loop(now, profile)
             session.engaged(now)
             self._assume_abandon(now)
             self.engagement.start(now, session.mode)
@@ -483,6 +490,25 @@ class CompanionService:
             defenders=len(placed.defenders), moved_m=moved,
         )  # fmt: skip
         return True
+
+    def _check_heading_loop(self, now: float, profile: AutopilotProfile) -> None:
+        """A plane whose heading loop (ArduPlane's GUIDED_P, as read) cannot fly the law's
+        hardest turn with the course asked at most the cap ahead: a warning with the share
+        it can fly (``setpoints.course_turn_share``)."""
+        setpoints = self.engagement.setpoints
+        gain = profile.heading_roll_gain
+        if setpoints is None or setpoints.kind is not SetpointKind.COURSE or gain is None:
+            return
+        accel = self.scenario.guidance.accel_max_m_s2
+        speed = self.loop.flown_speed_m_s
+        share = course_turn_share(gain, accel, speed, profile.turn_ratio)
+        if share < _TURN_SHARE_WARN:
+            guided_p = 100.0 * math.degrees(gain)
+            self.events.emit(EventKind.WARNING, now, f"GUIDED_P {guided_p:.0f} cd/rad: "
+                             f"ArduPlane's heading loop turns this plane at most {share:.2f} "
+                             f"of the law's hardest turn ({accel:g} m/s^2 at {speed:g} m/s) "
+                             "with the course asked at most 6 s of turning ahead; raise "
+                             "GUIDED_P or lower accel_max_m_s2", turn_share=share)  # fmt: skip
 
     def _assume_abandon(self, now: float) -> None:
         """Give the law the path the vehicle flies if this setpoint is its last: the

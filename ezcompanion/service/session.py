@@ -281,8 +281,10 @@ class VehicleSession(StreamRequests):
             self.fixed_wing = is_fixed_wing(msg)
             # its global positions are compared with its local ones as it maps them
             self.telemetry.projection = Projection.of_autopilot(int(msg.autopilot))
-            names = autopilot_profile(msg).parameter_names
-            if names and self.settings.abandon_check:
+            profile = autopilot_profile(msg)
+            names = (profile.parameter_names if self.settings.abandon_check
+                     else profile.steering_parameter_names)  # fmt: skip
+            if names:
                 self.parameters.ask(names, source, now)
             self.events.emit(
                 EventKind.VEHICLE_FOUND,

@@ -63,6 +63,7 @@ __all__ = [
     "CourseSetpoints",
     "Setpoints",
     "VelocitySetpoints",
+    "course_turn_share",
     "make_setpoints",
     "turn_bound_m_s2",
 ]
@@ -118,6 +119,7 @@ class Setpoints(ABC):
         self.ground_vehicle = ground_vehicle  # a rover or boat: no vertical velocity
         self.lead_s = 0.0  # the vehicle's course lag the setpoints cancel (0: none)
         self.turn_ratio = 1.0  # flown / asked lateral acceleration of a course command
+        self.heading_roll_gain = _GUIDED_P_RAD_PER_RAD  # ArduPlane's heading loop (rad/rad)
         self.reset()
 
     @abstractmethod
@@ -133,7 +135,14 @@ class Setpoints(ABC):
         the share of a course command's turn it flies (ArduPlane); starts afresh."""
         self.lead_s = profile.setpoint_lead_s
         self.turn_ratio = profile.turn_ratio
+        self.use_parameters(profile)
         self.reset()
+
+    def use_parameters(self, profile: AutopilotProfile) -> None:
+        """Take what the vehicle answered of its parameters (``profile`` with them), without
+        starting afresh: the roll gain of ArduPlane's heading loop (GUIDED_P)."""
+        if profile.heading_roll_gain is not None:
+            self.heading_roll_gain = profile.heading_roll_gain
 
     def brake(self, time_s: float) -> Message | None:
         """What stops the vehicle where it is when guidance must stop (a failsafe), built
@@ -267,7 +276,8 @@ class CourseSetpoints(Setpoints):
         floor = _MIN_ACCEL_LIMIT_RATIO * self.accel_max_m_s2
         limit = min(max(abs(command.accel_lat_m_s2) * self._gain, floor),
                     _GAIN_MAX * self.accel_max_m_s2)
-        course = command.course_rad + course_lead_rad(command.turn_rate_rad_s, limit)
+        course = command.course_rad + course_lead_rad(command.turn_rate_rad_s, limit,
+                                                      self.heading_roll_gain)
         return course_command(
             self.link,
             target_system=self.target_system,
@@ -277,11 +287,12 @@ class CourseSetpoints(Setpoints):
         )
 
 
-def course_lead_rad(turn_rate_rad_s: float, limit_m_s2: float) -> float:
+def course_lead_rad(turn_rate_rad_s: float, limit_m_s2: float,
+                    roll_gain: float = _GUIDED_P_RAD_PER_RAD) -> float:
     """How far ahead of the course to ask ArduPlane to turn to: the course
     ``_COURSE_HORIZON_S`` of turning ahead, or more where that leaves the roll its heading
-    loop demands (GUIDED_P times the error) below the clip of the limit ``p3``
-    (atan(p3 / g)), so that the clip, not the error, sets the turn; at most
+    loop demands (GUIDED_P, ``roll_gain`` rad/rad, times the error) below the clip of the
+    limit ``p3`` (atan(p3 / g)), so that the clip, not the error, sets the turn; at most
     ``_COURSE_HORIZON_MAX_S`` of turning and 90 degrees ahead (so that the wrapped course
     never turns the plane the wrong way). Measured on ArduPlane 4.5.1 SITL: with the course
     2 s ahead the roll stayed below the clip and the plane turned at 0.51 to 0.54 of the
@@ -289,10 +300,23 @@ def course_lead_rad(turn_rate_rad_s: float, limit_m_s2: float) -> float:
     rate = abs(turn_rate_rad_s)
     if rate == 0.0:
         return 0.0
-    clip = _CLIP_MARGIN * math.atan(limit_m_s2 / _GRAVITY_M_S2) / _GUIDED_P_RAD_PER_RAD
+    clip = _CLIP_MARGIN * math.atan(limit_m_s2 / _GRAVITY_M_S2) / roll_gain
     lead = min(max(rate * _COURSE_HORIZON_S, clip), rate * _COURSE_HORIZON_MAX_S,
                _MAX_COURSE_LEAD_RAD)  # fmt: skip
     return math.copysign(lead, turn_rate_rad_s)
+
+
+def course_turn_share(roll_gain: float, accel_m_s2: float, speed_m_s: float,
+                      turn_ratio: float) -> float:
+    """The most of a steady turn at ``accel_m_s2`` that ArduPlane's heading loop flies at
+    ``speed_m_s`` with the course asked at most ``course_lead_rad``'s cap ahead: its roll
+    demand there (``roll_gain`` rad/rad times the lead), flown as ``turn_ratio`` g tan(roll),
+    over ``accel_m_s2``, at most 1 (the clip of p3 then sets the turn). Below 1 the plane
+    cannot be made to turn as the law asks (a GUIDED_P softer than about 3,000 cd/rad at
+    22 m/s and 4.5 m/s^2)."""
+    lead = min(accel_m_s2 / speed_m_s * _COURSE_HORIZON_MAX_S, _MAX_COURSE_LEAD_RAD)
+    roll = min(roll_gain * lead, 0.5 * math.pi - 1e-9)
+    return min(1.0, turn_ratio * _GRAVITY_M_S2 * math.tan(roll) / accel_m_s2)
 
 
 def make_setpoints(

@@ -96,7 +96,7 @@ def abandon_gap_m(
     return out.reshape(shape)
 
 
-@jit_inline
+@jit  # on its own, not inlined: its copies took a share of each certificate's compile
 def abandon_gap(
     zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
     n: float, e: float, heading: float, accel: float, flown_accel: float, speed: float,

@@ -195,7 +195,10 @@ def _abandon(
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, below: float,
 ) -> float:
     """The least of ``below`` and the abandon gap of this state with the shield's profile
-    (``below`` where none is set)."""
+    (``below`` where none is set: decided here, inlined, so that the call to the abandon
+    gap, compiled on its own, is made only where a profile is set)."""
+    if s[S_AB_HOLD] <= 0.0:
+        return below
     return abandon_gap(
         zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, s[S_TAU], s[S_AB_TURN], s[S_AB_HOLD],
         s[S_AB_BRAKE], s[S_EPS], s[S_AMAX], below,

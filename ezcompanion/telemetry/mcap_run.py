@@ -5,8 +5,10 @@ of the ``run`` process, connected to the service's own zenoh session: it starts 
 service reports ``listening`` (its telemetry session is open by then), and the service
 waits, at most ``READY_TIMEOUT_S``, until the recorder's subscriptions are declared, so the
 recording holds the engagement from its start. ``close()`` (after ``service.run``) waits for
-the vehicle's liveliness token to go (the publisher sends its last samples first), at most
-``DRAIN_TIMEOUT_S``, and finishes the file. The service loop is not touched: the recorder
+the vehicle's liveliness token to go (the publisher sends its last samples first) and for
+every event the service emitted after ``listening`` to be recorded (the token's going can
+overtake the last event on the way: the end's ``on_exit`` was once missing), at most
+``DRAIN_TIMEOUT_S`` in all, and finishes the file. The service loop is not touched: the recorder
 is one more subscriber, as ``ezcompanion monitor --record`` in another terminal would be.
 
 It connects to the first plain ``tcp/`` endpoint the service listens on (a wildcard host
@@ -20,6 +22,7 @@ from __future__ import annotations
 import logging
 import re
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -76,6 +79,10 @@ class ServiceRecorder:
         self._vehicle = settings.vehicle_id
         self._ready = threading.Event()
         self._gone = threading.Event()
+        # events the service emitted since it listened, and those recorded
+        self._events = threading.Condition()
+        self._emitted = 0
+        self._recorded = 0
         self._stop = threading.Event()
         self._error: list[BaseException] = []
         self._thread = threading.Thread(target=self._run, name="record", daemon=True)
@@ -86,6 +93,9 @@ class ServiceRecorder:
             self._thread.start()
             if not self._ready.wait(READY_TIMEOUT_S):
                 _log.warning("record: not subscribed after %.0f s; going on", READY_TIMEOUT_S)
+        elif self._thread.is_alive():
+            with self._events:
+                self._emitted += 1
 
     def take(self, key_expr: str, payload: Any, received_unix_s: float) -> None:
         """A sample sink: records it (MCAP), notes when the vehicle's token goes."""
@@ -93,6 +103,12 @@ class ServiceRecorder:
             self._mcap.take(key_expr, payload, received_unix_s)
         if key_expr == key(self._vehicle, "alive") and payload is False:
             self._gone.set()
+        elif key_expr == key(self._vehicle, "event") and not (
+            isinstance(payload, dict) and payload.get("kind") == EventKind.LISTENING.value
+        ):  # (``listening`` itself, when it arrives, is not among those counted)
+            with self._events:
+                self._recorded += 1
+                self._events.notify_all()
 
     def _run(self) -> None:
         try:
@@ -108,7 +124,11 @@ class ServiceRecorder:
         """Wait for the last samples (at most ``DRAIN_TIMEOUT_S``), finish the file; raise
         what stopped the recorder, if anything did."""
         if self._thread.is_alive():
+            deadline = time.monotonic() + DRAIN_TIMEOUT_S
             self._gone.wait(DRAIN_TIMEOUT_S)
+            with self._events:  # the last events may arrive after the token went
+                self._events.wait_for(lambda: self._recorded >= self._emitted,
+                                      max(0.0, deadline - time.monotonic()))
             self._stop.set()
             self._thread.join(DRAIN_TIMEOUT_S + 5.0)
         if self._mcap is not None:

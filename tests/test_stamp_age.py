@@ -18,12 +18,13 @@ import time
 from pathlib import Path
 from typing import Any
 
+from conftest_sitl import Relay
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from pymavlink import mavutil
 from test_service_loopback import CONFIG, SPEEDUP, fly, stub_process
 from test_service_units import known_origin, local
-from test_trust_link import LIGHT, SCENARIO, Clock, Relay, assert_honest, wait_for
+from test_trust_link import LIGHT, SCENARIO, Clock, assert_honest, wait_for
 
 from ezcompanion.config import load_scenario
 from ezcompanion.records import Hold
@@ -32,6 +33,9 @@ from ezcompanion.service.events import EventKind
 from ezcompanion.service.loop import GuidanceLoop
 
 BUDGET_S = 0.25  # stale_after_s, the default
+# what the tlog's wall stamps may add at 5x on a loaded machine (90 ms of wall time between
+# reading a position and writing its setpoint); the old code's setpoints were 0.99-1.56 s old
+SLACK_S = 0.45
 
 
 def test_a_sample_that_waited_through_a_stall_is_as_old_as_its_stamp() -> None:
@@ -157,7 +161,7 @@ def test_frames_a_queue_held_and_let_go_at_once_drive_no_setpoint(tmp_path: Path
     after = [age for wall, age in setpoint_ages(tmp_path / "companion.tlog")
              if wall >= release_wall[0] - 0.1]  # fmt: skip
     assert after, "guidance never resumed"
-    assert max(after) <= BUDGET_S + 0.25, f"a setpoint from a position {max(after):.2f} s old"
+    assert max(after) <= BUDGET_S + SLACK_S, f"a setpoint from a position {max(after):.2f} s old"
     assert_honest(flight)
 
 
@@ -194,4 +198,4 @@ def test_a_stopped_and_continued_companion_sends_nothing_from_what_waited(
     before = [age for wall, age in ages if wall < stopped]
     after = [age for wall, age in ages if wall >= continued]
     assert before and after, "guidance did not run on both sides of the stop"
-    assert max(after) <= BUDGET_S + 0.25, f"a setpoint from a position {max(after):.2f} s old"
+    assert max(after) <= BUDGET_S + SLACK_S, f"a setpoint from a position {max(after):.2f} s old"

@@ -21,10 +21,16 @@ a bare echo loop costs several times its warm parts); their sums, and the ratios
 sets targets for (issue 13): service tick CPU <= 2x the sum of its parts, telemetry on <=
 1.2x off, round trip p99 <= 2x the echo loop's, start-up <= 1 s, memory <= 200 MB.
 
+The vehicle flies a straight track through the paper's zones whatever the setpoints say
+(the default): the backup law's worst case, most ticks without a certified backup. With
+``--follow`` it flies the velocity each setpoint commands (at once, an ideal vehicle): the
+law's work on a flight it steers. Either way the law's part ticks over the very positions
+the vehicle sent the service in its measured seconds.
+
 ``--startup N`` instead launches the service N times and prints only its start-up, with
 the imports and the law's load from numba's cache timed apart.
 
-    python bench/bench_service.py [--seconds S] [--rate 50] [--rates 50,200,1000]
+    python bench/bench_service.py [--seconds S] [--rate 50] [--rates 50,200,1000] [--follow]
     python bench/bench_service.py --startup 5
 """
 
@@ -100,7 +106,12 @@ def bench_scenario(rate_hz: float) -> dict[str, Any]:
 # --- the companions -----------------------------------------------------------------------
 
 
-def run_mode(mode: str, rate_hz: float, seconds: float) -> dict[str, float]:
+# one position the vehicle sent in the measured seconds: (stamp, north, east, vn, ve)
+Sample = tuple[float, float, float, float, float]
+
+
+def run_mode(mode: str, rate_hz: float, seconds: float, follow: bool = False
+             ) -> tuple[dict[str, float], list[Sample]]:
     port = free_udp_port()
     url = f"udpin:127.0.0.1:{port}"
     with tempfile.TemporaryDirectory() as tmp:
@@ -122,7 +133,7 @@ def run_mode(mode: str, rate_hz: float, seconds: float) -> dict[str, float]:
         try:
             wait_for_line(companion.stdout, "listening:")
             with Subscriber(endpoint) as subscriber:
-                result = _fly(port, rate_hz, seconds, companion.pid, launched)
+                result, track = _fly(port, rate_hz, seconds, companion.pid, launched, follow)
                 result["samples_received"] = subscriber.samples
             output = companion.stdout.read()
             inside = _internal_latencies(output)
@@ -133,7 +144,7 @@ def run_mode(mode: str, rate_hz: float, seconds: float) -> dict[str, float]:
     inside = inside[len(inside) // 10 :]  # steady state: drop the first tenth
     result["in_p50_ms"] = 1e3 * statistics.median(inside)
     result["in_p99_ms"] = 1e3 * percentile(inside, 0.99)
-    return result
+    return result, track
 
 
 class Subscriber:
@@ -185,7 +196,8 @@ def _internal_latencies(output: str) -> list[float]:
     raise RuntimeError("the timed companion printed no latencies")
 
 
-def _fly(port: int, rate_hz: float, seconds: float, pid: int, launched: float) -> dict[str, float]:
+def _fly(port: int, rate_hz: float, seconds: float, pid: int, launched: float,
+         follow: bool = False) -> tuple[dict[str, float], list[Sample]]:
     period = 1.0 / rate_hz
     origin = load_scenario(CONFIG).origin
     sent: list[float] = []  # send time of each position
@@ -200,6 +212,8 @@ def _fly(port: int, rate_hz: float, seconds: float, pid: int, launched: float) -
         cpu_start: float | None = None
         measured_from = start + _MEASURED_FROM_S  # let it find us, ask for streams, engage
         north, east = 8.0, -4.0
+        vn, ve = -0.832, 0.555  # the straight track's; with ``follow``, the last setpoint's
+        track: list[Sample] = []
         boot_ms = 0
         while True:
             now = time.perf_counter()
@@ -224,11 +238,13 @@ def _fly(port: int, rate_hz: float, seconds: float, pid: int, launched: float) -
                 next_hb += 1.0
             if now >= next_pos:
                 boot_ms += round(period * 1000) or 1
-                north -= 0.832 * period
-                east += 0.555 * period
+                north += vn * period
+                east += ve * period
                 frame = link.pack(
-                    mav.local_position_ned_encode(boot_ms, north, east, -20.0, -0.832, 0.555, 0.0)
+                    mav.local_position_ned_encode(boot_ms, north, east, -20.0, vn, ve, 0.0)
                 )
+                if now >= measured_from:
+                    track.append((boot_ms / 1000.0, north, east, vn, ve))
                 link.write(frame)
                 sent.append(time.perf_counter())
                 next_pos += period
@@ -241,6 +257,8 @@ def _fly(port: int, rate_hz: float, seconds: float, pid: int, launched: float) -
             for msg in link.recv_messages():
                 if msg.get_type() == "SET_POSITION_TARGET_LOCAL_NED":
                     arrived = time.perf_counter()
+                    if follow and math.hypot(msg.vx, msg.vy) > 0.0:
+                        vn, ve = msg.vx, msg.vy
                     if setpoints == 0:
                         first_setpoint_s = arrived - launched
                     setpoints += 1
@@ -259,7 +277,7 @@ def _fly(port: int, rate_hz: float, seconds: float, pid: int, launched: float) -
         "cpu_per_tick_us": 1e6 * cpu / max(ticks, 1),
         "peak_rss_mb": peak,
         "startup_s": first_setpoint_s,
-    }
+    }, track
 
 
 # --- start-up ----------------------------------------------------------------------------
@@ -381,13 +399,13 @@ def paced_call_us(function: Callable[[], object], period_s: float, number: int =
     return 1e6 * statistics.fmean(times)
 
 
-def parts(rate_hz: float, seconds: float, publish_rate_hz: float = 20.0
+def parts(rate_hz: float, track: list[Sample], publish_rate_hz: float = 20.0
           ) -> dict[str, tuple[float, float]]:
     """Each part of one service tick on one position: (warm and alone, once a period), us;
-    the law's tick over the same stretch of the vehicle's track as the service's measured
-    ``seconds`` (from 2 s on, again and again), where the backup law's work is what it was
-    in the service (the track flies into the paper's zones whatever the law asks: there no
-    backup is certified and the shield tries its lower rungs, ten times a certified tick);
+    the law's tick over the positions ``track`` the vehicle sent the service in its
+    measured seconds (again and again), so that the backup law's work is what it was in
+    the service (on the straight track into the zones no backup is certified on most ticks
+    and the shield tries its lower rungs, ten times a certified tick's cost);
     last, under ``CHAINED``, the parts of a tick with telemetry off called one after the
     other in one call (once a period, they share the cost of waking the caches, as a tick
     does; alone, each pays it)."""
@@ -440,18 +458,18 @@ def parts(rate_hz: float, seconds: float, publish_rate_hz: float = 20.0
         loop = GuidanceLoop(scenario, loop_rate_hz=rate_hz, stale_after_s=1.0)
         clock = iter(range(10**9))
         last: list[TickCommand] = []
-        window = max(1, round(seconds * rate_hz))  # the ticks of the service's measurement
+        window = max(1, len(track))  # the ticks of the service's measurement
 
         def tick() -> None:
             k = next(clock) % window
             if k == 0:
                 loop.reset()
-            t = _MEASURED_FROM_S + k / rate_hz
+            t, north, east, vn, ve = track[k]
             command = loop.tick(
                 VehicleState(
-                    north_m=8.0 - 0.832 * t, east_m=-4.0 + 0.555 * t, down_m=-20.0,
-                    velocity_north_m_s=-0.832, velocity_east_m_s=0.555, yaw_rad=2.55,
-                    position_time_s=t, attitude_time_s=t, position_source="local",
+                    north_m=north, east_m=east, down_m=-20.0, velocity_north_m_s=vn,
+                    velocity_east_m_s=ve, yaw_rad=math.atan2(ve, vn), position_time_s=t,
+                    attitude_time_s=t, position_source="local",
                 ),
                 t,
             )  # fmt: skip
@@ -508,12 +526,15 @@ def main() -> None:
     parser.add_argument(
         "--startup", type=int, default=0, metavar="N", help="only the start-up, N launches"
     )
+    parser.add_argument("--follow", action="store_true",
+                        help="the vehicle flies the setpoints (default: a straight track)")
     args = parser.parse_args()
     rate = args.rate
     if args.startup:
         startup(args.startup, rate)
         return
-    print(f"vehicle at {rate:g} Hz, {args.seconds:g} s per companion, on loopback UDP")
+    flown = "flying the setpoints" if args.follow else "on a straight track into the zones"
+    print(f"vehicle at {rate:g} Hz, {flown}, {args.seconds:g} s per companion, on loopback UDP")
     header = (
         f"{'companion':10s} {'setpts/s':>9s} {'in p50':>8s} {'in p99':>8s} {'rt p50':>8s} "
         f"{'rt p99':>8s} {'cpu':>7s} {'cpu/tick':>9s} {'peak rss':>9s} {'start-up':>9s} "
@@ -522,7 +543,10 @@ def main() -> None:
     print(header)
     rows = {}
     for mode in MODES:
-        r = rows[mode] = run_mode(mode, rate, args.seconds)
+        r, track = run_mode(mode, rate, args.seconds, args.follow)
+        rows[mode] = r
+        if mode == "service":
+            service_track = track
         extra = f"  ({r['samples_received']:.0f} samples received)" if mode == "telemetry" else ""
         print(
             f"{mode:10s} {r['setpoint_rate_hz']:9.1f} {r['in_p50_ms']:6.3f}ms "
@@ -531,7 +555,7 @@ def main() -> None:
             f"{r['startup_s']:8.2f}s {r['ticks_per_setpoint']:11.2f}{extra}",
             flush=True,
         )
-    costs = parts(rate, args.seconds)
+    costs = parts(rate, service_track)
     chained = costs.pop(CHAINED)
     print(f"\nparts of one tick, here: warm and alone, then once a {1e3 / rate:g} ms period")
     for name, (warm, paced) in costs.items():
@@ -583,7 +607,7 @@ def main() -> None:
         f"{telemetry['peak_rss_mb']:.0f} MB (target <= 200 MB)"
     )
     for extra_rate in (float(r) for r in args.rates.split(",") if r):
-        r = run_mode("service", extra_rate, args.seconds)
+        r, _ = run_mode("service", extra_rate, args.seconds, args.follow)
         print(
             f"service at {extra_rate:g} Hz: {r['setpoint_rate_hz']:.1f} setpoints/s, "
             f"{r['cpu_core_pct']:.1f}% of a core, rt p99 {r['rt_p99_ms']:.3f} ms",

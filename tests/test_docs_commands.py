@@ -109,6 +109,7 @@ CHECKS: dict[str, Check] = {
     "ezcompanion demo --profile px4": Check.PARSE,
     "python bench/bench_law.py --service --repeat 5": Check.PARSE,
     "python bench/bench_law.py --service": Check.PARSE,
+    "python bench/bench_service.py --seconds 20 --follow": Check.PARSE,
     "python bench/bench_service.py --startup 5": Check.PARSE,
     "python bench/bench_service.py --seconds 6": Check.PARSE,
     "python bench/bench_telemetry.py --seconds 6": Check.PARSE,

@@ -145,6 +145,11 @@ CHECKS: dict[str, Check] = {
     "--chatter-runs 100 --abandon px4 --no-figures --out validation-out-backup-10k": Check.PARSE,
     "ezcompanion validate --runs 10000 --seed 2029 --law backup --map-runs 0 --chatter-runs 0 "
     "--no-figures --out validation-out-backup-2029": Check.PARSE,
+    "ezcompanion validate --runs 600 --seed 2030 --law backup --map-runs 0 --chatter-runs 0 "
+    "--abandon px4 --no-figures --workers 1 --out validation-out-abandon-measured": Check.PARSE,
+    "ezcompanion validate --runs 600 --seed 2030 --law backup --set abandon_hold_s=1.15 "
+    "--set abandon_brake_m_s2=3.0 --map-runs 0 --chatter-runs 0 --abandon px4 --no-figures "
+    "--workers 1 --out validation-out-abandon-enforced": Check.PARSE,
     "ezcompanion validate --runs 2000 --seed 2026 --law backup --set shield_weight_fall_1_s=0 "
     "--set shield_robust_m=0 --map-runs 500 --chatter-runs 0 --abandon px4 --no-figures "
     "--workers 1 --out validation-out-memory-off": Check.PARSE,

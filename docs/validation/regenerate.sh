@@ -33,6 +33,17 @@ cp "$OUT-backup-10k/tables.md" "$OUT-backup-10k/summary.txt" docs/validation/bac
     --no-figures --no-progress --out "$OUT-backup-2029" $WHERE
 mkdir -p docs/validation/backup_10k_2029
 cp "$OUT-backup-2029/tables.md" "$OUT-backup-2029/summary.txt" docs/validation/backup_10k_2029/
+# the abandon check measured only, then enforced (the law given PX4's profile), 600 runs
+"$BIN/ezcompanion" validate --runs 600 --seed 2030 --law backup --map-runs 0 --chatter-runs 0 \
+    --abandon px4 --no-figures --workers 1 --no-progress --out "$OUT-abandon-measured"
+"$BIN/ezcompanion" validate --runs 600 --seed 2030 --law backup --set abandon_hold_s=1.15 \
+    --set abandon_brake_m_s2=3.0 --map-runs 0 --chatter-runs 0 --abandon px4 --no-figures \
+    --workers 1 --no-progress --out "$OUT-abandon-enforced"
+for check in measured enforced; do
+    mkdir -p "docs/validation/abandon_600/$check"
+    cp "$OUT-abandon-$check/tables.md" "$OUT-abandon-$check/summary.txt" \
+        "docs/validation/abandon_600/$check/"
+done
 # the shield's weight without and with its memory, the same 2,000 runs (no reserve)
 "$BIN/ezcompanion" validate --runs 2000 --seed 2026 --law backup --set shield_weight_fall_1_s=0 \
     --set shield_robust_m=0 --map-runs 500 --chatter-runs 0 --abandon px4 --no-figures \

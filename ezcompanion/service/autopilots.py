@@ -109,6 +109,9 @@ class AutopilotProfile:
         return profile
 
 
+# ArduPlane's GUIDED_P by default: 5000 cd/rad, a roll of 50 degrees per radian of course error
+GUIDED_P_DEFAULT_RAD_PER_RAD = math.radians(50.0)
+
 ARDUCOPTER = AutopilotProfile(
     name="ArduCopter", response_lag_s=0.6, abandon_turn_s=0.0, abandon_hold_s=3.0,
     abandon_brake_m_s2=2.5, timeout_parameter="GUID_TIMEOUT", brake_delay_s=0.6,
@@ -120,7 +123,7 @@ PX4_COPTER = AutopilotProfile(
 )  # fmt: skip
 ARDUPLANE = AutopilotProfile(
     name="ArduPlane", response_lag_s=1.0, turn_ratio=0.73, abandon_turn_s=6.0, abandon_hold_s=4.0,
-    abandon_brake_m_s2=0.0, heading_roll_gain=math.radians(50.0),  # GUIDED_P 5000 cd/rad
+    abandon_brake_m_s2=0.0, heading_roll_gain=GUIDED_P_DEFAULT_RAD_PER_RAD,
     heading_gain_parameter="GUIDED_P",
 )  # fmt: skip
 

@@ -53,7 +53,12 @@ import math
 from abc import ABC, abstractmethod
 
 from ezcompanion.frames import wrap_pi
-from ezcompanion.service.autopilots import ARDUPLANE, AutopilotProfile
+from ezcompanion.guidance.scaling import GRAVITY_M_S2
+from ezcompanion.service.autopilots import (
+    ARDUPLANE,
+    GUIDED_P_DEFAULT_RAD_PER_RAD,
+    AutopilotProfile,
+)
 from ezcompanion.service.loop import TickCommand
 from ezcompanion.service.settings import SetpointKind
 from ezcompanion.wire import Link, Message, course_command, s_to_ms, velocity_setpoint
@@ -78,10 +83,8 @@ _COURSE_HORIZON_S = 2.0
 # per radian) times the course error and only clips it at atan(p3 / g): the course is asked
 # far enough ahead that the demand passes the clip by this factor, so that p3 sets the turn,
 # but never more of turning ahead than the abandon path's turn (ArduPlane's profile)
-_GUIDED_P_RAD_PER_RAD = math.radians(50.0)
 _CLIP_MARGIN = 1.5
 _COURSE_HORIZON_MAX_S = ARDUPLANE.abandon_turn_s
-_GRAVITY_M_S2 = 9.80665
 _COURSE_MIN_INTERVAL_S = 0.1
 _MIN_ACCEL_LIMIT_RATIO = 0.02  # of a_max: the smallest limit we hand the autopilot
 _MAX_COURSE_LEAD_RAD = 0.5 * math.pi  # a course command never more than 90 degrees ahead
@@ -119,7 +122,7 @@ class Setpoints(ABC):
         self.ground_vehicle = ground_vehicle  # a rover or boat: no vertical velocity
         self.lead_s = 0.0  # the vehicle's course lag the setpoints cancel (0: none)
         self.turn_ratio = 1.0  # flown / asked lateral acceleration of a course command
-        self.heading_roll_gain = _GUIDED_P_RAD_PER_RAD  # ArduPlane's heading loop (rad/rad)
+        self.heading_roll_gain = GUIDED_P_DEFAULT_RAD_PER_RAD  # ArduPlane's heading loop
         self.reset()
 
     @abstractmethod
@@ -288,7 +291,7 @@ class CourseSetpoints(Setpoints):
 
 
 def course_lead_rad(turn_rate_rad_s: float, limit_m_s2: float,
-                    roll_gain: float = _GUIDED_P_RAD_PER_RAD) -> float:
+                    roll_gain: float = GUIDED_P_DEFAULT_RAD_PER_RAD) -> float:
     """How far ahead of the course to ask ArduPlane to turn to: the course
     ``_COURSE_HORIZON_S`` of turning ahead, or more where that leaves the roll its heading
     loop demands (GUIDED_P, ``roll_gain`` rad/rad, times the error) below the clip of the
@@ -300,7 +303,7 @@ def course_lead_rad(turn_rate_rad_s: float, limit_m_s2: float,
     rate = abs(turn_rate_rad_s)
     if rate == 0.0:
         return 0.0
-    clip = _CLIP_MARGIN * math.atan(limit_m_s2 / _GRAVITY_M_S2) / roll_gain
+    clip = _CLIP_MARGIN * math.atan(limit_m_s2 / GRAVITY_M_S2) / roll_gain
     lead = min(max(rate * _COURSE_HORIZON_S, clip), rate * _COURSE_HORIZON_MAX_S,
                _MAX_COURSE_LEAD_RAD)  # fmt: skip
     return math.copysign(lead, turn_rate_rad_s)
@@ -316,7 +319,7 @@ def course_turn_share(roll_gain: float, accel_m_s2: float, speed_m_s: float,
     22 m/s and 4.5 m/s^2)."""
     lead = min(accel_m_s2 / speed_m_s * _COURSE_HORIZON_MAX_S, _MAX_COURSE_LEAD_RAD)
     roll = min(roll_gain * lead, 0.5 * math.pi - 1e-9)
-    return min(1.0, turn_ratio * _GRAVITY_M_S2 * math.tan(roll) / accel_m_s2)
+    return min(1.0, turn_ratio * GRAVITY_M_S2 * math.tan(roll) / accel_m_s2)
 
 
 def make_setpoints(

@@ -674,6 +674,51 @@ def test_straights_closed_form_bounds_hold_along_its_flight(
     assert least <= upper + dt
 
 
+def _random_states(
+    count: int, seed: int
+) -> list[tuple[FloatArray, tuple[FloatArray, FloatArray, FloatArray, FloatArray, int],
+                float, float, float, float, float]]:  # fmt: skip
+    """``count`` states (settings with a drawn lag, 1-3 zones, position, course, a, a_v)
+    drawn among the zones, where exits are found and refused alike."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(count):
+        zones = ZoneSet.from_defenders([
+            Defender(north_m=rng.uniform(-5, 5), east_m=rng.uniform(-5, 5),
+                     range_m=rng.uniform(0.5, 2.5), capture_radius_m=rng.uniform(0, 1),
+                     speed_ratio=rng.uniform(0.2, 0.95))
+            for _ in range(rng.integers(1, 4))
+        ])  # fmt: skip
+        tau = float(rng.choice([0.0, 0.4, 0.8, 1.4]))
+        s = settings_for(dataclasses.replace(PARAMS, response_lag_s=tau))
+        a0 = rng.uniform(-0.99, 0.99)
+        av0 = rng.uniform(-0.99, 0.99) if tau > 0.0 else a0
+        z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
+        out.append((s, z, rng.uniform(-8, 8), rng.uniform(-8, 8), rng.uniform(-4, 4), a0, av0))
+    return out
+
+
+def test_the_running_screen_refuses_only_exits_whose_certificate_is_below_the_level() -> None:
+    """STRAIGHT's certificate asked only whether it reaches a level (a turn's exit) stops
+    with -inf once an upper bound on the rest of its flight is below the level: only where
+    the certificate computed in full (no level, sampled to the end) is below it too, so the
+    exit search decides as it did without the screen. Drawn with a lag (where the screen
+    at the exit itself is loosest); the screen must fire in some of them."""
+    dt = 0.02
+    fired = 0
+    for s, z, n, e, h, a, av in _random_states(400, 61):
+        full = bk.straight_certificate(s, *z, n, e, h, a, av, 1.0, dt, -math.inf, math.inf)
+        theta = bk.acceptance_level_m(s, z[2], z[3], 0, 1.0, dt)
+        for level in (theta, full + 0.05, full - 0.05):
+            value = bk.straight_certificate(s, *z, n, e, h, a, av, 1.0, dt, level, level)
+            if value == -math.inf:
+                fired += 1
+                assert full < level, (full, level)
+            elif value >= level:
+                assert full >= level
+    assert fired > 50
+
+
 # 5. the law at scale -------------------------------------------------------------------
 
 

@@ -241,18 +241,22 @@ def _lag_response(a0: float, a1: float, av0: float, tau: float, t: float, dt: fl
 
 
 @jit_inline
-def _fly(n: float, e: float, h: float, a0: float, a1: float, av0: float, speed: float,
-         tau: float, dt: float) -> tuple[float, float, float, float]:
+def _fly(n: float, e: float, h: float, cos_h: float, sin_h: float, a0: float, a1: float,
+         av0: float, speed: float, tau: float, dt: float
+         ) -> tuple[float, float, float, float, float, float]:
     """The vehicle over dt while the actuator moves linearly from a0 to a1: position by
-    Simpson's rule on the exact heading, heading and a_v exact."""  # fmt: skip
+    Simpson's rule on the exact heading, heading and a_v exact. ``cos_h``, ``sin_h``: of
+    ``h``, and returned for the heading after (a flight of many steps computes each
+    once)."""  # fmt: skip
     _, half = _lag_response(a0, a1, av0, tau, 0.5 * dt, dt)
     av1, full = _lag_response(a0, a1, av0, tau, dt, dt)
     hm = h + half / speed
     h1 = h + full / speed
+    cos_h1, sin_h1 = math.cos(h1), math.sin(h1)
     step = speed * dt / 6.0
-    n1 = n + step * (math.cos(h) + 4.0 * math.cos(hm) + math.cos(h1))
-    e1 = e + step * (math.sin(h) + 4.0 * math.sin(hm) + math.sin(h1))
-    return n1, e1, h1, av1
+    n1 = n + step * (cos_h + 4.0 * math.cos(hm) + cos_h1)
+    e1 = e + step * (sin_h + 4.0 * math.sin(hm) + sin_h1)
+    return n1, e1, h1, av1, cos_h1, sin_h1
 
 
 # ---------------------------------------------------------------------------------------
@@ -443,9 +447,13 @@ def straight_certificate(
     is returned. Sampling ends once the heading change still to come is below
     ``_RESIDUAL_RAD``, once the samples alone fall below the best so far (no later j can
     beat it), once a certificate reaches ``enough`` (the caller needs no more), or, returning
-    the running least gap, once that is below ``stop_below``. With an abandon profile the
-    tail is only taken at the end (the abandon paths of a turning flight are not in its
-    cone)."""  # fmt: skip
+    the running least gap, once that is below ``stop_below``; and, returning -inf, once an
+    upper bound on the least gap of the flight still to come (``_tube_gap``, from the
+    second sample on) is below ``stop_below`` (less round-off): every lower bound of the
+    whole flight's gap, the certificate included, is below it too, so a caller that only
+    asks whether the certificate reaches ``stop_below`` (a turn's exit) gets the same
+    answer without flying the rest. With an abandon profile the tail is only taken at the
+    end (the abandon paths of a turning flight are not in its cone)."""  # fmt: skip
     amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
     rate = _av_rate_bound(s)
     ticks = sample_ticks(s, speed, dt)
@@ -454,24 +462,35 @@ def straight_certificate(
     best = math.inf
     certified = -math.inf
     every = _TAIL_EVERY if enough < math.inf else 4 * _TAIL_EVERY
+    screen = stop_below - _SCREEN_SLACK * speed * speed / amax  # -inf: no screen
+    blocker = 0
+    ch, sh = math.cos(h), math.sin(h)
     for j in range(_MAX_SAMPLES):
         if early and j % every == 0:
             tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt)
             certified = max(certified, min(best, tail))
             if certified >= enough:
                 return certified
-        best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h), eps,
-                               speed, amax, rate, step, best)  # fmt: skip
+        best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, ch, sh, eps, speed, amax, rate,
+                               step, best)  # fmt: skip
         best = _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, best)
         if best < stop_below:
             return best
         if best <= certified:
             return certified
-        if _straight_to_come(s, a, av, speed, dt)[0] < _RESIDUAL_RAD:
+        delta, mid, w, drift = _straight_to_come(s, a, av, speed, dt)
+        if delta < _RESIDUAL_RAD:
             break
+        if j > 0 and screen > -math.inf:
+            # the rest of the flight from here, from above: where even that is below the
+            # level, so is every lower bound of the whole flight (the certificate)
+            upper, blocker = _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, h + mid, w, delta,
+                                       drift, True, blocker, screen)  # fmt: skip
+            if upper < screen:
+                return -math.inf
         for _ in range(ticks):
             a1 = _advance_straighten(a, dt, amax, p1, int(s[S_N]), s[S_CMD])
-            n, e, h, av = _fly(n, e, h, a, a1, av, speed, tau, dt)
+            n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a, a1, av, speed, tau, dt)
             a = a1
     tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt)
     return max(certified, min(best, tail))
@@ -537,9 +556,10 @@ def turn_certificate(
     converged = False
     screen_level = exit_level - _SCREEN_SLACK * speed * speed / amax
     blocker = 0  # the zone that stopped the last screen: the first one the next looks at
+    ch, sh = math.cos(h), math.sin(h)
     for j in range(_MAX_SAMPLES):
-        best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h), eps,
-                               speed, amax, rate, step, best)  # fmt: skip
+        best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, ch, sh, eps, speed, amax, rate,
+                               step, best)  # fmt: skip
         best = _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, best)
         if best < stop_below:
             return best
@@ -557,7 +577,7 @@ def turn_certificate(
         h0 = h
         for tick in range(ticks):
             a1 = advance_one(a, cmd, dt, amax, p1, int(s[S_N]), s[S_CMD])
-            n, e, h, av = _fly(n, e, h, a, a1, av, speed, tau, dt)
+            n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a, a1, av, speed, tau, dt)
             a = a1
             if every_step and tick < ticks - 1:
                 leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
@@ -571,8 +591,6 @@ def turn_certificate(
     widen = _residual_turn_rad(s, a, av, limit, speed)
     radius = speed * speed / abs(limit)
     side = 1.0 if limit > 0.0 else -1.0
-    ch = math.cos(h)
-    sh = math.sin(h)
     cn = n - side * radius * sh
     ce = e + side * radius * ch
     shift = widen * (2.0 * radius + speed * (tau + 1.0 / p1)) + speed * speed * abs(
@@ -707,12 +725,13 @@ def _fly_step(
         advance_one(a, command, dt, amax, p1, nn, cmd)
     )
     # the vehicle sees the actuator move from a to a_end; substeps interpolate it linearly
+    ch, sh = math.cos(h), math.sin(h)
     for i in range(steps):
         a0 = a + (a_end - a) * i / steps
         a1 = a + (a_end - a) * (i + 1) / steps
-        n, e, h, av = _fly(n, e, h, a0, a1, av, speed, s[S_TAU], sub)
-        best = min(best, point_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h),
-                                    s[S_EPS], speed, amax, rate, sub))  # fmt: skip
+        n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a0, a1, av, speed, s[S_TAU], sub)
+        best = min(best, point_gap(zn, ze, zmur, zreach, kz, n, e, ch, sh, s[S_EPS], speed,
+                                    amax, rate, sub))  # fmt: skip
     return best, n, e, h, a_end, av
 
 

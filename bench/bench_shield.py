@@ -1,0 +1,132 @@
+"""Where the backup law's shield spends a campaign's time: its step on the states a campaign
+really flies.
+
+Flies the first ``--runs`` runs of ``ezcompanion validate``'s distribution (``--seed``) in
+one batch, on one thread, with the backup law (the campaign's simulator, 40 s at 20 ms),
+and prints the CPU time an engagement. Then flies them again recording the shield's inputs
+at every ``--every``-th step (each vehicle's state, actuator, nominal command, held backup
+and weight, as ``GuidanceController`` hands them to ``backup.shield_batch``), and times
+``backup.shield_one`` on each state alone: median, p90, p99, the share of the time in the
+slowest 10% and 1% of the steps, and the mean step and share of the time per response lag.
+
+``--save FILE`` writes the per-run outcomes (``RunMetrics.as_arrays``) and ``--compare
+FILE`` says whether they are identical to a file saved before (on another tree: a change
+meant to cost less without changing a decision). The figures of docs/validation.md,
+"The default law, backup: 10,000 runs (seed 2029)", re-timed:
+
+    python bench/bench_shield.py --runs 1000 --seed 2029 --every 7
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from typing import Any
+
+import numpy as np
+
+import ezcompanion.guidance.controller as controller_module
+from ezcompanion.guidance import GuidanceParams
+from ezcompanion.guidance import backup as bk
+from ezcompanion.guidance._jit import JIT_ENABLED
+from ezcompanion.validation.batch import RunMetrics, law_policy, simulate_batch
+from ezcompanion.validation.scenarios import ScenarioBatch, ScenarioDistribution, draw_scenarios
+
+
+def fly(runs: ScenarioBatch, params: GuidanceParams) -> RunMetrics:
+    return simulate_batch(runs, law_policy(runs, params, "backup"),
+                          accel_max_m_s2=params.accel_max_m_s2)  # fmt: skip
+
+
+def recorded_states(
+    runs: ScenarioBatch, params: GuidanceParams, every: int
+) -> list[tuple[Any, ...]]:
+    """``shield_one``'s arguments for each vehicle at every ``every``-th shield call of a
+    flight of ``runs`` (the real kernel still flies every step)."""
+    states: list[tuple[Any, ...]] = []
+    calls = 0
+    kernel = controller_module.shield_batch
+
+    def recording(s: Any, zn: Any, ze: Any, zmur: Any, zreach: Any, n: Any, e: Any, h: Any,
+                  a: Any, av: Any, speed: Any, nominal: Any, active: Any, dt: float,
+                  current: Any, weight: Any, out: Any) -> None:  # fmt: skip
+        nonlocal calls
+        calls += 1
+        if calls % every == 0:
+            shared = zn.shape[0] == 1
+            for k in np.flatnonzero(active):
+                row = slice(0, 1) if shared else slice(k, k + 1)
+                zones = tuple(np.ascontiguousarray(x[row]) for x in (zn, ze, zmur, zreach))
+                states.append((s.copy(), *zones, 0, float(n[k]), float(e[k]), float(h[k]),
+                               float(a[k]), float(av[k]), float(speed[k]), float(nominal[k]),
+                               dt, int(current[k]), float(weight[k])))  # fmt: skip
+        kernel(s, zn, ze, zmur, zreach, n, e, h, a, av, speed, nominal, active, dt, current,
+               weight, out)  # fmt: skip
+
+    controller_module.shield_batch = recording  # type: ignore[assignment]
+    try:
+        fly(runs, params)
+    finally:
+        controller_module.shield_batch = kernel
+    return states
+
+
+def step_times_us(states: list[tuple[Any, ...]]) -> np.ndarray:
+    """``shield_one`` on each state alone (us), after one untimed call."""
+    out = np.empty((1, 6))
+    bk.shield_one(*states[0], out, 0)
+    times = np.empty(len(states))
+    for i, state in enumerate(states):
+        start = time.perf_counter()
+        bk.shield_one(*state, out, 0)
+        times[i] = time.perf_counter() - start
+    return times * 1e6
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", type=int, default=1000)
+    parser.add_argument("--seed", type=int, default=2029)
+    parser.add_argument("--every", type=int, default=7, help="record every N-th shield call")
+    parser.add_argument("--save", help="write the per-run outcomes here (.npz)")
+    parser.add_argument("--compare", help="compare the per-run outcomes with this file")
+    args = parser.parse_args()
+    if JIT_ENABLED:
+        from numba import set_num_threads
+
+        set_num_threads(1)
+    params = GuidanceParams()
+    runs = draw_scenarios(ScenarioDistribution(), args.seed, 0, args.runs)
+    fly(runs.subset(np.arange(2)), params)  # compile or load, untimed
+    started = time.process_time()
+    metrics = fly(runs, params)
+    cpu = time.process_time() - started
+    print(f"{args.runs} runs of seed {args.seed}, backup law, one batch on one thread: "
+          f"{cpu:.1f} s of CPU, {1e3 * cpu / args.runs:.1f} ms an engagement")  # fmt: skip
+    arrays = metrics.as_arrays()
+    if args.save:
+        np.savez(args.save, **arrays)
+    if args.compare:
+        before = np.load(args.compare)
+        differ = [k for k in arrays if not np.array_equal(arrays[k], before[k], equal_nan=True)]
+        print(f"outcomes against {args.compare}: "
+              f"{'identical' if not differ else 'DIFFERENT in ' + ', '.join(differ)}")  # fmt: skip
+
+    states = recorded_states(runs, params, args.every)
+    times = step_times_us(states)
+    slowest = np.sort(times)[::-1]
+    total = times.sum()
+    print(f"the shield's step alone on {len(states)} recorded states: median "
+          f"{np.median(times):.1f} us, p90 {np.percentile(times, 90):.1f} us, p99 "
+          f"{np.percentile(times, 99):.1f} us, mean {times.mean():.1f} us; the slowest 10% "
+          f"{slowest[: len(times) // 10].sum() / total:.0%} of the time, the slowest 1% "
+          f"{slowest[: len(times) // 100].sum() / total:.0%}")  # fmt: skip
+    lags = np.array([state[0][bk.S_TAU] for state in states])
+    for lag in np.unique(lags):
+        mask = lags == lag
+        print(f"  lag {lag:.1f} s: {int(mask.sum()):6d} states, mean {times[mask].mean():6.1f} us, "
+              f"{times[mask].sum() / total:.0%} of the time")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from ezcompanion.guidance._jit import jit, jit_inline
+from ezcompanion.guidance._jit import jit, jit_borrow, jit_inline
 from ezcompanion.guidance.lookahead import arc_end, point_gap_below, segment_gap
 from ezcompanion.guidance.params import GuidanceParams
 from ezcompanion.guidance.zones import ZoneSet
@@ -96,7 +96,7 @@ def abandon_gap_m(
     return out.reshape(shape)
 
 
-@jit  # on its own, not inlined: its copies took a share of each certificate's compile
+@jit_borrow  # on its own, not inlined: its copies took a share of each certificate's compile
 def abandon_gap(
     zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
     n: float, e: float, heading: float, accel: float, flown_accel: float, speed: float,

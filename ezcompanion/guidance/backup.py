@@ -74,7 +74,7 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-from ezcompanion.guidance._jit import jit, jit_inline
+from ezcompanion.guidance._jit import jit, jit_borrow, jit_inline
 from ezcompanion.guidance.abandon import abandon_gap
 from ezcompanion.guidance.actuator import actuator_rate, advance_one
 from ezcompanion.guidance.lookahead import (
@@ -209,7 +209,7 @@ def _abandon(
 # 2. the model: actuator, lag, kinematics over one step with the actuator path given
 
 
-@jit
+@jit_borrow
 def _advance_straighten(a: float, dt_s: float, accel_max: float, p1: float, n: int,
                         limit: float) -> float:
     """The actuator over ``dt_s`` under the feedback a_c = -(limit / a_max) a, integrated
@@ -263,7 +263,7 @@ def _fly(n: float, e: float, h: float, cos_h: float, sin_h: float, a0: float, a1
 # 3-4. certificates of the backup policies
 
 
-@jit
+@jit_borrow
 def _turn_limit(s: FloatArray, sign: float) -> float:
     """The fixed point a* of the saturation model under the held command sign * C."""
     amax, p1, n, cmd = s[S_AMAX], s[S_P1], int(s[S_N]), s[S_CMD]
@@ -275,7 +275,7 @@ def _turn_limit(s: FloatArray, sign: float) -> float:
     return a
 
 
-@jit
+@jit_borrow
 def sample_ticks(s: FloatArray, speed: float, dt: float) -> int:
     """Control steps per certificate sample: the sample step m dt is the largest multiple of
     the control step within ``prediction_step_ratio`` v / a_max (at least one step), so that
@@ -284,7 +284,7 @@ def sample_ticks(s: FloatArray, speed: float, dt: float) -> int:
     return max(1, ticks)
 
 
-@jit
+@jit_borrow
 def acceptance_level_m(s: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
                        speed: float, dt: float) -> float:
     """theta: the largest inter-sample dip (``_dip``) of any zone at the certificates' sample
@@ -409,7 +409,7 @@ def _tube_gap(
     return best, which
 
 
-@jit  # on its own, not inlined: two inlined copies took most of straight_certificate's compile
+@jit_borrow
 def _straight_tail(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
@@ -433,7 +433,7 @@ def _straight_tail(
     return max(cone, tube)
 
 
-@jit
+@jit_borrow
 def straight_certificate(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
@@ -510,7 +510,7 @@ def _straight_upper_bound(
                      below)  # fmt: skip
 
 
-@jit  # on its own, not inlined: two inlined copies took most of turn_certificate's compile
+@jit_borrow
 def _exit_here(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
@@ -529,7 +529,7 @@ def _exit_here(
     return leave, blocker
 
 
-@jit
+@jit_borrow
 def turn_certificate(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, policy: int, n: float, e: float, h: float, a: float, av: float, speed: float,
@@ -596,8 +596,11 @@ def turn_certificate(
     shift = widen * (2.0 * radius + speed * (tau + 1.0 / p1)) + speed * speed * abs(
         a - limit
     ) / (limit * limit)
+    widest = -math.inf  # the largest mu R (a loop: no array made)
+    for i in range(zmur.shape[1]):
+        widest = max(widest, zmur[kz, i])
     tail = annulus_gap(zn, ze, zmur, zreach, kz, cn, ce, radius, -1.0, 0.0, eps,
-                        shift + widen * np.max(zmur[kz]))  # fmt: skip
+                        shift + widen * widest)  # fmt: skip
     hold = s[S_AB_HOLD]
     if hold > 0.0:
         brake = s[S_AB_BRAKE]
@@ -607,7 +610,7 @@ def turn_certificate(
     return min(best, tail)
 
 
-@jit
+@jit_borrow
 def backup_certificates(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
@@ -662,7 +665,7 @@ def exit_level_m(s: FloatArray, policy: int, theta: float) -> float:
     return rung_level_m(s, (policy - BACKUP_RUNG0) // 2 + 1, theta) - theta
 
 
-@jit
+@jit_borrow
 def rung_certificates(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
@@ -702,7 +705,7 @@ def rung_certificates(
 # 5. the shield step
 
 
-@jit
+@jit_borrow
 def _fly_step(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, policy: int, command: float, n: float, e: float, h: float, a: float, av: float,
@@ -735,7 +738,7 @@ def _fly_step(
     return best, n, e, h, a_end, av
 
 
-@jit
+@jit_borrow
 def _ahead(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, command: float, n: float, e: float, h: float, a: float, av: float, speed: float,
@@ -752,7 +755,7 @@ def _ahead(
     return min(certs[which], gap), which, a1, av1
 
 
-@jit
+@jit_borrow
 def backup_command(s: FloatArray, policy: int, a: float) -> float:
     """The actuator command of a backup policy at actuator state ``a``."""
     cmd = s[S_CMD]
@@ -877,7 +880,7 @@ def shield_batch(
 # 6. a start from rest
 
 
-@jit
+@jit_borrow
 def rest_need_m(s: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int, speed: float,
                 dt: float) -> float:
     """How far a line from rest must clear the margin (``rest_line_gap_m``) for STRAIGHT,
@@ -887,7 +890,7 @@ def rest_need_m(s: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int, sp
     return float(2.0 * theta + (s[S_ROBUST] if s[S_TAU] > 0.0 else 0.0))
 
 
-@jit
+@jit_borrow
 def rest_line_gap_m(s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray,
                     zreach: FloatArray, kz: int, n: float, e: float, h: float) -> float:
     """The gap (margin subtracted) of the line p + x u(h), x >= 0, to the reach discs.
@@ -901,7 +904,7 @@ def rest_line_gap_m(s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatAr
                              math.inf, True, s[S_EPS], 0.0))  # fmt: skip
 
 
-@jit
+@jit_borrow
 def rest_course(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, yaw: float, speed: float, dt: float, drift_m: float,

@@ -18,7 +18,7 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-from ezcompanion.guidance._jit import jit, jit_inline
+from ezcompanion.guidance._jit import jit_borrow, jit_inline
 
 __all__ = [
     "annulus_gap", "arc_end", "dip", "lookahead_gap", "point_gap", "point_gap_below", "segment_gap",
@@ -123,7 +123,7 @@ def segment_gap(
     return best
 
 
-@jit
+@jit_borrow
 def annulus_gap(
     zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
     cn: float, ce: float, radius_m: float, inner_ahead_m: float, outer_ahead_m: float,

@@ -498,27 +498,38 @@ def best_value(
     return float(certs.max()), single, theta
 
 
-@st.composite
-def close_starts(draw: st.DrawFn) -> Engagement:
-    """An engagement that starts next to a zone, heading into it: where no backup may be
-    certified (the user's start: the vehicle is already short of the margin, or will be)."""
-    zones, params, _start, nominal, dt = draw(engagements())
-    i = draw(st.integers(0, zones.north_m.shape[1] - 1))
-    bearing = draw(st.floats(-math.pi, math.pi))
-    out = float(zones.reach_m[0, i] + zones.mu_range_m[0, i]) + draw(st.floats(0.0, 0.6))
+def close_start(rng: np.random.Generator) -> Engagement:
+    """An engagement (drawn as ``engagements`` draws one) that starts next to a zone, heading
+    into it: where no backup may be certified (the user's start: the vehicle is already
+    short of the margin, or will be)."""
+    zones = ZoneSet.from_defenders([
+        Defender(north_m=rng.uniform(-6, 6), east_m=rng.uniform(-6, 6),
+                 range_m=rng.uniform(0.5, 2.5), capture_radius_m=rng.uniform(0, 1),
+                 speed_ratio=rng.uniform(0.2, 0.95))
+        for _ in range(rng.integers(1, 4))
+    ])  # fmt: skip
+    params = dataclasses.replace(
+        PARAMS, response_lag_s=float(rng.choice([0.0, 0.0, 0.3, 1.2])),
+        shield_weight_fall_1_s=float(rng.choice([PARAMS.shield_weight_fall_1_s, 0.0, 20.0])),
+        shield_robust_m=float(rng.choice([PARAMS.shield_robust_m, 0.0, 0.2])),
+    )  # fmt: skip
+    dt = float(rng.choice([0.02, 0.01, 0.05]))
+    i = int(rng.integers(0, zones.north_m.shape[1]))
+    bearing = rng.uniform(-math.pi, math.pi)
+    out = float(zones.reach_m[0, i] + zones.mu_range_m[0, i]) + rng.uniform(0.0, 0.6)
     north = float(zones.north_m[0, i]) + out * math.cos(bearing)
     east = float(zones.east_m[0, i]) + out * math.sin(bearing)
-    course = bearing + math.pi + draw(st.floats(-0.8, 0.8))  # towards the defender, roughly
-    start = (north, east, course, draw(st.floats(-0.5, 0.5)))
-    return zones, params, start, nominal, dt
+    course = bearing + math.pi + rng.uniform(-0.8, 0.8)  # towards the defender, roughly
+    cmd = params.command_limit_m_s3
+    nominal: list[float] = []
+    while len(nominal) < 4.0 / dt:  # bounded commands held for a few steps, often at the limit
+        value = rng.choice([-cmd, cmd, 0.0]) if rng.random() < 0.5 else rng.uniform(-cmd, cmd)
+        nominal += [float(value)] * int(rng.integers(1, 41))
+    start = (north, east, course, rng.uniform(-0.5, 0.5))
+    return zones, params, start, nominal[: int(4.0 / dt)], dt
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.filter_too_much,
-                                                                  HealthCheck.too_slow])
-@given(case=close_starts())
-def test_with_no_backup_certified_the_flight_comes_no_nearer_than_the_best_value(
-    case: Engagement,
-) -> None:
+def test_with_no_backup_certified_the_flight_comes_no_nearer_than_the_best_value() -> None:
     """The degraded claim (docs/guidance.md, step 5): where no backup is certified at the
     start, the shield holds the backup of best value, the lower rungs' turns included (a
     turn of rung r looks for its exit at l = theta - r eps / 2, leaves at l - theta, and is
@@ -526,13 +537,24 @@ def test_with_no_backup_certified_the_flight_comes_no_nearer_than_the_best_value
     comes below that
     value less theta (and the tail's widening, 0.01 m): it changes backup only for one
     better by 2 theta, and the nominal only flies where a backup is certified again. So a
-    value of theta - margin plus the widening keeps the vehicle outside every zone."""
-    zones, params, start, nominal, dt = case
-    value, single, theta = best_value(zones, params, start, dt)
-    assume(value < theta)  # nothing certified: outside the first claim
-    assume(value > single + 2.0 * theta)  # and a lower rung is the best backup
-    least, _weights, _, _ = run_shield(zones, params, start, nominal, dt)
-    assert least - params.shield_margin_m >= value - theta - 0.01
+    value of theta - margin plus the widening keeps the vehicle outside every zone.
+
+    Such starts are rare among close ones (about 1 in 100), so they are drawn from a seeded
+    stream until 20 are found (a property test's filter found none on some orders of the
+    suite: the examples it drew then depended on what else was collected)."""
+    rng = np.random.default_rng(2027)
+    flown = 0
+    for _ in range(6000):
+        zones, params, start, nominal, dt = close_start(rng)
+        value, single, theta = best_value(zones, params, start, dt)
+        if not theta > value > single + 2.0 * theta:
+            continue  # a backup is certified (the first claim), or a single one is the best
+        least, _weights, _, _ = run_shield(zones, params, start, nominal, dt)
+        assert least - params.shield_margin_m >= value - theta - 0.01, (start, value, least)
+        flown += 1
+        if flown == 20:
+            break
+    assert flown == 20
 
 
 def test_a_start_short_of_the_margin_turns_away_at_a_lower_rung_and_stays_out() -> None:

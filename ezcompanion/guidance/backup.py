@@ -209,7 +209,7 @@ def _abandon(
 # 2. the model: actuator, lag, kinematics over one step with the actuator path given
 
 
-@jit_borrow
+@jit_inline  # inlined: its constants (gain, substeps) are then computed once per flight
 def _advance_straighten(a: float, dt_s: float, accel_max: float, p1: float, n: int,
                         limit: float) -> float:
     """The actuator over ``dt_s`` under the feedback a_c = -(limit / a_max) a, integrated

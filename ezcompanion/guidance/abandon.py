@@ -195,18 +195,19 @@ def _lagged_straight(
         step = sampled_t / count
         a_abs = abs(flown_accel)
         rate = a_abs / lag_s
-        hj = h
+        cos_j, sin_j = math.cos(h), math.sin(h)  # of each sample's course, computed once
         for j in range(count + 1):
-            best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, math.cos(hj), math.sin(hj),
-                                   margin_m, speed, a_abs, rate, step, best)  # fmt: skip
+            best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, cos_j, sin_j, margin_m,
+                                   speed, a_abs, rate, step, best)  # fmt: skip
             if j == count:
                 break
             hm = _heading_at(h, lead, lag_s, (j + 0.5) * step)
             h1 = _heading_at(h, lead, lag_s, (j + 1) * step)
+            cos_1, sin_1 = math.cos(h1), math.sin(h1)
             f = speed * step / 6.0
-            n += f * (math.cos(hj) + 4.0 * math.cos(hm) + math.cos(h1))
-            e += f * (math.sin(hj) + 4.0 * math.sin(hm) + math.sin(h1))
-            hj = h1
+            n += f * (cos_j + 4.0 * math.cos(hm) + cos_1)
+            e += f * (sin_j + 4.0 * math.sin(hm) + sin_1)
+            cos_j, sin_j = cos_1, sin_1
     h_from = _heading_at(h, lead, lag_s, sampled_t)
     rest = speed * (hold_s - sampled_t) + (0.5 * speed * speed / brake if brake > 0.0 else 0.0)
     tail = _lagged_tail(zn, ze, zmur, zreach, kz, n, e, h_from, h_to, rest, brake > 0.0,

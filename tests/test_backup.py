@@ -80,6 +80,17 @@ def layouts(draw: st.DrawFn) -> ZoneSet:
     return ZoneSet.from_defenders(defenders(draw, draw(st.integers(1, 3))))
 
 
+def random_layout(rng: np.random.Generator, extent_m: float) -> ZoneSet:
+    """1 to 3 defenders drawn as ``defenders`` draws them, centred within +-``extent_m``
+    (for the tests that draw from a seeded stream rather than with hypothesis)."""
+    return ZoneSet.from_defenders([
+        Defender(north_m=rng.uniform(-extent_m, extent_m),
+                 east_m=rng.uniform(-extent_m, extent_m), range_m=rng.uniform(0.5, 2.5),
+                 capture_radius_m=rng.uniform(0, 1), speed_ratio=rng.uniform(0.2, 0.95))
+        for _ in range(rng.integers(1, 4))
+    ])  # fmt: skip
+
+
 # 1. the zones as discs ------------------------------------------------------------------
 
 
@@ -502,12 +513,7 @@ def close_start(rng: np.random.Generator) -> Engagement:
     """An engagement (drawn as ``engagements`` draws one) that starts next to a zone, heading
     into it: where no backup may be certified (the user's start: the vehicle is already
     short of the margin, or will be)."""
-    zones = ZoneSet.from_defenders([
-        Defender(north_m=rng.uniform(-6, 6), east_m=rng.uniform(-6, 6),
-                 range_m=rng.uniform(0.5, 2.5), capture_radius_m=rng.uniform(0, 1),
-                 speed_ratio=rng.uniform(0.2, 0.95))
-        for _ in range(rng.integers(1, 4))
-    ])  # fmt: skip
+    zones = random_layout(rng, 6.0)
     params = dataclasses.replace(
         PARAMS, response_lag_s=float(rng.choice([0.0, 0.0, 0.3, 1.2])),
         shield_weight_fall_1_s=float(rng.choice([PARAMS.shield_weight_fall_1_s, 0.0, 20.0])),
@@ -705,12 +711,7 @@ def _random_states(
     rng = np.random.default_rng(seed)
     out = []
     for _ in range(count):
-        zones = ZoneSet.from_defenders([
-            Defender(north_m=rng.uniform(-5, 5), east_m=rng.uniform(-5, 5),
-                     range_m=rng.uniform(0.5, 2.5), capture_radius_m=rng.uniform(0, 1),
-                     speed_ratio=rng.uniform(0.2, 0.95))
-            for _ in range(rng.integers(1, 4))
-        ])  # fmt: skip
+        zones = random_layout(rng, 5.0)
         tau = float(rng.choice([0.0, 0.4, 0.8, 1.4]))
         s = settings_for(dataclasses.replace(PARAMS, response_lag_s=tau))
         a0 = rng.uniform(-0.99, 0.99)

@@ -409,7 +409,7 @@ def _tube_gap(
     return best, which
 
 
-@jit_borrow
+@jit_borrow  # on its own, not inlined: two inlined copies took most of its callers' compile
 def _straight_tail(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
@@ -510,7 +510,7 @@ def _straight_upper_bound(
                      below)  # fmt: skip
 
 
-@jit_borrow
+@jit_borrow  # on its own, not inlined: two inlined copies took most of its callers' compile
 def _exit_here(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,

@@ -725,7 +725,7 @@ def test_the_running_screen_refuses_only_exits_whose_certificate_is_below_the_le
     """STRAIGHT's certificate asked only whether it reaches a level (a turn's exit) stops
     with -inf once an upper bound on the rest of its flight is below the level: only where
     the certificate computed in full (no level, sampled to the end) is below it too, so the
-    exit search decides as it did without the screen. Drawn with a lag (where the screen
+    exit search decides as it did without the screen. Drawn with lags up to 1.4 s (where the screen
     at the exit itself is loosest); the screen must fire in some of them."""
     dt = 0.02
     fired = 0

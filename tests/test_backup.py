@@ -657,7 +657,7 @@ def test_the_straightening_integral_bounds_the_actuator_as_flown(dt: float) -> N
                                         PARAMS.actuator_n, PARAMS.command_limit_m_s3)  # fmt: skip
             flown += 0.5 * (a + a1) * dt
             a = a1
-        lo, hi = bk._straighten_integral(s, a0 * amax, dt)
+        lo, hi = bk._straighten_integral(s, a0 * amax, bk._trapezoid_excess(s, dt))
         assert lo <= flown <= hi, (a0, lo, flown, hi)
         assert hi <= 1.35 * lo  # and tight: what lets the tail close early
 
@@ -680,7 +680,7 @@ def test_straights_closed_form_bounds_hold_along_its_flight(
     params = dataclasses.replace(PARAMS, response_lag_s=tau)
     s = settings_for(params)
     av0 = av0 if tau > 0.0 else a0
-    delta, mid, w, drift = bk._straight_to_come(s, a0, av0, 1.0, dt)
+    delta, mid, w, drift = bk._straight_to_come(s, a0, av0, 1.0, bk._trapezoid_excess(s, dt))
     z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
     n, e, h, a, av = n0, e0, h0, a0, av0
     least = lk.lookahead_gap(*z[:4], n, e, h, PARAMS.shield_margin_m)
@@ -769,7 +769,7 @@ def test_a_screen_that_stops_at_the_first_zone_below_its_level_decides_as_the_fu
     value where it is not, and the zone it names gives the value it returns. The level is
     drawn among the zones' own values (2 to 6 zones), where stopping early matters."""
     s = settings_for(PARAMS)
-    delta, mid, w, drift = bk._straight_to_come(s, a0, a0, 1.0, 0.02)
+    delta, mid, w, drift = bk._straight_to_come(s, a0, a0, 1.0, bk._trapezoid_excess(s, 0.02))
     z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
     args = (s, *z, n0, e0, h0 + mid, w, delta, drift, upper)
     full, _ = bk._tube_gap(*args, 0, -math.inf)

@@ -317,20 +317,30 @@ def _residual_turn_rad(s: FloatArray, a: float, av: float, limit: float, speed: 
 
 
 @jit_inline
-def _straighten_integral(s: FloatArray, a_abs: float, dt: float) -> tuple[float, float]:
+def _trapezoid_excess(s: FloatArray, dt: float) -> float:
+    """(x / 2) coth(x / 2), x = (k + p1) dt: how far the trapezoid of a decay at rate
+    k + p1, flown linearly between control steps ``dt`` apart, exceeds its integral (the same
+    for every step of a flight: computed once a flight, a tanh a sample having cost 5% of
+    the shield's time)."""
+    k = s[S_CMD] / s[S_AMAX]
+    x = (k + s[S_P1]) * dt
+    return 0.5 * x / math.tanh(0.5 * x) if x > 1e-9 else 1.0
+
+
+@jit_inline
+def _straighten_integral(s: FloatArray, a_abs: float, trapezoid: float) -> tuple[float, float]:
     """Bounds (lo, hi) on the integral of |a| over STRAIGHT's flight from |a| = ``a_abs``,
     as flown: the actuator decays without changing sign under a_c = -(C / a_max) a, at the
     rate r(a) = k (1 - (a / a_max)^n) + p1 (k = C / a_max), so the integral is
     int_0^|a| dx / r(x): for n = 2 in closed form, k (c^2 - x^2) / a_max^2 with
     c^2 = (k + p1) a_max^2 / k, giving a_max^2 / (2 k c) ln((c + |a|) / (c - |a|)). Flown,
     a is linear between control steps: over a decay at rate r the trapezoid exceeds the
-    integral by at most (x / 2) coth(x / 2) with x = (k + p1) dt, and the integrator's own
-    error stays within 1% (tests/test_backup.py checks both against the flown sequence).
-    Other n: the cruder |a| / r(|a|), and |a| / (k + p1) below."""
+    integral by at most ``trapezoid`` = (x / 2) coth(x / 2) with x = (k + p1) dt
+    (``_trapezoid_excess``), and the integrator's own error stays within 1%
+    (tests/test_backup.py checks both against the flown sequence). Other n: the cruder
+    |a| / r(|a|), and |a| / (k + p1) below."""
     amax, p1, nn = s[S_AMAX], s[S_P1], int(s[S_N])
     k = s[S_CMD] / amax
-    x = (k + p1) * dt
-    trapezoid = 0.5 * x / math.tanh(0.5 * x) if x > 1e-9 else 1.0
     if nn != 2:
         return 0.99 * a_abs / (k + p1), trapezoid * a_abs / (k * (1.0 - (a_abs / amax) ** nn) + p1)
     c = amax * math.sqrt((k + p1) / k)
@@ -340,9 +350,10 @@ def _straighten_integral(s: FloatArray, a_abs: float, dt: float) -> tuple[float,
 
 @jit_inline
 def _straight_to_come(
-    s: FloatArray, a: float, av: float, speed: float, dt: float
+    s: FloatArray, a: float, av: float, speed: float, trapezoid: float
 ) -> tuple[float, float, float, float]:
-    """What is left of the turn once STRAIGHT is flown from (a, a_v): (delta, mid, w, drift).
+    """What is left of the turn once STRAIGHT is flown from (a, a_v): (delta, mid, w, drift)
+    (``trapezoid``: ``_trapezoid_excess`` at the control step).
 
     The heading changes by the integral of a_v over v, and that integral is
     tau a_v + the integral of a (the lag keeps the area); with the integral of |a| within
@@ -353,7 +364,7 @@ def _straight_to_come(
     (the lateral drift is at most int (t' - t) |a_v(t')| dt', and the integral of t |a| is
     at most hi^2 / |a| because a decays faster the smaller it is)."""
     tau = s[S_TAU]
-    lo, hi = _straighten_integral(s, abs(a), dt)
+    lo, hi = _straighten_integral(s, abs(a), trapezoid)
     sign = 1.0 if a >= 0.0 else -1.0
     delta = (tau * abs(av) + hi) / speed
     mid = (tau * av + sign * 0.5 * (lo + hi)) / speed
@@ -421,7 +432,7 @@ def _straight_tail(
     heading (``_tube_gap``). The larger bound is taken. With an abandon profile, the cone
     alone and from min(mu R, v hold) ahead: the abandon paths from points of the line are
     parts of the line (used once the turn has died out)."""
-    delta, mid, w, drift = _straight_to_come(s, a, av, speed, dt)
+    delta, mid, w, drift = _straight_to_come(s, a, av, speed, _trapezoid_excess(s, dt))
     hold = s[S_AB_HOLD]
     start = speed * hold if hold > 0.0 else math.inf
     cone = segment_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h), start,
@@ -465,6 +476,7 @@ def straight_certificate(
     screen = stop_below - _SCREEN_SLACK * speed * speed / amax  # -inf: no screen
     blocker = 0
     ch, sh = math.cos(h), math.sin(h)
+    trapezoid = _trapezoid_excess(s, dt)
     for j in range(_MAX_SAMPLES):
         if early and j % every == 0:
             tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt)
@@ -478,7 +490,7 @@ def straight_certificate(
             return best
         if best <= certified:
             return certified
-        delta, mid, w, drift = _straight_to_come(s, a, av, speed, dt)
+        delta, mid, w, drift = _straight_to_come(s, a, av, speed, trapezoid)
         if delta < _RESIDUAL_RAD:
             break
         if j > 0 and screen > -math.inf:
@@ -505,7 +517,7 @@ def _straight_upper_bound(
     """An upper bound on the least gap of STRAIGHT's flight from this state, so on its
     certificate (which is below that gap): cheap, to screen a turn's exits. Stops below
     ``below``, from zone ``first`` round (``_tube_gap``)."""
-    delta, mid, w, drift = _straight_to_come(s, a, av, speed, dt)
+    delta, mid, w, drift = _straight_to_come(s, a, av, speed, _trapezoid_excess(s, dt))
     return _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, h + mid, w, delta, drift, True, first,
                      below)  # fmt: skip
 

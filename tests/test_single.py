@@ -22,9 +22,13 @@ from ezcompanion.guidance import (
     Target,
     _jit,
 )
-from ezcompanion.guidance._jit import JIT_ENABLED, cache_dir, kernel_fingerprint
+from ezcompanion.guidance._jit import JIT_ENABLED, cache_dir, kernel_fingerprint, kernels_cached
 from ezcompanion.guidance.backup import BACKUP_NONE
 from ezcompanion.guidance.single import step_one
+from ezcompanion.service import runner
+from ezcompanion.service.events import EventKind, EventLog
+from ezcompanion.service.runner import CompanionService
+from ezcompanion.service.settings import companion_settings
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
 SCENARIO = load_scenario(CONFIG / "paper_scenario1.yaml")
@@ -213,3 +217,31 @@ def test_the_kernel_cache_is_named_by_every_kernel_source(tmp_path: Path) -> Non
     assert cache_dir("/elsewhere") == f"/elsewhere/numba-{here}"
     cache_path = step_one._cache._impl.locator.get_cache_path()  # type: ignore[attr-defined]
     assert cache_path.startswith(config.CACHE_DIR)
+
+
+def test_a_cold_kernel_cache_is_seen_and_said_before_the_link_opens(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A first run after an install or an edit compiles the one-vehicle step (11 s idle,
+    over a minute on a busy machine) before the link opens: the companion says so first,
+    rather than sitting silent. The cache is seen cold exactly where numba has not indexed
+    the kernel; once this process has run the step it is warm."""
+    assert kernels_cached(directory=str(tmp_path)) is not JIT_ENABLED  # uncompiled: "warm"
+    (tmp_path / "guidance_0").mkdir()
+    (tmp_path / "guidance_0" / "single.step_one-110.py311.nbi").write_bytes(b"")
+    assert kernels_cached(directory=str(tmp_path))
+    assert kernels_cached("backup.shield_one", directory=str(tmp_path)) is not JIT_ENABLED
+    controller = GuidanceController(zones=SCENARIO.zones(), target=SCENARIO.target)
+    controller.reset()
+    controller.step_one(north_m=8.0, east_m=-4.0, course_rad=2.5, speed_m_s=1.0, dt_s=0.02)
+    assert kernels_cached()  # compiled (or loaded) here, so indexed
+
+    settings_ = companion_settings(SCENARIO, connect="udpin:127.0.0.1:14550")
+    said = []
+    for cached in (False, True):
+        monkeypatch.setattr(runner, "kernels_cached", lambda cached=cached: cached)
+        events = EventLog()
+        CompanionService(SCENARIO, settings_, events=events, telemetry=None)
+        said.append([e.message for e in events.of_kind(EventKind.WARNING)
+                     if "compiling the guidance kernels" in e.message])  # fmt: skip
+    assert len(said[0]) == 1 and said[1] == []

@@ -3,6 +3,7 @@
 No clock, I/O or logging in here: state and parameters in, command and diagnostics out.
 """
 
+from ezcompanion.guidance._jit import kernels_cached
 from ezcompanion.guidance.actuator import advance_actuator, max_actuator_step_s
 from ezcompanion.guidance.controller import (
     GuidanceController,
@@ -29,6 +30,7 @@ __all__ = [
     "advance_actuator",
     "evaluate_law",
     "ez_boundary_point",
+    "kernels_cached",
     "max_actuator_step_s",
     "pack_params",
 ]

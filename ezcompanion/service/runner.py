@@ -37,7 +37,7 @@ from ezcompanion import __version__
 from ezcompanion.config import Scenario, scenario_to_dict, scenario_update
 from ezcompanion.errors import ConfigError
 from ezcompanion.field import VehiclePlacement, place_fixed, placement_warnings
-from ezcompanion.guidance import LawName
+from ezcompanion.guidance import LawName, kernels_cached
 from ezcompanion.records import EventKind, TickCommand
 from ezcompanion.service.autopilots import AutopilotProfile
 from ezcompanion.service.clock import Clock, LockstepClock, ScaledClock
@@ -117,6 +117,11 @@ class CompanionService:
             self.clock, self._lockstep = clock, Lockstep(clock)
         else:
             self.clock = ScaledClock(settings.speedup)
+        if not kernels_cached():
+            self.events.emit(EventKind.WARNING, self.clock.now_s(), "compiling the guidance "
+                             "kernels into numba's cache (the first run after an install or "
+                             "an update: about 11 s on an idle 2-core machine, a minute on "
+                             "a busy one); the link opens after it")  # fmt: skip
         self.loop = GuidanceLoop(
             scenario,
             law=law,

@@ -109,7 +109,9 @@ def jit_borrow(function: F) -> F:
     arrays costs no atomic increment and decrement of each. In the shield, where
     certificates call one another once a sample, those took a third of the time (sampled
     with gdb; ``bench/bench_shield.py``). numba refuses to compile such a kernel if it
-    makes an array, so a change that needs one fails loudly, at compile time."""
+    makes an array, so a change that needs one fails loudly, at compile time. (It rests on
+    ``_nrt``, an internal numba option: a numba without it would refuse the kernel, loudly
+    too.)"""
     return _compile(function, _nrt=False)
 
 

@@ -9,18 +9,23 @@ and weight, as ``GuidanceController`` hands them to ``backup.shield_batch``), an
 ``backup.shield_one`` on each state alone: median, p90, p99, the share of the time in the
 slowest 10% and 1% of the steps, and the mean step and share of the time per response lag.
 
-``--save FILE`` writes the per-run outcomes (``RunMetrics.as_arrays``) and ``--compare
-FILE`` says whether they are identical to a file saved before (on another tree: a change
-meant to cost less without changing a decision). The figures of docs/validation.md,
-"The default law, backup: 10,000 runs (seed 2029)", re-timed:
+``--abandon PROFILE`` gives the law an autopilot's abandon path to check every setpoint
+against (``abandon.ABANDON_PROFILES``: what the service does with
+``companion.abandon_check``). ``--save FILE`` writes the per-run outcomes
+(``RunMetrics.as_arrays``) and ``--compare FILE`` says whether they are identical to a file
+saved before (on another tree: a change meant to cost less without changing a decision).
+The figures of docs/validation.md, "The default law, backup: 10,000 runs (seed 2029)",
+re-timed:
 
     python bench/bench_shield.py --runs 1000 --seed 2029 --every 7
+    python bench/bench_shield.py --runs 300 --seed 2030 --every 7 --abandon px4
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -29,6 +34,7 @@ import ezcompanion.guidance.controller as controller_module
 from ezcompanion.guidance import GuidanceParams
 from ezcompanion.guidance import backup as bk
 from ezcompanion.guidance._jit import JIT_ENABLED
+from ezcompanion.guidance.abandon import ABANDON_PROFILES
 from ezcompanion.validation.batch import RunMetrics, law_policy, simulate_batch
 from ezcompanion.validation.scenarios import ScenarioBatch, ScenarioDistribution, draw_scenarios
 
@@ -90,18 +96,25 @@ def main() -> None:
     parser.add_argument("--every", type=int, default=7, help="record every N-th shield call")
     parser.add_argument("--save", help="write the per-run outcomes here (.npz)")
     parser.add_argument("--compare", help="compare the per-run outcomes with this file")
+    parser.add_argument("--abandon", choices=sorted(ABANDON_PROFILES),
+                        help="check every setpoint against this autopilot's abandon path")
     args = parser.parse_args()
     if JIT_ENABLED:
         from numba import set_num_threads
 
         set_num_threads(1)
     params = GuidanceParams()
+    if args.abandon:
+        profile = ABANDON_PROFILES[args.abandon]
+        params = replace(params, abandon_turn_s=profile.turn_s, abandon_hold_s=profile.hold_s,
+                         abandon_brake_m_s2=profile.brake_m_s2)  # fmt: skip
     runs = draw_scenarios(ScenarioDistribution(), args.seed, 0, args.runs)
     fly(runs.subset(np.arange(2)), params)  # compile or load, untimed
     started = time.process_time()
     metrics = fly(runs, params)
     cpu = time.process_time() - started
-    print(f"{args.runs} runs of seed {args.seed}, backup law, one batch on one thread: "
+    checked = f", {args.abandon}'s abandon check" if args.abandon else ""
+    print(f"{args.runs} runs of seed {args.seed}, backup law{checked}, one batch on one thread: "
           f"{cpu:.1f} s of CPU, {1e3 * cpu / args.runs:.1f} ms an engagement")  # fmt: skip
     arrays = metrics.as_arrays()
     if args.save:

@@ -116,6 +116,7 @@ CHECKS: dict[str, Check] = {
     "python bench/bench_telemetry.py --seconds 5": Check.PARSE,
     "python bench/bench_uncertified.py --runs 10000 --seed 2027 --certified 600": Check.PARSE,
     "python bench/bench_shield.py --runs 1000 --seed 2029 --every 7": Check.PARSE,
+    "python bench/bench_shield.py --runs 300 --seed 2030 --every 7 --abandon px4": Check.PARSE,
     # docs/sitl_stub.md
     "sitl-stub --config config/paper_scenario1.yaml [--connect udpout:127.0.0.1:14550] "
     "[--speedup K] [--profile copter|plane|px4] [--truth-out truth.csv] [--duration S] "

@@ -72,7 +72,7 @@ def kernels_cached(kernel: str = "single.step_one", directory: str | None = None
     """Whether numba's cache (``directory``, by default this process's) holds ``kernel``
     (module.function, by default the service's one-vehicle step) compiled from these
     sources: False on the first run after an install or an edit, which compiles it (11 s on
-    an idle 2-core machine, over a minute on a busy one). True when nothing is compiled."""
+    an idle 2-core machine, longer on a busy one). True when nothing is compiled."""
     if not JIT_ENABLED:
         return True
     where = Path(directory if directory is not None else _numba_config.CACHE_DIR)  # type: ignore[attr-defined]

@@ -423,16 +423,17 @@ def _tube_gap(
 @jit_borrow  # on its own, not inlined: two inlined copies took most of its callers' compile
 def _straight_tail(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
-    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
+    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, trapezoid: float,
 ) -> float:
-    """The gap of all of STRAIGHT's flight from this state on, in closed form, from below:
+    """The gap of all of STRAIGHT's flight from this state on, in closed form, from below
+    (``trapezoid``: ``_trapezoid_excess`` at the control step):
     its headings stay within delta of h (``_straight_to_come``), so its look-ahead points
     lie in the cone of that half-angle about the ray from here, which ``segment_gap``
     widens for; and (no abandon profile) within the tube about the ray along the final
     heading (``_tube_gap``). The larger bound is taken. With an abandon profile, the cone
     alone and from min(mu R, v hold) ahead: the abandon paths from points of the line are
     parts of the line (used once the turn has died out)."""
-    delta, mid, w, drift = _straight_to_come(s, a, av, speed, _trapezoid_excess(s, dt))
+    delta, mid, w, drift = _straight_to_come(s, a, av, speed, trapezoid)
     hold = s[S_AB_HOLD]
     start = speed * hold if hold > 0.0 else math.inf
     cone = segment_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h), start,
@@ -479,7 +480,7 @@ def straight_certificate(
     trapezoid = _trapezoid_excess(s, dt)
     for j in range(_MAX_SAMPLES):
         if early and j % every == 0:
-            tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt)
+            tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, trapezoid)
             certified = max(certified, min(best, tail))
             if certified >= enough:
                 return certified
@@ -504,7 +505,7 @@ def straight_certificate(
             a1 = _advance_straighten(a, dt, amax, p1, int(s[S_N]), s[S_CMD])
             n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a, a1, av, speed, tau, dt)
             a = a1
-    tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt)
+    tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, trapezoid)
     return max(certified, min(best, tail))
 
 

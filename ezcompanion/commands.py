@@ -175,6 +175,9 @@ def run_service(
         down = service.session.link_down_reason  # a tcp: client that never reached a server
         why = f"no vehicle heard in {outcome.time_s:.1f} s" + (f": {down}" if down else "")
         raise LinkError("connect", settings.connect, why)
+    if service.session.rebooted:  # a vehicle failure: ended by _end_disarmed
+        raise LinkError("connect", settings.connect, "the vehicle rebooted during the "
+                        "engagement (heard again disarmed after a silence)")  # fmt: skip
     lost, restored = events.of_kind(EventKind.LINK_LOST), events.of_kind(EventKind.LINK_RESTORED)
     if lost and (not restored or restored[-1].time_s < lost[-1].time_s):
         raise LinkError(

@@ -15,7 +15,8 @@ name                code   meaning
 ``BAD_INPUT``       2      a scenario file, a section of it or a flag is invalid (argparse's
                            usage errors use 2 as well)
 ``LINK_FAILURE``    3      the MAVLink link or the vehicle failed: the endpoint cannot be
-                           opened, no vehicle was heard, or the link was lost at the end
+                           opened, no vehicle was heard, the link was lost at the end, or
+                           the vehicle rebooted during the engagement
 ``IO_ERROR``        4      a file cannot be read or written (an output directory that is not
                            writable, a missing recording)
 ``INTERNAL_ERROR``  70     a bug: an unexpected exception (``EX_SOFTWARE`` of sysexits.h);

@@ -64,6 +64,8 @@ class Hold(StrEnum):
     DISAGREE = "local and global positions disagree"
     ORIGIN = "the vehicle's origin changed during the engagement"
     SPOOF = "conflicting heartbeats from the vehicle's id"
+    DISARMED = "the vehicle disarmed during the engagement"
+    REBOOTED = "the vehicle rebooted during the engagement"
 
 
 @dataclass(frozen=True)

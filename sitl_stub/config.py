@@ -37,7 +37,7 @@ Layout (every key optional; see ``docs/sitl_stub.md``)::
                 vfr_hud_hz: 4}
       faults: {drop_rate, delay_s, jitter_s, duplicate_rate, reorder_rate, reorder_delay_s,
                freeze_start_s, freeze_duration_s, freeze_mode: silent | stale | link,
-               jump_at_s, jump_north_m, jump_east_m}
+               jump_at_s, jump_north_m, jump_east_m, reboot_at_s, reboot_s}
 
 Every number has a stated range (the error gives it); positions and offsets are held to the
 scenario's limit (``ezcompanion.config_limits.POSITION_LIMIT_M``, 100 km), so that what the
@@ -108,6 +108,11 @@ class Faults:
     jump_at_s: float = -1.0  # < 0 = no jump; from then on the reported position is offset
     jump_north_m: float = 0.0
     jump_east_m: float = 0.0
+    # < 0 = none; at reboot_at_s the autopilot goes down (disarmed, silent both ways) for
+    # reboot_s, then starts afresh: time_boot_ms from 0, its initial mode, disarmed, the
+    # streams at their defaults (a power cycle, a watchdog reset)
+    reboot_at_s: float = -1.0
+    reboot_s: float = 3.0
 
     def __post_init__(self) -> None:
         for name in ("drop_rate", "duplicate_rate", "reorder_rate"):
@@ -116,6 +121,8 @@ class Faults:
                      "freeze_duration_s"):
             _check(name, getattr(self, name), low=0.0, high=3600.0)
         _check("jump_at_s", self.jump_at_s, low=-1e6, high=1e6)
+        _check("reboot_at_s", self.reboot_at_s, low=-1e6, high=1e6)
+        _check("reboot_s", self.reboot_s, low=0.0, high=600.0)
         for name in ("jump_north_m", "jump_east_m"):
             _check(name, getattr(self, name), low=-POSITION_LIMIT_M, high=POSITION_LIMIT_M)
         if self.freeze_mode not in ("silent", "stale", "link"):

@@ -5,7 +5,9 @@ times faster than ``time.monotonic()``, advances the vehicle in fixed physics st
 the clock, sends the HEARTBEAT (1 Hz) and the telemetry streams when due, and otherwise
 sleeps in ``select`` on the link until the next thing is due or a message arrives. Incoming
 messages take effect at the simulated time they are read. ``time_boot_ms`` is the simulated
-time since the stub started.
+time since the stub started, or since its autopilot last rebooted (``faults.reboot_at_s``:
+down and silent for ``faults.reboot_s``, then up afresh, disarmed, in its initial mode, its
+streams at their defaults).
 
 With ``lockstep=True`` (``sitl-stub --lockstep``) the simulated clock also waits for the
 companion: it stops after every position sample and at the time the companion granted, and
@@ -29,6 +31,7 @@ from dataclasses import replace
 from pathlib import Path
 from types import TracebackType
 
+from ezcompanion.errors import ConfigError
 from ezcompanion.sim.kinematics import Wind
 from sitl_stub.autopilot import Autopilot
 from sitl_stub.config import StubConfig
@@ -93,6 +96,11 @@ class SitlStub:
         self._stale: VehicleState | None = None
         self._truth: TruthWriter | None = None
         self.lockstep: LockstepGate | None = LockstepGate() if lockstep else None
+        if lockstep and s.faults.reboot_at_s >= 0.0:
+            raise ConfigError("faults.reboot_at_s", s.faults.reboot_at_s,
+                              "a reboot restarts the clock that lockstep runs on: not both")
+        self._boot_s = 0.0  # the simulated time the autopilot last booted at
+        self.reboots = 0  # 1 once the autopilot has rebooted (faults.reboot_at_s)
 
     # ---- lifecycle ---------------------------------------------------------------------
     def start(self) -> SitlStub:
@@ -253,9 +261,35 @@ class SitlStub:
             pass
 
     def _link_down(self) -> bool:
-        """A ``link`` freeze: nothing goes out and nothing that comes in is heard."""
-        return self.faults.frozen(self._state.t_s) and (
-            self.config.settings.faults.freeze_mode == "link")
+        """A ``link`` freeze or a reboot: nothing goes out and nothing that comes in is
+        heard."""
+        link_freeze = self.config.settings.faults.freeze_mode == "link"
+        return self._rebooting(self._state.t_s) or (
+            link_freeze and self.faults.frozen(self._state.t_s))
+
+    def _rebooting(self, t_s: float) -> bool:
+        f = self.config.settings.faults
+        return 0.0 <= f.reboot_at_s <= t_s < f.reboot_at_s + f.reboot_s
+
+    def _power(self, t_s: float) -> None:
+        """The reboot of ``faults.reboot_at_s``: the autopilot goes down (disarmed, no
+        guidance), and ``reboot_s`` later boots afresh: a new clock, its initial mode, its
+        default streams, the origin sent again once set."""
+        f = self.config.settings.faults
+        assert self.autopilot is not None and self._link is not None
+        if self.reboots or f.reboot_at_s < 0.0 or t_s < f.reboot_at_s:
+            return
+        if self._rebooting(t_s):
+            self.autopilot.armed = False
+            return
+        self._boot_s = t_s
+        self.reboots = 1
+        self._scheduler = StreamScheduler(self.config.settings.streams,
+                                          self.config.max_stream_rate_hz)
+        self._scheduler.shift(t_s)
+        self.autopilot = Autopilot(self.config, self._scheduler, self._link.mav)
+        self.autopilot.armed = False
+        _log.info("rebooted at %.2f s", t_s)
 
     def _receive(self, link: StubLink) -> None:
         assert self.autopilot is not None
@@ -307,6 +341,8 @@ class SitlStub:
                 self._sim_s = new.t_s  # before any frame stamped at it goes out
             if self._record:
                 self.history.append(new)
+            self._power(new.t_s)
+            ap = self.autopilot
             if self._truth is not None:
                 self._truth.write(new, ap.mode.name, ap.armed)
             self._periodic(new.t_s)
@@ -332,6 +368,8 @@ class SitlStub:
         """Send one telemetry message about the current state, through the faults."""
         assert self._link is not None
         s = self.config.settings
+        if self._rebooting(stamp_s):
+            return
         if name == "LOCAL_POSITION_NED" and not (0.0 <= s.local_origin_after_s <= stamp_s):
             return  # no local origin yet (ArduPilot sends it only once the EKF has one)
         state = self._state
@@ -344,7 +382,7 @@ class SitlStub:
         else:
             self._stale = None
         north, east = self.faults.position_offset_m(stamp_s)
-        msg: Message = self._encoder.encode(name, state, stamp_s, north, east)
+        msg: Message = self._encoder.encode(name, state, stamp_s - self._boot_s, north, east)
         frame = self._link.pack(msg)
         if s.faults.any:
             self.faults.submit(frame, stamp_s)

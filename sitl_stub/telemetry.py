@@ -60,6 +60,11 @@ class StreamScheduler:
             interval = 1.0 / min(hz, max_rate_hz) if hz > 0.0 else None
             self._streams[name] = _Stream(interval, interval, interval or 0.0)
 
+    def shift(self, now_s: float) -> None:
+        """Start every stream afresh at ``now_s`` (an autopilot that just booted)."""
+        for stream in self._streams.values():
+            stream.next_due_s = now_s + (stream.interval_s or 0.0)
+
     def interval_s(self, name: str) -> float | None:
         """The current interval of ``name`` (None: not streamed)."""
         return self._streams[name].interval_s

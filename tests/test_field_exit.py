@@ -154,3 +154,23 @@ def test_each_vehicle_class_has_its_end_mode(
     (AUTO = 4; LOITER sub mode 3, RTL 5), from pymavlink's tables."""
     heartbeat = M.MAVLink_heartbeat_message(mav_type, autopilot, 0, 0, 0, 3)
     assert end_mode(OnExit(choice), heartbeat) == expected
+
+
+def test_a_vehicle_that_rebooted_exits_3_naming_the_reboot(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The loopback copter reboots mid-engagement (down 3.5 s, back disarmed): a vehicle
+    failure, said in one line, with the link failure's code."""
+    data = yaml.safe_load((CONFIG / "paper_scenario1.yaml").read_text())
+    data["sitl_stub"] = {**data.get("sitl_stub", {}),
+                         "faults": {"reboot_at_s": 4.0, "reboot_s": 3.5}}  # fmt: skip
+    config = tmp_path / "reboot.yaml"
+    config.write_text(yaml.safe_dump(data))
+    port = free_udp_port()
+    with stub_process(config, port, tmp_path / "truth.csv", "--initial-mode", "GUIDED"):
+        code = main(["run", "--config", str(config), "--connect", f"udpin:127.0.0.1:{port}",
+                     "--speedup", f"{SPEEDUP:g}", "--max-time", "30",
+                     "--no-telemetry"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 3, err
+    assert "the vehicle rebooted during the engagement" in err

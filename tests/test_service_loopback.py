@@ -430,3 +430,49 @@ def test_at_the_end_a_vehicle_still_guided_is_told_to_stop(tmp_path: Path) -> No
     while (msg := log.recv_match(type="SET_POSITION_TARGET_LOCAL_NED")) is not None:
         last = msg
     assert last is not None and (last.vx, last.vy, last.vz) == (0.0, 0.0, 0.0)
+
+
+@pytest.mark.parametrize(("reboot_s", "cause"), [(3.5, "rebooted"), (0.5, "disarmed")])
+def test_a_vehicle_that_reboots_or_disarms_ends_guidance_and_is_not_asked_back(
+    reboot_s: float, cause: str, tmp_path: Path
+) -> None:
+    """The loopback copter's autopilot goes down mid-engagement and comes back disarmed, its
+    clock from 0 (as an autopilot boots). Against ArduPlane SITL the companion asked the
+    rebooted, disarmed plane for GUIDED and ended on a spoof alarm. Here: heard again after
+    4 s unheard (the link lost) it is named a reboot; after 1 s (one heartbeat missed) a
+    disarm. Either way guidance ends at once, no mode is asked for, no brake is sent to a
+    disarmed vehicle, and the end mode leaves it alone."""
+    from pymavlink import mavutil
+
+    config = scenario_file(
+        tmp_path, sitl_stub={"faults": {"reboot_at_s": 4.0, "reboot_s": reboot_s}}
+    )
+    # it starts (and boots again) in LOITER: the companion asks for GUIDED at the start
+    flight = fly(config, tmp_path, start_mode="LOITER", max_time_s=30.0)
+    engaged = flight.events.of_kind(EventKind.ENGAGED)
+    assert engaged, "guidance never started before the reboot"
+    aborted = flight.events.of_kind(EventKind.ABORTED)
+    assert [e.data["cause"] for e in aborted] == [cause], [e.message for e in aborted]
+    assert ("rebooted" in aborted[0].message) == (cause == "rebooted")
+    assert not flight.outcome.intercepted
+    assert flight.service.session.armed is False
+    asked = [e for e in flight.events.of_kind(EventKind.MODE) if "requested" in e.data]
+    assert all(e.time_s <= engaged[0].time_s for e in asked)
+    on_exit = flight.events.of_kind(EventKind.ON_EXIT)
+    assert on_exit and "disarmed: left as it is" in on_exit[-1].message
+    # nothing sent to the vehicle after it was heard disarmed: no setpoint, brake or mode
+    log = mavutil.mavlink_connection(str(tmp_path / "companion.tlog"))
+    disarmed_at = None
+    after = []
+    while (msg := log.recv_match()) is not None:
+        kind = msg.get_type()
+        autopilot = kind == "HEARTBEAT" and msg.autopilot != mavutil.mavlink.MAV_AUTOPILOT_INVALID
+        if autopilot and disarmed_at is None and not (
+            msg.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+        ):
+            disarmed_at = msg._timestamp
+        elif disarmed_at is not None and kind in (
+            "SET_POSITION_TARGET_LOCAL_NED", "COMMAND_LONG"
+        ):
+            after.append(str(msg)[:120])
+    assert disarmed_at is not None and after == []

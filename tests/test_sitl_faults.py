@@ -1,16 +1,20 @@
 """Seeded telemetry faults, observed over UDP: loss, latency and jitter, duplication,
-reordering, a freeze (silent and stale) and a position jump; same seed, same faults."""
+reordering, a freeze (silent and stale), a position jump and a reboot; same seed, same
+faults."""
 
 from __future__ import annotations
 
 import collections
 import itertools
+import math
 
 import pytest
-from conftest_sitl import Gcs, gcs_link, running_stub, stamps_s
+from conftest_sitl import Gcs, gcs_link, make_config, running_stub, stamps_s
 
+from ezcompanion.errors import ConfigError
 from sitl_stub import Faults
 from sitl_stub.faults import FaultInjector
+from sitl_stub.server import SitlStub
 
 
 @pytest.fixture
@@ -89,6 +93,23 @@ def test_stale_freeze_repeats_old_values(gcs: Gcs) -> None:
     assert len(frozen) >= 15 and len({m.time_boot_ms for m in frozen}) == len(frozen)
     assert len({(m.x, m.y) for m in frozen}) == 1  # time goes on, the position does not
     assert abs(after[0].x - frozen[0].x) + abs(after[0].y - frozen[0].y) > 1.5  # 2 s at 1 m/s
+
+
+def test_a_reboot_is_silent_then_boots_disarmed_on_a_new_clock(gcs: Gcs) -> None:
+    faults = Faults(reboot_at_s=2.0, reboot_s=1.5)
+    got = _run(gcs, faults, until_s=5.0, speedup=20.0, types=("LOCAL_POSITION_NED", "HEARTBEAT"))
+    arrivals = [arrival for arrival, _ in got]
+    assert not [t for t in arrivals if 2.05 < t < 3.45]  # nothing while it reboots
+    armed = [bool(m.base_mode & 128) for _, m in got if m.get_type() == "HEARTBEAT"]
+    before = [m for t, m in got if t < 2.0 and m.get_type() == "LOCAL_POSITION_NED"]
+    after = [m for t, m in got if t > 3.5 and m.get_type() == "LOCAL_POSITION_NED"]
+    assert armed[0] and not armed[-1]  # it boots disarmed (the stub starts armed)
+    assert before and after
+    assert before[-1].time_boot_ms > 1800 and after[0].time_boot_ms < 300  # a new clock
+    # disarmed, the copter stops where it was
+    assert math.hypot(after[-1].vx, after[-1].vy) < 0.05
+    with pytest.raises(ConfigError, match=r"faults\.reboot_at_s"):
+        SitlStub(make_config(gcs.port, faults=faults), lockstep=True)
 
 
 def test_same_seed_same_faults(gcs: Gcs) -> None:

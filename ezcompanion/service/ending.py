@@ -21,9 +21,9 @@ climb rate, so with no RC (or the stick low) it descends; BRAKE holds position a
 altitude whatever the sticks say.
 
 The mode is asked for only of a vehicle the companion has sent setpoints to, while it is
-still in its guided mode (GUIDED, OFFBOARD), the link is up and one vehicle alone was heard
-(never after a ``vehicle_refused``): a vehicle a pilot (or a failsafe) has already taken
-elsewhere is left there. The request
+still in its guided mode (GUIDED, OFFBOARD), has not disarmed since (nor rebooted), the
+link is up and one vehicle alone was heard (never after a ``vehicle_refused``): a vehicle
+a pilot (or a failsafe) has already taken elsewhere is left there. The request
 (MAV_CMD_DO_SET_MODE) is repeated every ``_RETRY_S`` until it is acknowledged, at most
 ``_TRIES`` times, and then the vehicle must report the mode in a heartbeat within
 ``_CONFIRM_S``; a refusal, no answer or another mode is reported (an ``on_exit`` event with
@@ -129,6 +129,9 @@ def leave_vehicle(
     if not session.connected:
         return _report(events, now(), resolved, None, warn=True,
                        detail="link lost: the end mode cannot be asked for")  # fmt: skip
+    if session.disarmed is not None:
+        return _report(events, now(), resolved, None,
+                       detail="the vehicle is disarmed: left as it is")  # fmt: skip
     if not session.in_guided:
         return _report(events, now(), resolved, None,
                        detail=f"the vehicle is in {session.mode or 'an unknown mode'}, not "

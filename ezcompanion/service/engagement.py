@@ -96,8 +96,9 @@ class Engagement:
             return  # nothing to stop yet: no position has arrived since (re)connecting
         self.failsafe(now, result)
 
-    def failsafe(self, now: float, reason: Hold) -> None:
-        """Stop sending (once per failsafe) and say why."""
+    def failsafe(self, now: float, reason: Hold, *, brake_vehicle: bool = True) -> None:
+        """Stop sending (once per failsafe) and say why; tell the vehicle to stop unless
+        ``brake_vehicle`` is False (a vehicle that no longer flies setpoints)."""
         if self.failsafe_active:
             return
         self.failsafe_active = True
@@ -106,7 +107,7 @@ class Engagement:
         brake = None
         if self.setpoints is not None:
             self.setpoints.reset()
-            brake = self.setpoints.brake(now)
+            brake = self.setpoints.brake(now) if brake_vehicle else None
         if brake is not None:
             self._send(brake)
             self.brakes_sent += 1
@@ -119,14 +120,20 @@ class Engagement:
             braked=brake is not None,
         )
 
-    def abort(self, now: float, cause: Hold, lasted_s: float) -> None:
-        """End guidance for good: the input stayed untrusted for ``lasted_s``."""
-        self.failsafe(now, cause)
+    def abort(
+        self, now: float, cause: Hold, lasted_s: float = 0.0, *, why: str | None = None,
+        brake: bool = True,
+    ) -> None:
+        """End guidance for good: the input stayed untrusted for ``lasted_s`` (or ``why``);
+        ``brake``: tell the vehicle to stop (see :meth:`failsafe`)."""
+        self.failsafe(now, cause, brake_vehicle=brake)
+        if not brake:
+            self.pause(now)  # nor at the end (finish)
         self.done = True
         self.events.emit(
             EventKind.ABORTED,
             now,
-            f"{cause.value} for {lasted_s:.2f} s: guidance ended",
+            why or f"{cause.value} for {lasted_s:.2f} s: guidance ended",
             cause=cause.name.lower(),
             setpoints_sent=self.setpoints_sent,
         )

@@ -38,7 +38,7 @@ from ezcompanion.config import Scenario, scenario_to_dict, scenario_update
 from ezcompanion.errors import ConfigError
 from ezcompanion.field import VehiclePlacement, place_fixed, placement_warnings
 from ezcompanion.guidance import LawName, kernels_cached
-from ezcompanion.records import EventKind, TickCommand
+from ezcompanion.records import EventKind, Hold, TickCommand
 from ezcompanion.service.autopilots import AutopilotProfile
 from ezcompanion.service.clock import Clock, LockstepClock, ScaledClock
 from ezcompanion.service.ending import ExitReport, leave_vehicle
@@ -419,6 +419,17 @@ class CompanionService:
         if session.refused:
             self.phase = Phase.DONE
             return
+        if session.disarmed is not None and self.phase is not Phase.DONE:
+            self._end_disarmed(now, session.disarmed)
+            return
+        if session.disarm_pending and self.phase is Phase.GUIDING:
+            self.engagement.pause(now)  # no brake: a disarmed vehicle flies nothing
+            self.schedule.reset()
+            self.phase = Phase.WAITING
+            self.events.emit(EventKind.FAILSAFE, now, "the vehicle reports itself disarmed: "
+                             "guidance paused until it says so again (the end) or armed",
+                             reason="disarmed", setpoints_sent=self.setpoints_sent,
+                             braked=False)  # fmt: skip
         if self.phase in (Phase.WAITING, Phase.GUIDING) and not session.connected:
             self.engagement.pause(now, brake=self.phase is Phase.GUIDING)
             self.schedule.reset()
@@ -443,6 +454,7 @@ class CompanionService:
         if (
             self.phase is Phase.WAITING
             and session.in_guided
+            and not session.disarm_pending
             and session.frame_settled
             and self._placed(now)
         ):
@@ -469,6 +481,22 @@ class CompanionService:
                 f"autopilot's: put it back in {guided} to resume)",
                 left_for=session.mode,
             )  # fmt: skip
+
+    def _end_disarmed(self, now: float, disarmed: tuple[float, float]) -> None:
+        """The vehicle disarmed (or rebooted: it came back disarmed after a silence) after
+        guidance started: it cannot fly the engagement, and nothing is asked of it again."""
+        at_s, unheard_s = disarmed
+        if self.session.rebooted:
+            cause = Hold.REBOOTED
+            why = (f"the vehicle was heard again at {at_s:.1f} s after {unheard_s:.1f} s "
+                   "unheard, disarmed: it rebooted (or landed and disarmed while unheard); "
+                   "guidance ended")
+        else:
+            cause = Hold.DISARMED
+            why = (f"the vehicle reports itself disarmed since {at_s:.1f} s (landed, its "
+                   "pilot or a failsafe): guidance ended")
+        self.engagement.abort(now, cause, why=why, brake=False)
+        self.phase = Phase.DONE
 
     def _place_fixed(self, now: float) -> bool:
         """The positions the file gave as latitude and longitude placed as the vehicle's

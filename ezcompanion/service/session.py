@@ -27,6 +27,15 @@ is the engagement's (:mod:`ezcompanion.service.engagement`).
 3. With ``engage``, ask for GUIDED (OFFBOARD on PX4) every second while not in it. Never arm.
 4. No heartbeat from the vehicle for ``link_lost_after_s`` is a lost link: the address lock
    is released and discovery runs again, for the same system and component only.
+5. A vehicle that reports itself disarmed (HEARTBEAT base_mode without
+   MAV_MODE_FLAG_SAFETY_ARMED) after it was armed since guidance first started cannot fly
+   the engagement. One such heartbeat makes it :attr:`VehicleSession.disarm_pending` (the
+   runner pauses guidance, and nothing is asked of the vehicle); a second, ``FLIP_S`` or
+   more after the first with no armed one between, confirms it
+   (:attr:`VehicleSession.disarmed`: when, and whether it came back so after
+   ``_REBOOT_SILENCE_S`` unheard, a reboot: an autopilot always boots disarmed), and the
+   runner ends guidance. A forged disarmed heartbeat cannot confirm while the vehicle is
+   heard armed (at 1 Hz, within any ``FLIP_S``); an armed one clears the pending disarm.
 
 Trust (each refusal is an ``alarm`` event naming its ``cause``; see docs/service.md):
 frames claiming the vehicle's id from another address are refused (``foreign_address``);
@@ -52,7 +61,7 @@ from ezcompanion.service.settings import CompanionSettings, SetpointKind
 from ezcompanion.service.state import TelemetryState
 from ezcompanion.service.statustext import StatusTextAssembler
 from ezcompanion.service.streams import POSITIONS, StreamRequests
-from ezcompanion.service.trust import Alarms, HeartbeatJudge
+from ezcompanion.service.trust import FLIP_S, Alarms, HeartbeatJudge
 from ezcompanion.wire import (
     Address,
     Frame,
@@ -73,6 +82,9 @@ _SPOOF_HOLD_S = 3.0  # a heartbeat conflict holds guidance this long after the l
 _TELEMETRY_HOLD_S = 0.5  # a refused position holds guidance this long after the last one
 _ORIGIN_RETRY_S = 0.5
 _ORIGIN_TRIES = 6  # then the scenario's origin is assumed (with a warning)
+# heard again disarmed after this long unheard: a reboot (ArduPilot and PX4 send a heartbeat
+# a second and boot disarmed; a disarm within the stream is a landing, a pilot, a failsafe)
+_REBOOT_SILENCE_S = 2.5
 
 
 class VehicleSession(StreamRequests):
@@ -124,6 +136,13 @@ class VehicleSession(StreamRequests):
         self.parameters = ParameterReader(link, send)
         self.global_rate_hz = settings.telemetry_rate_hz  # what GLOBAL_POSITION_INT is asked
         self._global_paced_s = -math.inf
+        self.armed: bool | None = None  # as its last heartbeat says
+        self._engaged_once = False
+        # (when, seconds unheard before it) of the first heartbeat saying disarmed after the
+        # vehicle was armed since guidance first started (None: none, or an armed one since);
+        # kept in ``disarmed`` once a second heartbeat confirms it
+        self._disarm_seen: tuple[float, float] | None = None
+        self.disarmed: tuple[float, float] | None = None
 
     @property
     def setpoint_kind(self) -> SetpointKind:
@@ -144,7 +163,9 @@ class VehicleSession(StreamRequests):
         return self.guided_mode is not None and self.mode == self.guided_mode[0]
 
     def engaged(self, now: float) -> None:
-        """Guidance starts: other autopilots still refuse the lock for ``_DISCOVERY_S``."""
+        """Guidance starts: other autopilots still refuse the lock for ``_DISCOVERY_S``;
+        from now on a vehicle that disarms ends it."""
+        self._engaged_once = True
         if self._discovery_until_s is not None:
             self._discovery_until_s = min(self._discovery_until_s, now + _DISCOVERY_S)
 
@@ -325,11 +346,13 @@ class VehicleSession(StreamRequests):
         return True
 
     def _take_heartbeat(self, msg: Message, now: float) -> None:
+        self._judge_arming(msg, now)
         if not self.connected:
             if self.last_heartbeat_s > -math.inf:
                 self.events.emit(EventKind.LINK_RESTORED, now, "vehicle heard again")
             self.connected = True
-            self.request_streams(now)
+            if self._disarm_seen is None:  # nothing is asked of a vehicle that disarmed
+                self.request_streams(now)
             if self._origin_tries == 0:
                 self._next_origin_s = now
         self.last_heartbeat_s = now
@@ -340,6 +363,27 @@ class VehicleSession(StreamRequests):
                 self._judge.mode_changed(now)
             self.mode = name
             self.events.emit(EventKind.MODE, now, f"vehicle mode {name}", mode=name)
+
+    def _judge_arming(self, msg: Message, now: float) -> None:
+        armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+        seen = self._disarm_seen
+        if armed:
+            self._disarm_seen = None
+        elif seen is None and self._engaged_once and self.armed and self.disarmed is None:
+            self._disarm_seen = (now, now - self.last_heartbeat_s)
+        elif seen is not None and now - seen[0] >= FLIP_S:
+            self.disarmed = seen
+        self.armed = armed
+
+    @property
+    def disarm_pending(self) -> bool:
+        """Heard disarmed after it was armed in the engagement, not confirmed yet."""
+        return self._disarm_seen is not None and self.disarmed is None
+
+    @property
+    def rebooted(self) -> bool:
+        """The vehicle came back disarmed after ``_REBOOT_SILENCE_S`` or more unheard."""
+        return self.disarmed is not None and self.disarmed[1] >= _REBOOT_SILENCE_S
 
     # --- trust ----------------------------------------------------------------------------
 
@@ -362,6 +406,8 @@ class VehicleSession(StreamRequests):
         """Discovery, link health, the stream-rate check, the origin request and
         (``waiting`` for GUIDED) mode requests."""
         self._check_link(now)
+        if self._disarm_seen is not None:
+            return  # nothing is asked of a vehicle that disarmed
         self._check_rates(now)
         self._pace_global(now)
         self._request_origin(now)

@@ -1,0 +1,102 @@
+"""A vehicle that disarms, or reboots, during the engagement (``VehicleSession``'s arming
+judgement): one heartbeat saying disarmed makes it pending, a second ``FLIP_S`` or more
+later with no armed one between confirms it, named a reboot after 2.5 s unheard. A forged
+disarmed heartbeat between the vehicle's armed ones never confirms.
+
+Heartbeats are fed as frames from the vehicle's address to a session whose link is a real
+UDP socket on loopback (what the session sends goes to a listening link, counted)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import pytest
+from conftest_sitl import M, forger, frame
+from test_service_units import CONFIG
+
+from ezcompanion.config import load_scenario
+from ezcompanion.service.events import EventLog
+from ezcompanion.service.session import VehicleSession
+from ezcompanion.service.settings import companion_settings
+from ezcompanion.service.trust import FLIP_S
+from ezcompanion.wire import Frame, Link, open_link
+
+VEHICLE = ("127.0.0.1", 14555)  # the address the heartbeats claim to come from
+_MAV = forger()
+_READER = forger(245, 191)
+
+
+def heartbeat(armed: bool, mode: int = 4) -> Frame:
+    base = M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (M.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
+    msg = M.MAVLink_heartbeat_message(
+        M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA, base, mode, M.MAV_STATE_ACTIVE, 3
+    )
+    (decoded,) = _READER.parse_buffer(frame(_MAV, msg))
+    return Frame(decoded, VEHICLE)
+
+
+@contextmanager
+def session_and_vehicle() -> Iterator[tuple[VehicleSession, Link]]:
+    scenario = load_scenario(CONFIG)
+    with open_link("udpin:127.0.0.1:0", system_id=1, component_id=1) as vehicle:
+        host, port = vehicle.local_address or ("", 0)
+        settings = companion_settings(scenario, connect=f"udpout:{host}:{port}", engage=True)
+        with open_link(settings.connect, system_id=245, component_id=191) as link:
+            yield VehicleSession(scenario, settings, EventLog(), link, link.send), vehicle
+
+
+def sent_to(vehicle: Link) -> list[str]:
+    vehicle.wait_readable(0.2)
+    return [m.get_type() for m in vehicle.recv_messages()]
+
+
+def engaged(session: VehicleSession) -> float:
+    """Armed heartbeats at 0, 1 and 2 s, guidance started at 2 s."""
+    for t in (0.0, 1.0, 2.0):
+        session.on_frame(heartbeat(armed=True), t)
+    session.engaged(2.0)
+    return 2.0
+
+
+@pytest.mark.parametrize(("first_s", "cause"), [(3.0, "disarmed"), (6.5, "rebooted")])
+def test_two_disarmed_heartbeats_end_it_named_by_the_silence_before(
+    first_s: float, cause: str
+) -> None:
+    with session_and_vehicle() as (session, vehicle):
+        engaged(session)
+        session.on_frame(heartbeat(armed=False), first_s)
+        assert session.disarm_pending and session.disarmed is None
+        sent_to(vehicle)  # what the lock asked for before
+        session.periodic(first_s + 0.5, waiting=True)  # nothing asked of it meanwhile
+        assert sent_to(vehicle) == []
+        session.on_frame(heartbeat(armed=False), first_s + FLIP_S - 0.01)
+        assert session.disarmed is None  # too soon after the first
+        session.on_frame(heartbeat(armed=False), first_s + FLIP_S)
+        assert session.disarmed == (first_s, first_s - 2.0)
+        assert session.rebooted is (cause == "rebooted")
+
+
+def test_a_forged_disarmed_heartbeat_between_armed_ones_never_confirms() -> None:
+    with session_and_vehicle() as (session, _):
+        engaged(session)
+        for t in range(3, 12):  # the vehicle at 1 Hz, armed; a forger half a second after
+            session.on_frame(heartbeat(armed=True), float(t))
+            assert not session.disarm_pending
+            session.on_frame(heartbeat(armed=False), t + 0.5)
+            assert session.disarm_pending
+        assert session.disarmed is None and not session.rebooted
+
+
+def test_a_vehicle_disarmed_before_guidance_started_is_not_an_end() -> None:
+    with session_and_vehicle() as (session, _):
+        for t in (0.0, 1.0, 2.0):
+            session.on_frame(heartbeat(armed=False), t)
+        session.engaged(2.0)  # the user arms it later
+        for t in (3.0, 4.0, 5.0, 6.0):
+            session.on_frame(heartbeat(armed=False), t)
+        assert not session.disarm_pending and session.disarmed is None
+        session.on_frame(heartbeat(armed=True), 7.0)
+        for t in (8.0, 9.6):
+            session.on_frame(heartbeat(armed=False), t)
+        assert session.disarmed == (8.0, 1.0)

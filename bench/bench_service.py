@@ -52,7 +52,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-from _timing import per_call_s
+from _timing import paced_call_us, per_call_s
 
 from ezcompanion.config import load_scenario, scenario_from_dict
 from ezcompanion.records import TickCommand, VehicleState
@@ -380,23 +380,6 @@ def _first_setpoint(port: int, rate_hz: float, timeout_s: float = 20.0) -> float
 def per_call_us(function: Callable[[], object], number: int = 2000, repeat: int = 5) -> float:
     """Median over ``repeat`` rounds of the mean time of ``number`` calls (us)."""
     return 1e6 * per_call_s(function, repeat, number)
-
-
-def paced_call_us(function: Callable[[], object], period_s: float, number: int = 150) -> float:
-    """Mean CPU time of one call made once a ``period_s`` (us), a sleep between calls: the
-    part as the service runs it, its caches gone cold between ticks (the process slept,
-    the other processes ran). CPU time and a mean, as the service's CPU per tick is: the
-    law's tick is heavy-tailed (a median of it was a certified tick's cost, the service's
-    mean ten times that where no backup is certified)."""
-    function()
-    times = []
-    clock = time.thread_time
-    for _ in range(number):
-        time.sleep(period_s)
-        start = clock()
-        function()
-        times.append(clock() - start)
-    return 1e6 * statistics.fmean(times)
 
 
 def parts(rate_hz: float, track: list[Sample], publish_rate_hz: float = 20.0

@@ -20,10 +20,14 @@ tick (``wall_time_unix_s``) and from the put (``sent_unix_s``) to its callback. 
 
 Prints, per condition: the loop's rate and its change, how late its ticks ran (p99), the
 cost of the call in the loop (p50/p99/max us), the process CPU per tick (all threads: the
-loop, the publisher thread, zenoh's) and its ratio to ``no telemetry``, and the latency
+loop, the publisher thread, zenoh's) and its ratio to ``no telemetry``, that CPU split by
+thread (the loop's, the other Python threads': the publisher's; zenoh's own, named by its
+runtime: tx, rx, net, acc, app), and the latency
 tick-to-receive and put-to-receive (p50/p99 ms) with the share of ticks received. The
 telemetry put-to-receive p99 is printed as a ratio to zenoh alone's (target <= 1.5x), and
-the slow subscribers' sample age in publish periods (target: at most 2).
+the slow subscribers' sample age in publish periods (target: at most 2). Then the
+publisher's parts, one guidance sample built and encoded: warm and alone, and once a
+publish period as the publisher thread runs them (caches cold between periods).
 
     python bench/bench_telemetry.py [--seconds 10] [--rate 50] [--publish-rate 20]
 """
@@ -33,6 +37,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import socket
 import subprocess
 import sys
@@ -42,6 +47,7 @@ from typing import Any
 
 import yaml
 import zenoh
+from _timing import paced_call_us, per_call_s
 
 from ezcompanion.config import scenario_from_dict
 from ezcompanion.service.loop import GuidanceLoop, TickCommand
@@ -130,9 +136,26 @@ def state_at(loop: GuidanceLoop, t: float) -> VehicleState:
     )
 
 
+def thread_cpu_s() -> dict[str, float]:
+    """CPU time of this process's threads so far (s), by kind: ``loop`` (the main thread),
+    ``python`` (the others Python started: the publisher's), ``zenoh`` (its runtime's)."""
+    out = {"loop": 0.0, "python": 0.0, "zenoh": 0.0}
+    pid = os.getpid()
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            ns = int((task / "schedstat").read_text().split()[0])
+            name = (task / "comm").read_text().strip()
+        except OSError:
+            continue  # a thread that ended meanwhile
+        kind = "loop" if task.name == str(pid) else "python" if name == "python" else "zenoh"
+        out[kind] += ns / 1e9
+    return out
+
+
 def run_loop(rate_hz: float, seconds: float, publish: Any | None) -> dict[str, Any]:
     """Tick on deadlines for ``seconds``, calling ``publish(command)`` after each tick."""
     loop = make_loop(rate_hz)
+    threads0 = thread_cpu_s()
     period = 1.0 / rate_hz
     costs: list[float] = []
     lateness: list[float] = []
@@ -155,7 +178,9 @@ def run_loop(rate_hz: float, seconds: float, publish: Any | None) -> dict[str, A
         ticks += 1
     cpu = time.process_time() - cpu0
     rate = ticks / (time.monotonic() - start)
-    return {"rate_hz": rate, "costs": costs, "lateness": lateness, "ticks": ticks, "cpu_s": cpu}
+    threads = {k: v - threads0[k] for k, v in thread_cpu_s().items()}
+    return {"rate_hz": rate, "costs": costs, "lateness": lateness, "ticks": ticks, "cpu_s": cpu,
+            "threads_s": threads}  # fmt: skip
 
 
 def guidance_size(rate_hz: float) -> int:
@@ -259,10 +284,36 @@ def report(row: dict[str, Any], reference: dict[str, Any] | None) -> None:
         if put_ms
         else "-"
     )
+    split = " / ".join(f"{1e6 * v / row['ticks']:5.1f}" for v in row["threads_s"].values())
     print(
         f"{row['name']:<15} {row['rate_hz']:7.2f} Hz {change:>11}  late p99 "
         f"{percentile(late_ms, 0.99):6.3f} ms  call p50/p99/max {cost} us  CPU/tick "
-        f"{cpu_us:6.1f} us{ratio:8}  latency p50/p99 {latency}"
+        f"{cpu_us:6.1f} us{ratio:8} (loop / publisher / zenoh threads {split})  latency "
+        f"p50/p99 {latency}"
+    )
+
+
+def publisher_parts(rate_hz: float, publish_hz: float) -> None:
+    """One guidance sample built and encoded, warm and alone and once a publish period."""
+    loop = make_loop(rate_hz)
+    command = loop.tick(state_at(loop, 0.0), 0.0)
+    assert isinstance(command, TickCommand)
+    fmt = TelemetrySettings().payload
+    payload = guidance_payload("bench", 1, command, time.time(), ())
+
+    def build() -> None:
+        guidance_payload("bench", 1, command, time.time(), ())
+
+    def encoded() -> None:
+        encode("guidance", payload, fmt)
+
+    warm = [1e6 * per_call_s(f, 5, 2000) for f in (build, encoded)]
+    paced = [paced_call_us(f, 1.0 / publish_hz) for f in (build, encoded)]
+    print(
+        f"publisher's parts, one guidance sample: build {warm[0]:.1f} us + encode "
+        f"({fmt}) {warm[1]:.1f} us warm and alone; once a publish period (CPU, caches cold) "
+        f"{paced[0]:.1f} + {paced[1]:.1f} us: {sum(paced) * publish_hz / rate_hz:.1f} us a "
+        f"loop tick"
     )
 
 
@@ -307,6 +358,7 @@ def main(rate_hz: float, seconds: float, publish_hz: float) -> None:
             f"{percentile(ages, 0.5):.2f} / {percentile(ages, 0.99):.2f} / "
             f"{max(ages, default=math.nan):.2f} publish periods (target <= 2)"
         )
+    publisher_parts(rate_hz, publish_hz)
 
 
 if __name__ == "__main__":

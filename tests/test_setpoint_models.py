@@ -26,6 +26,7 @@ from ezcompanion.service.setpoints import (
     CourseSetpoints,
     VelocitySetpoints,
     course_turn_share,
+    guided_p_needed,
     make_setpoints,
     turn_bound_m_s2,
 )
@@ -225,6 +226,24 @@ def test_a_planes_heading_loop_flies_the_share_of_the_turn_its_guided_p_allows(
     share = course_turn_share(read.heading_roll_gain, accel, speed, 0.72)  # the model's 0.72
     assert flown / accel == pytest.approx(share, rel=0.03)
     assert (share < 0.95) is (guided_p < 3000.0)
+
+
+def test_the_guided_p_a_refusal_names_flies_all_of_the_turn(link: wire.Link) -> None:
+    """``guided_p_needed``: the loop model flies all of the law's hardest turn at that
+    GUIDED_P, and not 3% below it."""
+    accel, speed = 4.5, 22.0
+    needed = guided_p_needed(accel, speed, 0.72)
+    for gain, whole in ((needed, True), (0.97 * needed, False)):
+        w = make_setpoints(SetpointKind.COURSE, link, target_system=1, target_component=1,
+                           accel_max_m_s2=accel)  # fmt: skip
+        w.use_profile(ARDUPLANE.with_parameters({"GUIDED_P": 100.0 * math.degrees(gain)}))
+        flown = 0.0
+        for i in range(1500):
+            msg = w.message(tick(0.02 * i, 0.0, speed, accel, rate_rad_s=flown / speed))
+            if msg is not None:
+                flown = arduplane_turn_m_s2(math.radians(msg.param2), msg.param3, speed,
+                                            100.0 * math.degrees(gain))  # fmt: skip
+        assert (flown >= 0.98 * accel) is whole, (gain, flown)
 
 
 def test_outer_loop_gain_converges_to_the_inverse_of_the_flown_share(link: wire.Link) -> None:

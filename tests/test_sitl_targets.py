@@ -130,22 +130,39 @@ def test_scenario_1_scaled_to_a_22_m_s_plane(tmp_path: Path) -> None:
     assert accel > 0.6
 
 
-@pytest.mark.parametrize(("guided_p", "warned"), [(1500.0, True), (5000.0, False)])
-def test_a_plane_too_soft_to_turn_as_the_law_asks_is_warned_of(
-    guided_p: float, warned: bool, tmp_path: Path
+@pytest.mark.parametrize(
+    ("guided_p", "accept", "outcome"),
+    [(1500.0, False, "refused"), (1500.0, True, "warned"), (5000.0, False, "flown")],
+)
+def test_a_plane_too_soft_to_turn_as_the_law_asks_is_refused_before_guided(
+    guided_p: float, accept: bool, outcome: str, tmp_path: Path
 ) -> None:
     """The loopback plane answers GUIDED_P as ArduPlane does and flies its heading loop with
     it; the companion reads it and, where the loop cannot fly the law's hardest turn with
-    the course asked at most 6 s of turning ahead, says so with the share it can fly."""
+    the course asked at most 6 s of turning ahead, refuses to guide it (the safety argument
+    assumes that turn is flown) before asking for GUIDED, naming the share it can fly and
+    the GUIDED_P that flies all of it; with ``accept_soft_heading_loop``, a warning."""
     data = yaml.safe_load((CONFIG / "paper_scenario1_plane22.yaml").read_text())
     data["sitl_stub"]["guided_p"] = guided_p
     config = tmp_path / "plane.yaml"
     config.write_text(yaml.safe_dump(data))
-    flight = fly_service(config, tmp_path, profile="plane", start_mode="GUIDED",
-                         max_time_s=2.0, lockstep=True)
+    flight = fly_service(config, tmp_path, profile="plane", start_mode="LOITER",
+                         max_time_s=4.0, lockstep=True, accept_soft_heading_loop=accept)
     read = [e for e in flight.events.of_kind(EventKind.PARAMETER) if e.data["name"] == "GUIDED_P"]
     assert [e.data["value"] for e in read] == [guided_p]
-    warnings = [e for e in flight.events.of_kind(EventKind.WARNING) if "GUIDED_P" in e.message]
-    assert bool(warnings) is warned
-    if warned:  # 22 m/s cruise, flown at 23.4: 4.5 m/s^2 asks more roll than 15 deg/rad gives
-        assert warnings[0].data["turn_share"] == pytest.approx(0.5, abs=0.05)
+    said = [e for e in flight.events.events if "GUIDED_P" in e.message
+            and e.kind in (EventKind.ABORTED, EventKind.WARNING)]  # fmt: skip
+    asked = [e for e in flight.events.of_kind(EventKind.MODE) if "requested" in e.data]
+    if outcome == "flown":
+        assert not said and asked and flight.outcome.setpoints_sent > 0
+        return
+    (event,) = said
+    assert event.kind is (EventKind.ABORTED if outcome == "refused" else EventKind.WARNING)
+    # 22 m/s cruise, flown at 23.4: 4.5 m/s^2 asks more roll than 15 deg/rad gives
+    assert event.data["turn_share"] == pytest.approx(0.5, abs=0.05)
+    assert 2500.0 < event.data["guided_p_needed"] < 5000.0
+    if outcome == "refused":
+        assert not asked and flight.outcome.setpoints_sent == 0
+        assert event.data["cause"] == "heading_loop"
+    else:
+        assert asked and flight.outcome.setpoints_sent > 0

@@ -49,7 +49,12 @@ from ezcompanion.service.inbox import ScenarioInbox
 from ezcompanion.service.lockstep import Lockstep, check_loopback_url
 from ezcompanion.service.loop import GuidanceLoop
 from ezcompanion.service.session import POSITIONS, VehicleSession
-from ezcompanion.service.setpoints import Setpoints, course_turn_share, make_setpoints
+from ezcompanion.service.setpoints import (
+    Setpoints,
+    course_turn_share,
+    guided_p_needed,
+    make_setpoints,
+)
 from ezcompanion.service.settings import CompanionSettings, SetpointKind, signing_key
 from ezcompanion.service.state import TelemetryState
 from ezcompanion.service.ticks import EPSILON_S, TickSchedule
@@ -75,7 +80,7 @@ _WAKE_S = 0.1  # clock seconds: the session's checks run at least this often
 # filled while the companion was busy is taken whole before a tick
 _DRAIN_READS = 512
 # a plane's heading loop that flies less than this of the law's hardest turn is warned of
-_TURN_SHARE_WARN = 0.95
+_TURN_SHARE_MIN = 0.95  # the loop model's tolerance (its turn ratio is measured to 2 digits)
 
 
 class Phase(StrEnum):
@@ -151,6 +156,9 @@ class CompanionService:
         self.schedule = TickSchedule(self.loop.period_s)
         self._engaged_at_s: float | None = None  # clock time the engagement first started
         self._abandon_said = False
+        # the plane's heading loop judged (GUIDED_P read or given up on): only then is the
+        # guided mode asked for, or guidance started
+        self._heading_loop_checked = False
         self.exit_report: ExitReport | None = None  # where the vehicle was left (on_exit)
         self.placement: VehiclePlacement | None = None  # frame: vehicle, latched at engage
 
@@ -351,9 +359,8 @@ class CompanionService:
         # the guided mode is asked for only until guidance first starts: after that a vehicle
         # out of it was taken by the pilot, a ground station or the autopilot's own failsafe,
         # whose word is the last (docs/field.md, "You keep the last word")
-        self.session.periodic(
-            now, waiting=self.phase is Phase.WAITING and self._engaged_at_s is None
-        )
+        self.session.periodic(now, waiting=self.phase is Phase.WAITING
+                              and self._engaged_at_s is None and self._heading_loop_checked)
         self._follow_session(now)
         self._check_distrust(now)
         if self._ticking() and self.schedule.is_due(now):
@@ -453,6 +460,16 @@ class CompanionService:
             self.phase = Phase.WAITING
         if (
             self.phase is Phase.WAITING
+            and not self._heading_loop_checked
+            and session.parameters.settled
+            and session.profile is not None
+        ):
+            self._heading_loop_checked = True
+            if not self._check_heading_loop(now, session.profile):
+                return
+        if (
+            self.phase is Phase.WAITING
+            and self._heading_loop_checked
             and session.in_guided
             and not session.disarm_pending
             and session.frame_settled
@@ -466,7 +483,6 @@ class CompanionService:
             profile = session.profile  # with its parameters, settled by now
             if profile is not None and self.engagement.setpoints is not None:
                 self.engagement.setpoints.use_parameters(profile)
-                self._check_heading_loop(now, profile)
             session.engaged(now)
             self._assume_abandon(now)
             self.engagement.start(now, session.mode)
@@ -524,24 +540,40 @@ class CompanionService:
         )  # fmt: skip
         return True
 
-    def _check_heading_loop(self, now: float, profile: AutopilotProfile) -> None:
+    def _check_heading_loop(self, now: float, profile: AutopilotProfile) -> bool:
         """A plane whose heading loop (ArduPlane's GUIDED_P, as read) cannot fly the law's
-        hardest turn with the course asked at most the cap ahead: a warning with the share
-        it can fly (``setpoints.course_turn_share``)."""
+        hardest turn with the course asked at most the cap ahead (the share it can fly,
+        ``setpoints.course_turn_share``, below ``_TURN_SHARE_MIN``) is refused before its
+        guided mode is asked for: the law's safety argument assumes the turn it asks is
+        flown. With ``accept_soft_heading_loop``, a warning instead. False if refused."""
         setpoints = self.engagement.setpoints
         gain = profile.heading_roll_gain
         if setpoints is None or setpoints.kind is not SetpointKind.COURSE or gain is None:
-            return
+            return True
         accel = self.scenario.guidance.accel_max_m_s2
         speed = self.loop.flown_speed_m_s
         share = course_turn_share(gain, accel, speed, profile.turn_ratio)
-        if share < _TURN_SHARE_WARN:
-            guided_p = 100.0 * math.degrees(gain)
-            self.events.emit(EventKind.WARNING, now, f"GUIDED_P {guided_p:.0f} cd/rad: "
-                             f"ArduPlane's heading loop turns this plane at most {share:.2f} "
-                             f"of the law's hardest turn ({accel:g} m/s^2 at {speed:g} m/s) "
-                             "with the course asked at most 6 s of turning ahead; raise "
-                             "GUIDED_P or lower accel_max_m_s2", turn_share=share)  # fmt: skip
+        if share >= _TURN_SHARE_MIN:
+            return True
+        guided_p = 100.0 * math.degrees(gain)
+        needed = 100.0 * math.degrees(guided_p_needed(accel, speed, profile.turn_ratio))
+        why = (f"GUIDED_P {guided_p:.0f} cd/rad: ArduPlane's heading loop turns this plane at "
+               f"most {share:.2f} of the law's hardest turn ({accel:g} m/s^2 at {speed:g} m/s) "
+               f"with the course asked at most 6 s of turning ahead (GUIDED_P {needed:.0f} "
+               "cd/rad flies all of it)")  # fmt: skip
+        if self.settings.accept_soft_heading_loop:
+            self.events.emit(EventKind.WARNING, now, f"{why}; flown anyway "
+                             "(accept_soft_heading_loop): the safety argument does not hold",
+                             turn_share=share, guided_p_needed=needed)  # fmt: skip
+            return True
+        self.events.emit(EventKind.ABORTED, now, f"{why}; the law's safety argument assumes "
+                         "the turn it asks is flown: not guided (raise GUIDED_P, or set "
+                         "companion.accept_soft_heading_loop to fly it without the argument)",
+                         cause="heading_loop", turn_share=share,
+                         guided_p_needed=needed)  # fmt: skip
+        self.engagement.done = True
+        self.phase = Phase.DONE
+        return False
 
     def _assume_abandon(self, now: float) -> None:
         """Give the law the path the vehicle flies if this setpoint is its last: the

@@ -69,6 +69,7 @@ __all__ = [
     "Setpoints",
     "VelocitySetpoints",
     "course_turn_share",
+    "guided_p_needed",
     "make_setpoints",
     "turn_bound_m_s2",
 ]
@@ -320,6 +321,14 @@ def course_turn_share(roll_gain: float, accel_m_s2: float, speed_m_s: float,
     lead = min(accel_m_s2 / speed_m_s * _COURSE_HORIZON_MAX_S, _MAX_COURSE_LEAD_RAD)
     roll = min(roll_gain * lead, 0.5 * math.pi - 1e-9)
     return min(1.0, turn_ratio * GRAVITY_M_S2 * math.tan(roll) / accel_m_s2)
+
+
+def guided_p_needed(accel_m_s2: float, speed_m_s: float, turn_ratio: float) -> float:
+    """The least ``roll_gain`` (rad/rad) for which :func:`course_turn_share` is 1: the roll
+    of a steady turn at ``accel_m_s2`` flown as ``turn_ratio`` g tan(roll), over the course
+    lead's cap at ``speed_m_s``. ArduPlane's GUIDED_P in cd/rad is 100 degrees of it."""
+    lead = min(accel_m_s2 / speed_m_s * _COURSE_HORIZON_MAX_S, _MAX_COURSE_LEAD_RAD)
+    return math.atan(accel_m_s2 / (turn_ratio * GRAVITY_M_S2)) / lead
 
 
 def make_setpoints(

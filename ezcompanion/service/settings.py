@@ -17,6 +17,9 @@ Layout (every key optional)::
       abandon_check: false           # check every setpoint is safe to keep flying if it is
                                      # the last (the autopilot's timeout read from it)
       on_exit: default               # hold | loiter | rtl | none | default (per vehicle class)
+      accept_soft_heading_loop: false  # fly a plane whose GUIDED_P cannot fly the law's
+                                     # hardest turn (a warning, not a refusal: the safety
+                                     # argument then does not hold)
       gate_position_m: 0.5           # estimate gate: position innovation allowed
       gate_accel_m_s2: 0.0           # the gate's acceleration bound; 0 = 2 x accel_max
       distrust_give_up_s: 3.0        # untrusted input this long without a break ends guidance
@@ -99,6 +102,7 @@ class CompanionSettings:
     engage: bool = False
     abandon_check: bool = False
     on_exit: OnExit = OnExit.DEFAULT
+    accept_soft_heading_loop: bool = False
     gate_position_m: float = 0.5
     gate_accel_m_s2: float = 0.0
     distrust_give_up_s: float = 3.0
@@ -153,8 +157,9 @@ class CompanionSettings:
             raise ConfigError("abandon_check", self.abandon_check, "must be true or false")
         if not isinstance(self.on_exit, OnExit):
             raise ConfigError("on_exit", self.on_exit, f"must be one of {_ON_EXIT}")
-        if not isinstance(self.engage, bool):
-            raise ConfigError("engage", self.engage, "must be true or false")
+        for name in ("engage", "accept_soft_heading_loop"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(name, getattr(self, name), "must be true or false")
         given = [
             name
             for name in ("signing_key_hex", "signing_key_file", "signing_passphrase")

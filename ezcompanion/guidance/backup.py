@@ -568,7 +568,9 @@ def turn_certificate(
     turned = 0.0
     converged = False
     screen_level = exit_level - _SCREEN_SLACK * speed * speed / amax
-    blocker = 0  # the zone that stopped the last screen: the first one the next looks at
+    # the zone that stopped the last screen: the first one the next looks at (an int64, not
+    # the literal 0, which numba would compile _exit_here for a second time: 0.5 s)
+    blocker = int(np.int64(0))
     ch, sh = math.cos(h), math.sin(h)
     for j in range(_MAX_SAMPLES):
         best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, ch, sh, eps, speed, amax, rate,
@@ -760,7 +762,8 @@ def _ahead(
     """Fly ``command`` held for ``fly_s``: the best certificate after it (with the flight's
     own least gap; exact up to ``enough``), which backup holds it, and the actuator and
     model a_v at the end. ``dt`` is the control step the certificates align with."""
-    gap, n1, e1, h1, a1, av1 = _fly_step(s, zn, ze, zmur, zreach, kz, -1, command, n, e, h, a,
+    held = int(np.int64(-1))  # the command held (not the literal -1: one compile of _fly_step)
+    gap, n1, e1, h1, a1, av1 = _fly_step(s, zn, ze, zmur, zreach, kz, held, command, n, e, h, a,
                                          av, speed, fly_s)  # fmt: skip
     backup_certificates(s, zn, ze, zmur, zreach, kz, n1, e1, h1, a1, av1, speed, dt, enough,
                         certs)  # fmt: skip

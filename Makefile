@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
 	@echo "compiling the guidance kernels into numba's cache (once, 10 to 30 s)"
-	$(BIN)/ezcompanion simulate config/paper_scenario1.yaml > /dev/null
+	$(BIN)/ezcompanion compile
 	touch $(STAMP)
 
 demo: $(STAMP)

@@ -28,6 +28,7 @@ from ezcompanion.cli_args import (
 from ezcompanion.commands import (
     PAPER_SCENARIOS,
     output_directory,
+    run_compile,
     run_demo,
     run_reference_demo,
     run_scale,
@@ -154,6 +155,11 @@ def _parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     scale.add_argument("--out", type=Path, required=True, help="the scaled scenario file")
 
+    commands.add_parser(
+        "compile",
+        help="compile the service's guidance kernel into numba's cache (once after an install "
+        "or update: the first run then starts at once)",
+    )
     demo = commands.add_parser("demo", help="fly the paper's scenarios on the loopback vehicle")
     demo.add_argument("--scenario", type=int, choices=sorted(PAPER_SCENARIOS), help="just one")
     demo.add_argument(
@@ -216,6 +222,8 @@ def _dispatch(args: argparse.Namespace) -> int:
     code = run_telemetry_command(args)
     if code is not None:
         return code
+    if args.command == "compile":
+        return run_compile()
     if args.command == "simulate":
         return run_simulate(
             args.config,

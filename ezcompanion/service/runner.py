@@ -126,7 +126,8 @@ class CompanionService:
             self.events.emit(EventKind.WARNING, self.clock.now_s(), "compiling the guidance "
                              "kernels into numba's cache (the first run after an install or "
                              "an update: about 10 s on an idle 2-core machine, longer on "
-                             "a busy one); the link opens after it")  # fmt: skip
+                             "a busy one; `ezcompanion compile` does it ahead); the link opens "
+                             "after it")  # fmt: skip
         self.loop = GuidanceLoop(
             scenario,
             law=law,

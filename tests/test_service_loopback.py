@@ -415,6 +415,8 @@ def test_the_tlog_reads_back_with_pymavlink(tmp_path: Path) -> None:
     assert seen.get("LOCAL_POSITION_NED", 0) > 50 and seen.get("HEARTBEAT", 0) > 5
     sent = flight.outcome.setpoints_sent + flight.outcome.brakes_sent
     assert seen.get("SET_POSITION_TARGET_LOCAL_NED", 0) == sent
+    # the vehicle started in GUIDED: it was never asked for it (only for the end mode)
+    assert not [e for e in flight.events.of_kind(EventKind.MODE) if "requested" in e.data]
 
 
 def test_at_the_end_a_vehicle_still_guided_is_told_to_stop(tmp_path: Path) -> None:

@@ -419,8 +419,8 @@ class VehicleSession(StreamRequests):
         if not self.settings.engage or now < self._next_engage_s:
             return
         mode = self.guided_mode
-        if mode is None or self.target is None:
-            return
+        if mode is None or self.target is None or self.in_guided:
+            return  # (a vehicle already in its guided mode is not asked for it again)
         name, param1, param2, param3 = mode
         self.request_mode(param1, param2, param3)
         self._next_engage_s = now + _ENGAGE_RETRY_S

@@ -72,15 +72,17 @@ def _load(config: Path) -> Scenario:
 
 
 def run_compile() -> int:
-    """Compile the service's kernel (the one-vehicle step, with the law, the shield and the
-    abandon check) into numba's cache, or say it is there already; 0 either way. Run once
-    after an install or an update, so that the first ``ezcompanion run`` starts at once
-    instead of compiling for about 10 s before its link opens."""
+    """Compile the service's kernels (the one-vehicle step, with the law, the shield and the
+    abandon check; the response fits' scan) into numba's cache, or say they are there
+    already; 0 either way. Run once after an install or an update, so that the first
+    ``ezcompanion run`` starts at once instead of compiling for about 10 s before its link
+    opens."""
     import time
 
     from ezcompanion.config import scenario_from_dict
     from ezcompanion.guidance import kernels_cached
     from ezcompanion.guidance._jit import JIT_ENABLED
+    from ezcompanion.service.identify import warm_up
     from ezcompanion.service.loop import GuidanceLoop
 
     if not JIT_ENABLED:
@@ -90,6 +92,7 @@ def run_compile() -> int:
     started = time.perf_counter()
     # any scenario: the kernel's types, not its values, decide what is compiled
     GuidanceLoop(scenario_from_dict(_COMPILE_SCENARIO), loop_rate_hz=50.0, stale_after_s=1.0)
+    warm_up()  # the response fits' scan
     took = time.perf_counter() - started
     where = "already in numba's cache, loaded" if cached else "compiled into numba's cache"
     print(f"the service's guidance kernel: {where} in {took:.1f} s")

@@ -41,9 +41,10 @@ import numpy as np
 import numpy.typing as npt
 
 from ezcompanion.errors import IdentificationError
+from ezcompanion.guidance._jit import JIT_ENABLED, jit_borrow
 
 __all__ = ["LagFit", "ResponseSample", "ResponseWindow", "SpeedFit", "fit_course_lag",
-           "fit_speed_factor"]
+           "fit_speed_factor", "warm_up"]
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
@@ -151,11 +152,39 @@ def _decay(time_s: FloatArray, lags_s: FloatArray) -> FloatArray:
 
 
 def _affine_scan(keep: FloatArray, drive: FloatArray) -> FloatArray:
-    """x[n] = keep[n] x[n-1] + drive[n] down the rows (keep[0] = 0), for every column at
-    once: a doubling scan (log2 N passes of whole-array operations, products of factors in
-    [0, 1] only, so nothing overflows)."""
-    keep, x = np.broadcast_arrays(keep, drive)
-    keep, x = keep.copy(), x.copy()
+    """x[n] = keep[n] x[n-1] + drive[n] down the rows (keep[0] = 0), for every column.
+    Compiled, the recurrence itself, row by row (``_scan_rows``: 0.1 ms for an 8 s window
+    at 50 Hz and 61 lags, against 1.5 ms for the doubling scan); uncompiled
+    (``EZCOMPANION_JIT=0``), the doubling scan (``_doubling_scan``), which numpy runs as
+    whole-array operations."""
+    keep, drive = np.broadcast_arrays(keep, drive)
+    if not JIT_ENABLED:
+        return _doubling_scan(keep, drive)
+    out = np.empty(drive.shape)
+    _scan_rows(np.ascontiguousarray(keep), np.ascontiguousarray(drive), out)
+    return out
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) what the fits run, so that the first review in
+    flight does not: called where the service starts, before its link opens."""
+    _affine_scan(np.zeros((2, 1)), np.zeros((2, 1)))
+
+
+@jit_borrow
+def _scan_rows(keep: FloatArray, drive: FloatArray, out: FloatArray) -> None:
+    """``_affine_scan`` into ``out`` (rows by columns, C order), sequentially."""
+    for j in range(drive.shape[1]):
+        out[0, j] = drive[0, j]
+    for n in range(1, drive.shape[0]):
+        for j in range(drive.shape[1]):
+            out[n, j] = keep[n, j] * out[n - 1, j] + drive[n, j]
+
+
+def _doubling_scan(keep: FloatArray, drive: FloatArray) -> FloatArray:
+    """``_affine_scan`` as a doubling scan: log2 N passes of whole-array operations,
+    products of factors in [0, 1] only, so nothing overflows."""
+    keep, x = keep.copy(), drive.copy()
     shift = 1
     while shift < len(x):
         x[shift:] = x[shift:] + keep[shift:] * x[:-shift]

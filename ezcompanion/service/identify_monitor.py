@@ -40,6 +40,7 @@ from ezcompanion.service.identify import (
     SpeedFit,
     fit_course_lag,
     fit_speed_factor,
+    warm_up,
 )
 from ezcompanion.service.loop import GuidanceLoop
 from ezcompanion.service.setpoints import MAX_LEAD_DEG, turn_bound_m_s2
@@ -86,6 +87,7 @@ class ResponseMonitor:
         lag_tolerance_ratio: float = 0.15,
         speed_tolerance: float = 0.05,
     ) -> None:
+        warm_up()  # the fits compiled now, not at the first review in flight
         self.loop = loop
         self.events = events
         self.stated_lag_s = stated_lag_s  # the scenario's own response_lag_s (0: none)

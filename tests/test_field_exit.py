@@ -162,14 +162,15 @@ def test_a_vehicle_that_rebooted_exits_3_naming_the_reboot(
     """The loopback copter reboots mid-engagement (down 3.5 s, back disarmed): a vehicle
     failure, said in one line, with the link failure's code."""
     data = yaml.safe_load((CONFIG / "paper_scenario1.yaml").read_text())
+    data["target"] = {"north_m": 48.0, "east_m": -4.0}  # still guiding at the reboot (10 s)
     data["sitl_stub"] = {**data.get("sitl_stub", {}),
-                         "faults": {"reboot_at_s": 4.0, "reboot_s": 3.5}}  # fmt: skip
+                         "faults": {"reboot_at_s": 10.0, "reboot_s": 3.5}}  # fmt: skip
     config = tmp_path / "reboot.yaml"
     config.write_text(yaml.safe_dump(data))
     port = free_udp_port()
     with stub_process(config, port, tmp_path / "truth.csv", "--initial-mode", "GUIDED"):
         code = main(["run", "--config", str(config), "--connect", f"udpin:127.0.0.1:{port}",
-                     "--speedup", f"{SPEEDUP:g}", "--max-time", "30",
+                     "--speedup", f"{SPEEDUP:g}", "--max-time", "40",
                      "--no-telemetry"])  # fmt: skip
     err = capsys.readouterr().err
     assert code == 3, err

@@ -442,15 +442,18 @@ def test_a_vehicle_that_reboots_or_disarms_ends_guidance_and_is_not_asked_back(
     clock from 0 (as an autopilot boots). Against ArduPlane SITL the companion asked the
     rebooted, disarmed plane for GUIDED and ended on a spoof alarm. Here: heard again after
     4 s unheard (the link lost) it is named a reboot; after 1 s (one heartbeat missed) a
-    disarm. Either way guidance ends at once, no mode is asked for, no brake is sent to a
+    disarm. Either way guidance ends, no mode is asked for, no brake is sent to a
     disarmed vehicle, and the end mode leaves it alone."""
     from pymavlink import mavutil
 
+    # a target 40 m off, so that the reboot (at 10 s of vehicle time, 2 s of wall time at
+    # 5x: room for a loaded machine to have engaged by then) finds it still guiding
     config = scenario_file(
-        tmp_path, sitl_stub={"faults": {"reboot_at_s": 4.0, "reboot_s": reboot_s}}
+        tmp_path, target={"north_m": 48.0, "east_m": -4.0},
+        sitl_stub={"faults": {"reboot_at_s": 10.0, "reboot_s": reboot_s}},
     )
     # it starts (and boots again) in LOITER: the companion asks for GUIDED at the start
-    flight = fly(config, tmp_path, start_mode="LOITER", max_time_s=30.0)
+    flight = fly(config, tmp_path, start_mode="LOITER", max_time_s=40.0)
     engaged = flight.events.of_kind(EventKind.ENGAGED)
     assert engaged, "guidance never started before the reboot"
     aborted = flight.events.of_kind(EventKind.ABORTED)

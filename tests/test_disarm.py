@@ -8,6 +8,7 @@ UDP socket on loopback (what the session sends goes to a listening link, counted
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Iterator
 from contextlib import contextmanager
 
@@ -16,9 +17,10 @@ from conftest_sitl import M, forger, frame
 from test_service_units import CONFIG
 
 from ezcompanion.config import load_scenario
+from ezcompanion.service.ending import leave_vehicle
 from ezcompanion.service.events import EventLog
 from ezcompanion.service.session import VehicleSession
-from ezcompanion.service.settings import companion_settings
+from ezcompanion.service.settings import OnExit, companion_settings
 from ezcompanion.service.trust import FLIP_S
 from ezcompanion.wire import Frame, Link, open_link
 
@@ -100,3 +102,18 @@ def test_a_vehicle_disarmed_before_guidance_started_is_not_an_end() -> None:
         for t in (8.0, 9.6):
             session.on_frame(heartbeat(armed=False), t)
         assert session.disarmed == (8.0, 1.0)
+
+
+def test_no_end_mode_is_asked_of_a_vehicle_heard_disarmed() -> None:
+    """Even before the disarm is confirmed (the run ended meanwhile), the end mode is not
+    asked for: nothing reaches the vehicle."""
+    with session_and_vehicle() as (session, vehicle):
+        engaged(session)
+        session.on_frame(heartbeat(armed=False), 3.0)
+        assert session.disarm_pending
+        sent_to(vehicle)  # what the lock asked for before
+        clock = itertools.count(3.1, 0.25)  # time goes on as the end waits for answers
+        report = leave_vehicle(OnExit.HOLD, session, EventLog(), commanded=True,
+                               now=lambda: next(clock), pump=lambda _timeout_s: None)  # fmt: skip
+        assert report.mode is None and "disarmed" in report.detail
+        assert sent_to(vehicle) == []

@@ -129,7 +129,7 @@ def leave_vehicle(
     if not session.connected:
         return _report(events, now(), resolved, None, warn=True,
                        detail="link lost: the end mode cannot be asked for")  # fmt: skip
-    if session.disarmed is not None or session.disarm_pending:
+    if session.heard_disarmed:
         return _report(events, now(), resolved, None,
                        detail="the vehicle is disarmed: left as it is")  # fmt: skip
     if not session.in_guided:

@@ -96,28 +96,28 @@ class Engagement:
             return  # nothing to stop yet: no position has arrived since (re)connecting
         self.failsafe(now, result)
 
-    def failsafe(self, now: float, reason: Hold, *, brake_vehicle: bool = True) -> None:
+    def failsafe(self, now: float, reason: Hold, *, brake: bool = True) -> None:
         """Stop sending (once per failsafe) and say why; tell the vehicle to stop unless
-        ``brake_vehicle`` is False (a vehicle that no longer flies setpoints)."""
+        ``brake`` is False (a vehicle that no longer flies setpoints)."""
         if self.failsafe_active:
             return
         self.failsafe_active = True
         self.failsafes += 1
         self.loop.reset()
-        brake = None
+        stop = None
         if self.setpoints is not None:
             self.setpoints.reset()
-            brake = self.setpoints.brake(now) if brake_vehicle else None
-        if brake is not None:
-            self._send(brake)
+            stop = self.setpoints.brake(now) if brake else None
+        if stop is not None:
+            self._send(stop)
             self.brakes_sent += 1
         self.events.emit(
             EventKind.FAILSAFE,
             now,
-            f"{reason.value}: setpoints stopped" + ("; vehicle told to stop" if brake else ""),
+            f"{reason.value}: setpoints stopped" + ("; vehicle told to stop" if stop else ""),
             reason=reason.name.lower(),
             setpoints_sent=self.setpoints_sent,
-            braked=brake is not None,
+            braked=stop is not None,
         )
 
     def abort(
@@ -126,7 +126,7 @@ class Engagement:
     ) -> None:
         """End guidance for good: the input stayed untrusted for ``lasted_s`` (or ``why``);
         ``brake``: tell the vehicle to stop (see :meth:`failsafe`)."""
-        self.failsafe(now, cause, brake_vehicle=brake)
+        self.failsafe(now, cause, brake=brake)
         if not brake:
             self.pause(now)  # nor at the end (finish)
         self.done = True

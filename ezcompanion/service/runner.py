@@ -431,6 +431,8 @@ class CompanionService:
             self._end_disarmed(now, session.disarmed)
             return
         if session.disarm_pending and self.phase is Phase.GUIDING:
+            # a pause, as when the vehicle leaves its guided mode (not a failsafe, which
+            # would hold off the ones a forged heartbeat's trouble raises next)
             self.engagement.pause(now)  # no brake: a disarmed vehicle flies nothing
             self.schedule.reset()
             self.phase = Phase.WAITING

@@ -351,7 +351,7 @@ class VehicleSession(StreamRequests):
             if self.last_heartbeat_s > -math.inf:
                 self.events.emit(EventKind.LINK_RESTORED, now, "vehicle heard again")
             self.connected = True
-            if self._disarm_seen is None:  # nothing is asked of a vehicle that disarmed
+            if not self.heard_disarmed:  # nothing is asked of a vehicle that disarmed
                 self.request_streams(now)
             if self._origin_tries == 0:
                 self._next_origin_s = now
@@ -376,9 +376,15 @@ class VehicleSession(StreamRequests):
         self.armed = armed
 
     @property
+    def heard_disarmed(self) -> bool:
+        """Heard disarmed after it was armed in the engagement, confirmed or not: nothing is
+        asked of it any more."""
+        return self._disarm_seen is not None
+
+    @property
     def disarm_pending(self) -> bool:
         """Heard disarmed after it was armed in the engagement, not confirmed yet."""
-        return self._disarm_seen is not None and self.disarmed is None
+        return self.heard_disarmed and self.disarmed is None
 
     @property
     def rebooted(self) -> bool:
@@ -406,7 +412,7 @@ class VehicleSession(StreamRequests):
         """Discovery, link health, the stream-rate check, the origin request and
         (``waiting`` for GUIDED) mode requests."""
         self._check_link(now)
-        if self._disarm_seen is not None:
+        if self.heard_disarmed:
             return  # nothing is asked of a vehicle that disarmed
         self._check_rates(now)
         self._pace_global(now)

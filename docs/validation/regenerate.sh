@@ -76,6 +76,17 @@ for reserve in no_reserve reserve; do
     cp "$OUT-rate-filter-$reserve/tables.md" "$OUT-rate-filter-$reserve/summary.txt" \
         "docs/validation/rate_filter_2k/$reserve/"
 done
+# the chattering ratio with the shield's reserve (the default) and without it, 100 runs
+"$BIN/ezcompanion" validate --runs 100 --seed 2027 --law backup --map-runs 0 --chatter-runs 100 \
+    --no-figures --workers 1 --no-progress --out "$OUT-chatter-reserve"
+"$BIN/ezcompanion" validate --runs 100 --seed 2027 --law backup --set shield_robust_m=0 \
+    --map-runs 0 --chatter-runs 100 --no-figures --workers 1 --no-progress \
+    --out "$OUT-chatter-no_reserve"
+for reserve in reserve no_reserve; do
+    mkdir -p "docs/validation/chatter_100/$reserve"
+    cp "$OUT-chatter-$reserve/tables.md" "$OUT-chatter-$reserve/summary.txt" \
+        "docs/validation/chatter_100/$reserve/"
+done
 if [ -n "${FULL:-}" ]; then
     # shellcheck disable=SC2086
     "$BIN/ezcompanion" validate --runs 100000 --seed 2026 --law robust --map-runs 10000 \

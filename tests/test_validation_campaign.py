@@ -173,6 +173,8 @@ def test_chattering_shows_a_stiff_loop_and_not_the_default() -> None:
     assert np.nanmax(smooth.ratio) < 1.5
     assert np.nanmedian(stiff.ratio) > 3.0
     assert "ratio median" in smooth.line()
+    assert "; 0 of 3 runs above 1.5" in smooth.line()
+    assert "; 3 of 3 runs above 1.5" in stiff.line()
 
 
 def _never_safe(scenarios, state, accel_cmd_m_s2, params):  # type: ignore[no-untyped-def]

@@ -696,10 +696,13 @@ def test_straights_closed_form_bounds_hold_along_its_flight(
     assert lateral <= drift + 1e-6
     lower, _ = bk._tube_gap(s, *z, n0, e0, h0 + mid, w, delta, drift, False, 0, -math.inf)
     upper, _ = bk._tube_gap(s, *z, n0, e0, h0 + mid, w, delta, drift, True, 0, -math.inf)
+    lag_upper, _ = bk._lag_flight_upper(s, *z, n0, e0, h0, a0, av0, 1.0,
+                                        bk._trapezoid_excess(s, dt), 0, -math.inf)  # fmt: skip
     assert lower <= least + 1e-6
     # (the flight is sampled at its control steps: its least gap may sit between them, up
     # to the look-ahead point's speed, at most 2 v, over half a step)
     assert least <= upper + dt
+    assert least <= lag_upper + dt
 
 
 def _random_states(
@@ -721,6 +724,41 @@ def _random_states(
     return out
 
 
+def test_the_sine_and_cosine_integrals_match_a_quadrature() -> None:
+    """Si and Cin (the lag's closed-form flight) against the trapezoid rule on 400,001
+    points, across the range the screen uses them in (|x| <= 4)."""
+    for x in (-4.0, -1.7, -0.3, 1e-3, 0.5, 1.2, 2.5, 4.0):
+        u = np.linspace(1e-12, abs(x), 400_001)
+        si = math.copysign(float(np.trapezoid(np.sin(u) / u, u)), x)
+        cin = float(np.trapezoid((1.0 - np.cos(u)) / u, u))
+        assert bk._si_cin(x) == pytest.approx((si, cin), abs=1e-9)
+
+
+def test_the_lags_closed_form_bounds_the_flight_from_above_and_tighter_than_the_tube() -> None:
+    """With a lag, the least look-ahead gap of STRAIGHT's flight (the shield's own, at its
+    20 ms steps, past every zone) is never above the lag's closed-form upper bound (plus the
+    slack of sampling at the steps), on states drawn among the zones; and the bound is below
+    the tube's in most of them (what it is for: refusing a turn's exits before their flight
+    is sampled)."""
+    tighter = lagged = 0
+    for s, z, n, e, h, a, av in _random_states(120, 7):
+        if s[bk.S_TAU] <= 0.0 or abs(s[bk.S_TAU] * av) < bk._LAG_SCREEN_MIN_RAD:
+            continue
+        lagged += 1
+        trapezoid = bk._trapezoid_excess(s, 0.02)
+        upper, _ = bk._lag_flight_upper(s, *z, n, e, h, a, av, 1.0, trapezoid, 0, -math.inf)
+        delta, mid, w, drift = bk._straight_to_come(s, a, av, 1.0, trapezoid)
+        tube, _ = bk._tube_gap(s, *z, n, e, h + mid, w, delta, drift, True, 0, -math.inf)
+        least = lk.lookahead_gap(*z[:4], n, e, h, PARAMS.shield_margin_m)
+        for _ in range(int((12.0 * s[bk.S_TAU] + 30.0) / 0.02)):
+            _, n, e, h, a, av = bk._fly_step(s, *z, bk.BACKUP_STRAIGHT, 0.0, n, e, h, a, av,
+                                             1.0, 0.02)  # fmt: skip
+            least = min(least, lk.lookahead_gap(*z[:4], n, e, h, PARAMS.shield_margin_m))
+        assert least <= upper + 0.02, (least, upper)
+        tighter += upper < tube - 1e-3
+    assert lagged > 40 and tighter > 0.8 * lagged
+
+
 def test_the_running_screen_refuses_only_exits_whose_certificate_is_below_the_level() -> None:
     """STRAIGHT's certificate asked only whether it reaches a level (a turn's exit) stops
     with -inf once an upper bound on the rest of its flight is below the level: only where
@@ -728,7 +766,7 @@ def test_the_running_screen_refuses_only_exits_whose_certificate_is_below_the_le
     exit search decides as it did without the screen. Drawn with lags up to 1.4 s (where the screen
     at the exit itself is loosest); the screen must fire in some of them."""
     dt = 0.02
-    fired = 0
+    fired = screened = 0
     for s, z, n, e, h, a, av in _random_states(400, 61):
         full = bk.straight_certificate(s, *z, n, e, h, a, av, 1.0, dt, -math.inf, math.inf)
         theta = bk.acceptance_level_m(s, z[2], z[3], 0, 1.0, dt)
@@ -739,7 +777,13 @@ def test_the_running_screen_refuses_only_exits_whose_certificate_is_below_the_le
                 assert full < level, (full, level)
             elif value >= level:
                 assert full >= level
-    assert fired > 50
+            # the screen before the flight (a turn's exit: the tube, and with a lag the
+            # lag's closed form)
+            upper, _ = bk._straight_upper_bound(s, *z, n, e, h, a, av, 1.0, dt, 0, level)
+            if upper < level:
+                screened += 1
+                assert full < level, (full, level, upper)
+    assert fired > 50 and screened > 50
 
 
 # 5. the law at scale -------------------------------------------------------------------

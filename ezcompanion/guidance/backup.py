@@ -374,6 +374,14 @@ def _straight_to_come(
 
 
 @jit_inline
+def _zone_round(first: int, j: int, count: int) -> int:
+    """The j-th of ``count`` zones taken from zone ``first`` round (a screen starts at the
+    zone that stopped it last time)."""
+    i = first + j
+    return i - count if i >= count else i
+
+
+@jit_inline
 def _tube_gap(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h_final: float, w: float, delta: float, drift: float,
@@ -400,9 +408,7 @@ def _tube_gap(
     which = first
     count = zn.shape[1]
     for j in range(count):
-        i = first + j
-        if i >= count:
-            i -= count
+        i = _zone_round(first, j, count)
         mur = zmur[kz, i]
         wn = zn[kz, i] - n
         we = ze[kz, i] - e
@@ -413,6 +419,82 @@ def _tube_gap(
         rho = drift + (math.sqrt(wn * wn + we * we) + zreach[kz, i] + mur + drift) * slope
         rho += 2.0 * mur * delta
         value = g + rho if upper else g - rho
+        if value < best:
+            best, which = value, i
+            if best < below:
+                break
+    return best, which
+
+
+@jit_inline
+def _si_cin(x: float) -> tuple[float, float]:
+    """Si(x) = int_0^x sin(u) / u du and Cin(x) = int_0^x (1 - cos u) / u du, by their power
+    series (alternating, stopped once a term is below 1e-17: at most 15 terms for |x| <= 4,
+    3 for |x| <= 0.01)."""
+    si = cin = 0.0
+    term = x  # +- x^(2j-1) / (2j-1)!
+    for j in range(1, 16):
+        si += term / (2 * j - 1)
+        term *= x / (2 * j)  # +- x^(2j) / (2j)!
+        cin += term / (2 * j)
+        term *= -x / (2 * j + 1)
+        if abs(term) < 1e-17:
+            break
+    return si, cin
+
+
+# The lag's closed-form screen is used where the heading still to come from a_v alone,
+# |tau a_v / v|, is within this (its series are exact to round-off there).
+_LAG_SCREEN_RAD = 4.0
+_LAG_SCREEN_MIN_RAD = 0.2
+
+
+@jit_inline
+def _lag_flight_upper(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float,
+    trapezoid: float, first: int, below: float,
+) -> tuple[float, int]:
+    """An upper bound on the least gap of STRAIGHT's flight from this state with a lag,
+    tight where the tube (``_tube_gap``) is not: once the actuator has died out the
+    lag's turn is known in closed form.
+
+    With a = 0 from here, a_v = a_v0 e^(-t / tau), so the heading is h_f - c e^(-t / tau)
+    (c = tau a_v0 / v, h_f = h + c), and with x = c e^(-t / tau) the flight is, along u(h_f)
+    and its left normal, v t - v tau (Cin(c) - Cin(x)) and -v tau (Si(c) - Si(x)); its
+    look-ahead point adds mu R (cos x, -sin x). STRAIGHT's actuator moves the heading from
+    that by at most eta = (the integral of |a| to come) / v at every time (the lag keeps
+    the sign and the area of a, which decays without changing sign), so the look-ahead
+    point at time t lies within eta (v t + mu R) of that one. For each zone, at the time
+    the asymptote passes nearest it, that point's gap plus eta (v t + mu R) bounds the
+    flight's least gap from above. Returns the least over the zones, from zone ``first``
+    round, stopping at the first below ``below`` (as ``_tube_gap``); inf without a lag."""
+    tau = s[S_TAU]
+    c = tau * av / speed
+    if tau <= 0.0 or not _LAG_SCREEN_MIN_RAD <= abs(c) <= _LAG_SCREEN_RAD:
+        return math.inf, first
+    _, hi = _straighten_integral(s, abs(a), trapezoid)
+    eta = hi / speed
+    ch, sh = math.cos(h + c), math.sin(h + c)
+    si_c, cin_c = _si_cin(c)
+    reach_v = speed * tau
+    best = math.inf
+    which = first
+    count = zn.shape[1]
+    for j in range(count):
+        i = _zone_round(first, j, count)
+        mur = zmur[kz, i]
+        wn = zn[kz, i] - n
+        we = ze[kz, i] - e
+        t = max(0.0, (wn * ch + we * sh - mur + reach_v * cin_c) / speed)
+        x = c * math.exp(-t / tau)
+        si_x, cin_x = _si_cin(x)
+        ahead = speed * t - reach_v * (cin_c - cin_x) + mur * math.cos(x)
+        left = -reach_v * (si_c - si_x) - mur * math.sin(x)
+        dn = wn - (ahead * ch - left * sh)
+        de = we - (ahead * sh + left * ch)
+        value = (math.sqrt(dn * dn + de * de) - zreach[kz, i] - s[S_EPS]
+                 + eta * (speed * t + mur))  # fmt: skip
         if value < best:
             best, which = value, i
             if best < below:
@@ -460,8 +542,9 @@ def straight_certificate(
     ``_RESIDUAL_RAD``, once the samples alone fall below the best so far (no later j can
     beat it), once a certificate reaches ``enough`` (the caller needs no more), or, returning
     the running least gap, once that is below ``stop_below``; and, returning -inf, once an
-    upper bound on the least gap of the flight still to come (``_tube_gap``, from the
-    second sample on) is below ``stop_below`` (less round-off): every lower bound of the
+    upper bound on the least gap of the flight still to come (``_tube_gap``, and with a
+    lag ``_lag_flight_upper``, from the second sample on) is below ``stop_below`` (less
+    round-off): every lower bound of the
     whole flight's gap, the certificate included, is below it too, so a caller that only
     asks whether the certificate reaches ``stop_below`` (a turn's exit) gets the same
     answer without flying the rest. With an abandon profile the tail is only taken at the
@@ -499,6 +582,9 @@ def straight_certificate(
             # level, so is every lower bound of the whole flight (the certificate)
             upper, blocker = _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, h + mid, w, delta,
                                        drift, True, blocker, screen)  # fmt: skip
+            if upper >= screen and tau > 0.0:
+                upper, blocker = _lag_flight_upper(s, zn, ze, zmur, zreach, kz, n, e, h, a, av,
+                                                   speed, trapezoid, blocker, screen)  # fmt: skip
             if upper < screen:
                 return -math.inf
         for _ in range(ticks):
@@ -517,10 +603,16 @@ def _straight_upper_bound(
 ) -> tuple[float, int]:
     """An upper bound on the least gap of STRAIGHT's flight from this state, so on its
     certificate (which is below that gap): cheap, to screen a turn's exits. Stops below
-    ``below``, from zone ``first`` round (``_tube_gap``)."""
-    delta, mid, w, drift = _straight_to_come(s, a, av, speed, _trapezoid_excess(s, dt))
-    return _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, h + mid, w, delta, drift, True, first,
-                     below)  # fmt: skip
+    ``below``, from zone ``first`` round (``_tube_gap``; with a lag, where that does not
+    reach below, ``_lag_flight_upper``)."""
+    trapezoid = _trapezoid_excess(s, dt)
+    delta, mid, w, drift = _straight_to_come(s, a, av, speed, trapezoid)
+    upper, which = _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, h + mid, w, delta, drift, True,
+                             first, below)  # fmt: skip
+    if upper >= below and s[S_TAU] > 0.0:
+        upper, which = _lag_flight_upper(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
+                                         trapezoid, which, below)  # fmt: skip
+    return upper, which
 
 
 @jit_borrow  # on its own, not inlined: two inlined copies took most of its callers' compile

@@ -444,7 +444,9 @@ def _si_cin(x: float) -> tuple[float, float]:
 
 
 # The lag's closed-form screen is used where the heading still to come from a_v alone,
-# |tau a_v / v|, is within this (its series are exact to round-off there).
+# |tau a_v / v|, is within this (its series are exact to round-off there) and at least the
+# second (below, it is rarely below the tube's bound and costs more than it saves:
+# bench/bench_shield.py, 0.05 to 0.4 rad tried, docs/validation.md).
 _LAG_SCREEN_RAD = 4.0
 _LAG_SCREEN_MIN_RAD = 0.2
 

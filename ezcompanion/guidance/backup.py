@@ -504,6 +504,28 @@ def _lag_flight_upper(
     return best, which
 
 
+@jit_inline
+def _rest_upper(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float,
+    trapezoid: float, delta: float, mid: float, w: float, drift: float, first: int,
+    below: float,
+) -> tuple[float, int]:
+    """An upper bound on the least gap of STRAIGHT's flight from this state, the exit
+    screens' (``delta, mid, w, drift``: ``_straight_to_come`` here): the tube's
+    (``_tube_gap``), and where that does not reach below ``below``, the lesser of it and the
+    lag's closed form (``_lag_flight_upper``; inf without a lag). From zone ``first`` round,
+    stopping at the first zone below ``below``; returns the bound and that zone."""
+    upper, which = _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, h + mid, w, delta, drift, True,
+                             first, below)  # fmt: skip
+    if upper >= below:
+        lag, lag_zone = _lag_flight_upper(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
+                                          trapezoid, which, below)  # fmt: skip
+        if lag < upper:
+            upper, which = lag, lag_zone
+    return upper, which
+
+
 @jit_borrow  # on its own, not inlined: two inlined copies took most of its callers' compile
 def _straight_tail(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
@@ -544,9 +566,8 @@ def straight_certificate(
     ``_RESIDUAL_RAD``, once the samples alone fall below the best so far (no later j can
     beat it), once a certificate reaches ``enough`` (the caller needs no more), or, returning
     the running least gap, once that is below ``stop_below``; and, returning -inf, once an
-    upper bound on the least gap of the flight still to come (``_tube_gap``, and with a
-    lag ``_lag_flight_upper``, from the second sample on) is below ``stop_below`` (less
-    round-off): every lower bound of the
+    upper bound on the least gap of the flight still to come (``_rest_upper``, from the
+    second sample on) is below ``stop_below`` (less round-off): every lower bound of the
     whole flight's gap, the certificate included, is below it too, so a caller that only
     asks whether the certificate reaches ``stop_below`` (a turn's exit) gets the same
     answer without flying the rest. With an abandon profile the tail is only taken at the
@@ -582,11 +603,9 @@ def straight_certificate(
         if j > 0 and screen > -math.inf:
             # the rest of the flight from here, from above: where even that is below the
             # level, so is every lower bound of the whole flight (the certificate)
-            upper, blocker = _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, h + mid, w, delta,
-                                       drift, True, blocker, screen)  # fmt: skip
-            if upper >= screen and tau > 0.0:
-                upper, blocker = _lag_flight_upper(s, zn, ze, zmur, zreach, kz, n, e, h, a, av,
-                                                   speed, trapezoid, blocker, screen)  # fmt: skip
+            upper, blocker = _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
+                                         trapezoid, delta, mid, w, drift, blocker,
+                                         screen)  # fmt: skip
             if upper < screen:
                 return -math.inf
         for _ in range(ticks):
@@ -604,17 +623,12 @@ def _straight_upper_bound(
     first: int, below: float,
 ) -> tuple[float, int]:
     """An upper bound on the least gap of STRAIGHT's flight from this state, so on its
-    certificate (which is below that gap): cheap, to screen a turn's exits. Stops below
-    ``below``, from zone ``first`` round (``_tube_gap``; with a lag, where that does not
-    reach below, ``_lag_flight_upper``)."""
+    certificate (which is below that gap): cheap, to screen a turn's exits (``_rest_upper``).
+    Stops below ``below``, from zone ``first`` round."""
     trapezoid = _trapezoid_excess(s, dt)
     delta, mid, w, drift = _straight_to_come(s, a, av, speed, trapezoid)
-    upper, which = _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, h + mid, w, delta, drift, True,
-                             first, below)  # fmt: skip
-    if upper >= below and s[S_TAU] > 0.0:
-        upper, which = _lag_flight_upper(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
-                                         trapezoid, which, below)  # fmt: skip
-    return upper, which
+    return _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, trapezoid, delta, mid,
+                       w, drift, first, below)  # fmt: skip
 
 
 @jit_borrow  # on its own, not inlined: two inlined copies took most of its callers' compile

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pytest
@@ -47,14 +48,17 @@ class Flight:
     seed: int = 0
 
 
-def _rk4(x: float, target: float, lag_s: float, h: float) -> float:
-    def f(y: float) -> float:
+def _rk4(x: Any, target: Any, lag_s: float, h: float, steps: int = 1) -> Any:
+    """``steps`` RK4 steps of ``h`` of ``lag x_dot = target - x`` (numbers or arrays)."""
+    def f(y: Any) -> Any:
         return (target - y) / lag_s
-    k1 = f(x)
-    k2 = f(x + 0.5 * h * k1)
-    k3 = f(x + 0.5 * h * k2)
-    k4 = f(x + h * k3)
-    return x + h * (k1 + 2.0 * k2 + 2.0 * k3 + k4) / 6.0
+    for _ in range(steps):
+        k1 = f(x)
+        k2 = f(x + 0.5 * h * k1)
+        k3 = f(x + 0.5 * h * k2)
+        k4 = f(x + h * k3)
+        x = x + h * (k1 + 2.0 * k2 + 2.0 * k3 + k4) / 6.0
+    return x
 
 
 def fly(flight: Flight, command_rad: np.ndarray | None = None) -> ResponseWindow:
@@ -110,7 +114,8 @@ def test_a_first_order_lag_and_a_speed_factor_are_recovered_within_the_bounds(
     assert abs(lag.lag_s - lag_s) <= LAG_BOUND_S + LAG_BOUND_RATIO * lag_s, lag
     assert lag.residual_rad <= 2.0 * noise_rad + 0.005, lag
     speed = fit_speed_factor(window)
-    assert abs(speed.speed_factor - factor) <= SPEED_FACTOR_BOUND, speed
+    # a unicycle's turns read high by the vectors' model, taken where the two fit alike
+    assert -SPEED_FACTOR_BOUND <= speed.speed_factor - factor <= 2.0 * SPEED_FACTOR_BOUND, speed
 
 
 @settings(max_examples=15, deadline=None)
@@ -124,7 +129,7 @@ def test_from_hover_the_slow_samples_are_left_out_and_both_are_still_recovered(
     assert abs(lag.lag_s - lag_s) <= LAG_BOUND_S + LAG_BOUND_RATIO * lag_s, lag
     assert lag.samples < len(window)  # the hover's samples have no course: not fitted
     speed = fit_speed_factor(window)
-    assert abs(speed.speed_factor - factor) <= 2.0 * SPEED_FACTOR_BOUND, speed
+    assert -2.0 * SPEED_FACTOR_BOUND <= speed.speed_factor - factor <= 2.0 * SPEED_FACTOR_BOUND
 
 
 def test_a_window_where_the_command_did_not_change_is_refused() -> None:
@@ -186,3 +191,95 @@ def test_the_compiled_scan_is_the_recurrence_the_doubling_scan_computes() -> Non
     np.testing.assert_allclose(identify._affine_scan(keep, column),
                                identify._doubling_scan(*np.broadcast_arrays(keep, column)),
                                rtol=1e-9, atol=1e-12)  # fmt: skip
+
+
+def fly_velocity_loop(lag_s: float, factor: float, rate_rad_s: float, seed: int,
+                      noise_m_s: float = 0.01) -> ResponseWindow:
+    """A multicopter's velocity loop: the velocity *vector* follows k times the setpoint
+    with a first-order lag (RK4 on the vector, at most 5 ms a step), under a setpoint that
+    turns at +-``rate_rad_s`` in 2 s halves (hard turns, as the shield's backups fly); 8 s
+    at 50 Hz, jittered, the velocity reported with noise."""
+    rng = np.random.default_rng(seed)
+    times = np.cumsum(0.02 * rng.uniform(0.8, 1.2, 400))
+    rate = np.where((times // 2.0) % 2 == 0, rate_rad_s, -rate_rad_s)
+    command = rng.uniform(-math.pi, math.pi) + np.cumsum(rate * np.gradient(times))
+    wanted = factor * np.stack([np.cos(command), np.sin(command)], axis=1)
+    velocity = wanted[0].copy()
+    samples = []
+    for n, t in enumerate(times):
+        if n:
+            dt = t - times[n - 1]
+            steps = max(1, math.ceil(dt / 5e-3))
+            velocity = _rk4(velocity, wanted[n], lag_s, dt / steps, steps)  # type: ignore[arg-type]
+        seen = velocity + rng.normal(0.0, noise_m_s, 2)
+        samples.append(ResponseSample(
+            time_s=float(t), velocity_north_m_s=float(seen[0]), velocity_east_m_s=float(seen[1]),
+            command_north_m_s=math.cos(command[n]), command_east_m_s=math.sin(command[n])))
+    return ResponseWindow.of(samples)
+
+
+@settings(max_examples=20, deadline=None)
+@given(lag_s=st.floats(0.3, 1.5), factor=st.floats(0.7, 1.0), rate=st.floats(0.6, 1.5),
+       seed=st.integers(0, 2**16))
+def test_a_velocity_that_lags_as_a_vector_keeps_its_speed_factor_through_hard_turns(
+        lag_s: float, factor: float, rate: float, seed: int) -> None:
+    """In a turn a lagging velocity vector is shorter than k |c| (k cos phi |c| in a steady
+    turn, phi the angle it lags by), which the magnitudes' model reads as a lower k; the
+    vectors' model explains it, fits better, and keeps k."""
+    window = fly_velocity_loop(lag_s, factor, rate, seed)
+    speed = fit_speed_factor(window)
+    assert speed.model == "velocity", speed
+    assert abs(speed.speed_factor - factor) <= SPEED_FACTOR_BOUND, speed
+    magnitudes = identify.speed_models(window)[0]
+    assert magnitudes.model == "speed"
+    assert magnitudes.residual_m_s > speed.residual_m_s
+
+
+def test_the_magnitudes_alone_read_a_lagging_vector_in_hard_turns_as_a_slower_vehicle() -> None:
+    """What the companion fitted before (the magnitudes only), on a PX4-like loop (1.2 s,
+    k 0.8, turns at 1.25 rad/s: 0.8 m/s at a_max 1): k read 0.1 or more low, where the
+    fit reports 0.8. On real PX4 this ratcheted the speed factor to 0.41-0.49
+    (docs/field.md)."""
+    window = fly_velocity_loop(1.2, 0.8, 1.25, seed=11)
+    magnitudes, vectors = identify.speed_models(window)
+    assert magnitudes.speed_factor < 0.7, magnitudes
+    assert fit_speed_factor(window) == vectors
+    assert abs(vectors.speed_factor - 0.8) <= SPEED_FACTOR_BOUND, vectors
+
+
+def test_a_vehicle_whose_speed_lags_on_its_own_is_read_on_the_safe_side() -> None:
+    """The other way round: a unicycle's speed does not drop in a turn (``fly``, a speed lag
+    of its own), which the vectors' model reads as a higher k. The magnitudes' model fits
+    it better; where the two fit alike the larger k is reported: never below the truth by
+    more than the bound, above it by at most twice that (the law then plans wider turns)."""
+    for seed in range(8):
+        window = fly(Flight(0.8, 0.8, 0.5, seed=seed))
+        magnitudes, vectors = identify.speed_models(window)
+        assert magnitudes.residual_m_s < vectors.residual_m_s
+        assert abs(magnitudes.speed_factor - 0.8) <= SPEED_FACTOR_BOUND, magnitudes
+        assert vectors.speed_factor > magnitudes.speed_factor, vectors
+        speed = fit_speed_factor(window)
+        assert 0.8 - SPEED_FACTOR_BOUND <= speed.speed_factor <= 0.8 + 2.0 * SPEED_FACTOR_BOUND
+
+
+def test_the_compiled_speed_sums_are_the_whole_array_simulations(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Both models' fits, compiled (``_lag_sums_rows``, row by row) and as numpy runs them
+    uncompiled (``EZCOMPANION_JIT=0``: whole-array simulations), on a flight with a gap and
+    a hover: the same fits to round-off."""
+    window = fly(Flight(0.6, 0.8, 0.4, start_speed_m_s=0.0, seed=3))
+    cut = np.ones(len(window), dtype=bool)
+    cut[120:160] = False  # 0.8 s of telemetry lost
+    holed = ResponseWindow(*(getattr(window, name)[cut] for name in (
+        "time_s", "velocity_north_m_s", "velocity_east_m_s", "command_north_m_s",
+        "command_east_m_s")))
+    for flight in (holed, fly_velocity_loop(1.0, 0.9, 1.0, seed=4)):
+        compiled = identify.speed_models(flight)
+        monkeypatch.setattr(identify, "JIT_ENABLED", False)
+        whole = identify.speed_models(flight)
+        monkeypatch.setattr(identify, "JIT_ENABLED", True)
+        assert [f.model for f in compiled] == [f.model for f in whole] == ["speed", "velocity"]
+        for a, b in zip(compiled, whole, strict=True):
+            assert a.speed_lag_s == b.speed_lag_s
+            assert a.speed_factor == pytest.approx(b.speed_factor, rel=1e-9)
+            assert a.residual_m_s == pytest.approx(b.residual_m_s, rel=1e-9)

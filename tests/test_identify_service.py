@@ -93,10 +93,11 @@ def test_the_service_identifies_the_measured_autopilots_and_changes_only_what_is
     last = identified(run)
     assert last.lag is not None and last.speed is not None
     assert abs(last.lag.lag_s - lag_s) <= LAG_BOUND_S, last.lag
-    if profile == "copter":  # a turning ArduCopter slows (0.91 V at a 30-degree lead)
-        assert 0.95 <= last.speed.speed_factor <= factor, last.speed
-    else:
-        assert abs(last.speed.speed_factor - factor) <= SPEED_FACTOR_BOUND, last.speed
+    # a turning ArduCopter slows (0.91 V at a 30-degree lead): its velocity lags as a
+    # vector, which the fit models (the shaping is not quite a first-order lag: twice the
+    # bound); the magnitudes alone read it as 0.95 to 0.99 (docs/field.md)
+    bound = 2.0 * SPEED_FACTOR_BOUND if profile == "copter" else SPEED_FACTOR_BOUND
+    assert abs(last.speed.speed_factor - factor) <= bound, last.speed
     said = run.response_events()
     assert said[0].message.startswith("identified: course lag")
     loop = run.service.loop
@@ -205,3 +206,17 @@ def test_a_vehicle_far_slower_than_commanded_is_not_following_and_changes_nothin
     # 0.3 of the commanded speed, and slower still while it turns (the shaping)
     assert len(said) == 1 and said[0].data["speed_factor"] == pytest.approx(0.27, abs=0.04)
     assert run.service.loop.speed_factor == 1.0
+
+
+def test_one_low_reading_of_the_speed_factor_changes_nothing() -> None:
+    """The first review (2 s from the start) reads the stub's 0.8 s copter at 0.91 of its
+    speed (the shaping's acceleration limit from the start, not a lag), the next ones at
+    1.00: the factor is lowered only where two reviews in a row find it lower (as the lag
+    is raised), so the law's speed floor stays the vehicle's. Before, that first reading
+    lowered it for good."""
+    run = fly("copter", max_time_s=6.0, velocity_lag_s=0.8)
+    speeds = [e.speed for e in run.estimates if e.speed is not None]
+    assert speeds[0].speed_factor < 0.95, speeds[0]  # lower by more than the tolerance
+    assert all(abs(s.speed_factor - 1.0) <= 2.0 * SPEED_FACTOR_BOUND for s in speeds[1:]), speeds
+    assert run.service.loop.speed_factor == 1.0
+    assert not any(e.message.startswith("measured speed factor") for e in run.response_events())

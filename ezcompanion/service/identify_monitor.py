@@ -15,7 +15,8 @@ lag_tolerance_ratio * assumed)``, or a speed factor lower by more than ``speed_t
 is a ``response`` event with the numbers, and the loop is told the safer value
 (``GuidanceLoop.assume_measured_lag``, which overrides a scenario's own lag only when the
 measurement is worse; ``GuidanceLoop.assume_speed_factor``). A lag is acted on only when
-two reviews in a row (1 s apart) find it longer, and the law gets the smaller of the two.
+two reviews in a row (1 s apart) find it longer, and the law gets the smaller of the two;
+a speed factor only when two in a row find it lower, and the larger of the two is taken.
 A value is never lowered again during the engagement. The first estimate is an event too,
 whatever it says. A speed factor below ``MIN_SPEED_FACTOR`` (0.5) is a vehicle not
 following the setpoints at all (refused, or held by its autopilot): said once, nothing
@@ -109,6 +110,7 @@ class ResponseMonitor:
         self._said_not_following = False
         self._said_turn_bound = False
         self._worse_lag_s: float | None = None  # the last review's lag, when it was worse
+        self._lower_speed: float | None = None  # the last review's factor, when it was lower
 
     def use_profile(self, profile: AutopilotProfile) -> None:
         """The autopilot's lag the setpoints cancel, and whose default the law was told."""
@@ -255,8 +257,16 @@ class ResponseMonitor:
             return False
         assumed = self.loop.speed_factor
         if speed.speed_factor >= assumed - self.speed_tolerance:
+            self._lower_speed = None
             return False
-        factor = speed.speed_factor
+        # as for the lag, two reviews in a row: the first review's 2 s from the start read
+        # the stub's copter at 0.91 of its speed (its shaping's acceleration limit, not a
+        # lag), the next at 1.00; the larger of the two is taken
+        previous, self._lower_speed = self._lower_speed, speed.speed_factor
+        if previous is None:
+            return False
+        self._lower_speed = None
+        factor = max(previous, speed.speed_factor)
         if factor < MIN_SPEED_FACTOR:
             if not self._said_not_following:
                 self._said_not_following = True

@@ -12,6 +12,7 @@ Layout (every key optional; see ``docs/sitl_stub.md``)::
       physics_dt_s: 0.01
       model: measured               # measured | ideal (docs/sitl_stub.md)
       velocity_lag_s: null          # null: the model's (measured: copter 0.6, PX4 1.2)
+      velocity_vector_lag: false    # PX4: the velocity lags as a vector (a velocity loop)
       speed_ratio: null             # flown / commanded (measured: PX4 0.8, plane 23.4/22)
       heading_accel_ratio: null     # plane course command (measured 0.73)
       guided_p: null                # plane: ArduPlane's GUIDED_P, cd/rad (null: 5000)
@@ -160,6 +161,8 @@ class StubSettings:
     physics_dt_s: float = 0.01
     model: str = "measured"
     velocity_lag_s: float | None = None
+    # PX4 (measured model): the velocity lags as a vector rather than speed and course apart
+    velocity_vector_lag: bool = False
     speed_ratio: float | None = None
     heading_accel_ratio: float | None = None
     guided_p: float | None = None  # ArduPlane's GUIDED_P (cd/rad): its heading loop's roll gain
@@ -217,8 +220,9 @@ class StubSettings:
         if self.max_stream_rate_hz is not None:
             _check("max_stream_rate_hz", self.max_stream_rate_hz, low=0.0, high=10000.0,
                    low_open=True)
-        if not isinstance(self.start_armed, bool):
-            raise ConfigError("start_armed", self.start_armed, "must be true or false")
+        for name in ("start_armed", "velocity_vector_lag"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(name, getattr(self, name), "must be true or false")
         if self.signing_key_hex is not None and self.signing_passphrase is not None:
             raise ConfigError("signing_key_hex", self.signing_key_hex,
                               "give at most one of signing_key_hex and signing_passphrase")
@@ -328,6 +332,14 @@ class StubConfig:
         tracking = min(self.spec.tracking_lag_s, 0.5 * lag)
         return VelocityShaping(accel_max_m_s2=accel, jerk_max_m_s3=accel / (lag - tracking),
                                tracking_lag_s=tracking)
+
+    def vector_lag_s(self) -> float:
+        """The velocity loop's lag where ``velocity_vector_lag`` is set (the measured model,
+        a vehicle that hovers without ArduCopter's shaping: PX4), else 0."""
+        if (not self.settings.velocity_vector_lag or not self.measured
+                or not self.spec.can_hover or self.spec.shaping_accel_m_s2 is not None):
+            return 0.0
+        return self.model_value("velocity_lag_s")
 
     @property
     def max_stream_rate_hz(self) -> float:

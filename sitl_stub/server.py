@@ -69,6 +69,7 @@ class SitlStub:
             speed_ratio=config.model_value("speed_ratio"),
             speed_lag_s=config.model_value("velocity_lag_s") if config.measured else 0.0,
             follows_setpoint_speed=config.measured, shaping=config.velocity_shaping(),
+            vector_lag_s=config.vector_lag_s(),
         )
         grounded = not s.start_armed and config.spec.can_hover
         start = config.placed_start

@@ -19,13 +19,16 @@ State (local NED of the scenario, SI):
   velocity reference and its acceleration while it follows a velocity setpoint or brakes;
   None otherwise.
 
-A vehicle with :class:`VelocityShaping` follows velocity setpoints (and brakes) as
-ArduCopter's position controller does, not as a unicycle: a jerk-limited square-root
-controller shapes a reference velocity towards the setpoint (``AC_PosControl``'s
-``shape_vel_accel_xy``: gain ``jerk / accel``, acceleration at most ``accel_max_m_s2``,
-jerk at most ``jerk_max_m_s3``) and the vehicle's velocity over ground follows that reference
-with a first-order lag of ``tracking_lag_s``. Fitted to ArduCopter 4.5.6 SITL
-(docs/sitl_stub.md, "ArduCopter's velocity response, measured again").
+A vehicle with ``vector_lag_s`` > 0 follows velocity setpoints as a velocity loop does
+(PX4's, a PID on the velocity vector): the velocity over ground lags the setpoint as a
+vector, not speed and course apart. A vehicle with :class:`VelocityShaping` follows
+velocity setpoints (and brakes) as ArduCopter's position controller does, not as a
+unicycle: a jerk-limited square-root controller shapes a reference velocity towards the
+setpoint (``AC_PosControl``'s ``shape_vel_accel_xy``: gain ``jerk / accel``, acceleration
+at most ``accel_max_m_s2``, jerk at most ``jerk_max_m_s3``) and the vehicle's velocity over
+ground follows that reference with a first-order lag of ``tracking_lag_s``. Fitted to
+ArduCopter 4.5.6 SITL (docs/sitl_stub.md, "ArduCopter's velocity response, measured
+again").
 
 Commands say what the autopilot's inner loops are asked to do; :func:`step` turns one into
 the lateral acceleration and speed of one fixed step and integrates
@@ -166,6 +169,8 @@ class VehicleParams:
     climb_max_m_s: float = 2.0  # ... within this
     wind: Wind = field(default_factory=Wind)
     shaping: VelocityShaping | None = None  # velocity setpoints shaped as ArduCopter does
+    # > 0: velocity setpoints flown by a velocity loop, the vector lagging by this (PX4)
+    vector_lag_s: float = 0.0
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -344,6 +349,38 @@ def _shaped_vehicle_step(
     )
 
 
+def _vector_lag_step(
+    state: VehicleState, command: FollowCourse, params: VehicleParams, dt_s: float,
+    height: float, climb: float,
+) -> VehicleState:
+    """A velocity setpoint flown by a velocity loop: the velocity over ground follows
+    ``speed_ratio`` times the setpoint as a vector, with a first-order lag of
+    ``vector_lag_s`` (exact over the step, the setpoint held), its change at most
+    ``accel_max`` per second. In a turn the velocity is shorter than the setpoint's
+    (cos phi of it in a steady turn, phi the angle it lags by)."""
+    wind = params.wind
+    g_n, g_e = state.ground_velocity(wind)
+    speed = _target_speed(command, params)
+    course = command.reference_rad(state.t_s)
+    target_n, target_e = speed * math.cos(course), speed * math.sin(course)
+    keep = math.exp(-dt_s / params.vector_lag_s)
+    d_n, d_e = _limit((target_n - g_n) * (1.0 - keep), (target_e - g_e) * (1.0 - keep),
+                      params.accel_max_m_s2 * dt_s)  # fmt: skip
+    n_next, e_next = g_n + d_n, g_e + d_e
+    air_n, air_e = n_next - wind.north_m_s, e_next - wind.east_m_s
+    speed_next = math.hypot(air_n, air_e)
+    heading = state.heading_rad if speed_next <= _HOVER_M_S else math.atan2(air_e, air_n)
+    return VehicleState(
+        t_s=state.t_s + dt_s,
+        north_m=state.north_m + 0.5 * (g_n + n_next) * dt_s,
+        east_m=state.east_m + 0.5 * (g_e + e_next) * dt_s,
+        heading_rad=heading, speed_m_s=speed_next,
+        accel_lat_m_s2=(-d_n * math.sin(heading) + d_e * math.cos(heading)) / dt_s,
+        yaw_rate_rad_s=float(wrap_pi(heading - state.heading_rad)) / dt_s,
+        height_m=height, climb_m_s=climb,
+    )
+
+
 def step(
     state: VehicleState, command: VehicleCommand, params: VehicleParams, dt_s: float,
     vertical: Vertical | None = None,
@@ -356,6 +393,10 @@ def step(
                                                and command.speed_m_s is not None))):
         height, climb = _next_height(state, vertical or Vertical(), params, dt_s)
         return _shaped_vehicle_step(state, command, params, shaping, dt_s, height, climb)
+    if (params.vector_lag_s > 0.0 and params.can_hover and isinstance(command, FollowCourse)
+            and command.speed_m_s is not None and params.follows_setpoint_speed):
+        height, climb = _next_height(state, vertical or Vertical(), params, dt_s)
+        return _vector_lag_step(state, command, params, dt_s, height, climb)
     speed_next = _next_speed(state.speed_m_s, _target_speed(command, params), params, dt_s,
                              braking=isinstance(command, Stop))
     speed_mean = 0.5 * (state.speed_m_s + speed_next)

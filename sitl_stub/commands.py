@@ -174,7 +174,7 @@ class CommandHandlers:
         command = FollowCourse(math.radians(heading_deg), over_ground=over_ground,
                                accel_limit_m_s2=ratio * max(accel, 0.05), since_s=t_s,
                                roll_gain=self.config.heading_roll_gain,
-                               roll_limit_rad=self.spec.roll_limit_rad,
+                               roll_limit_rad=self.config.roll_limit_rad,
                                turn_ratio=ratio)  # fmt: skip
         label = "following course" if over_ground else "following heading"
         self._follow(label, command, t_s)
@@ -201,8 +201,8 @@ class CommandHandlers:
         """The parameters the stub answers for: its setpoint timeout, under the imitated
         autopilot's name (ArduCopter GUID_TIMEOUT, PX4 COM_OF_LOSS_T), and ArduCopter's
         velocity shaping (WPNAV_ACCEL in cm/s/s, PSC_JERK_XY in m/s/s/s) where it is
-        modelled; ArduPlane's heading loop gain (GUIDED_P, cd/rad) where it is (its course
-        command has no timeout)."""
+        modelled; ArduPlane's heading loop gain (GUIDED_P, cd/rad) and roll limit
+        (ROLL_LIMIT_DEG) where it is (its course command has no timeout)."""
         timeout = self.config.timeout_s("setpoint")
         if self.spec.profile is Profile.PX4:
             return {"COM_OF_LOSS_T": timeout}
@@ -213,7 +213,10 @@ class CommandHandlers:
             return {"GUID_TIMEOUT": timeout, "WPNAV_ACCEL": 100.0 * shaping.accel_max_m_s2,
                     "PSC_JERK_XY": shaping.jerk_max_m_s3}
         gain = self.config.heading_roll_gain
-        return {} if gain is None else {"GUIDED_P": 100.0 * math.degrees(gain)}
+        if gain is None:
+            return {}
+        return {"GUIDED_P": 100.0 * math.degrees(gain),
+                "ROLL_LIMIT_DEG": math.degrees(self.config.roll_limit_rad)}
 
     def _on_param_request_read(self, msg: Message, t_s: float, state: VehicleState) -> None:
         if not self._for_us(msg):

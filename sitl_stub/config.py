@@ -16,6 +16,7 @@ Layout (every key optional; see ``docs/sitl_stub.md``)::
       speed_ratio: null             # flown / commanded (measured: PX4 0.8, plane 23.4/22)
       heading_accel_ratio: null     # plane course command (measured 0.73)
       guided_p: null                # plane: ArduPlane's GUIDED_P, cd/rad (null: 5000)
+      roll_limit_deg: null          # plane: ArduPlane's ROLL_LIMIT_DEG (null: 45; SITL's 65)
       vz_hold_drift_m_s: null       # climb under vz = 0 without a height (PX4 0.1)
       failsafe_descent_m_s: null    # after PX4's offboard-loss failsafe (0.8)
       response_time_s: 0.0          # first-order lag of lateral acceleration, 0 = ideal
@@ -166,6 +167,7 @@ class StubSettings:
     speed_ratio: float | None = None
     heading_accel_ratio: float | None = None
     guided_p: float | None = None  # ArduPlane's GUIDED_P (cd/rad): its heading loop's roll gain
+    roll_limit_deg: float | None = None  # ArduPlane's ROLL_LIMIT_DEG: its heading loop's clip
     vz_hold_drift_m_s: float | None = None
     failsafe_descent_m_s: float | None = None
     response_time_s: float = 0.0
@@ -208,6 +210,8 @@ class StubSettings:
         _check("course_gain_1_s", self.course_gain_1_s, low=0.0, high=100.0, low_open=True)
         if self.guided_p is not None:
             _check("guided_p", self.guided_p, low=0.0, high=1e5, low_open=True)
+        if self.roll_limit_deg is not None:
+            _check("roll_limit_deg", self.roll_limit_deg, low=0.0, high=89.0, low_open=True)
         _check("yaw_rate_max_deg_s", self.yaw_rate_max_deg_s, low=0.0, high=3600.0, low_open=True)
         _check("loiter_radius_m", self.loiter_radius_m, low=0.0, high=1e5, low_open=True)
         _check("height_m", self.height_m, low=-1000.0, high=1e5)
@@ -320,6 +324,13 @@ class StubConfig:
             return None
         guided_p = self.settings.guided_p
         return gain if guided_p is None else math.radians(guided_p / 100.0)
+
+    @property
+    def roll_limit_rad(self) -> float:
+        """ArduPlane's roll limit, which clips its heading loop's roll: ``roll_limit_deg``,
+        else the profile's (the firmware's default, 45 degrees)."""
+        limit = self.settings.roll_limit_deg
+        return self.spec.roll_limit_rad if limit is None else math.radians(limit)
 
     def velocity_shaping(self) -> VelocityShaping | None:
         """ArduCopter's velocity shaping in the measured model, else None: WPNAV_ACCEL from

@@ -16,6 +16,7 @@ the wall.
 from __future__ import annotations
 
 import csv
+import math
 import subprocess
 import sys
 import threading
@@ -128,6 +129,38 @@ def test_scenario_1_scaled_to_a_22_m_s_plane(tmp_path: Path) -> None:
     assert min(speeds) == pytest.approx(23.4, rel=1e-3)  # the plane's own speed, not 22
     # the outer loop turned the plane as hard as the law asked: without it, at most 0.73x
     assert accel > 0.6
+
+
+@pytest.mark.parametrize(("roll_limit_deg", "outcome"), [(25.0, "refused"), (65.0, "flown")])
+def test_a_plane_whose_roll_limit_stops_the_laws_turn_is_refused_before_guided(
+    roll_limit_deg: float, outcome: str, tmp_path: Path
+) -> None:
+    """The loopback plane answers ROLL_LIMIT_DEG as ArduPlane does and clips its heading
+    loop's roll there. At 23.4 m/s and 4.5 m/s^2, flown as 0.73 g tan(roll), the law's
+    hardest turn takes a roll of 32 degrees: a limit of 25 turns the plane at most at 0.74
+    of it, so the companion refuses to guide it, naming the limit (GUIDED_P would not help);
+    SITL's 65 (its plane.parm) and the firmware's 45 fly it."""
+    data = yaml.safe_load((CONFIG / "paper_scenario1_plane22.yaml").read_text())
+    data["sitl_stub"]["roll_limit_deg"] = roll_limit_deg
+    config = tmp_path / "plane.yaml"
+    config.write_text(yaml.safe_dump(data))
+    flight = fly_service(config, tmp_path, profile="plane", start_mode="LOITER",
+                         max_time_s=4.0, lockstep=True)
+    read = [e.data["value"] for e in flight.events.of_kind(EventKind.PARAMETER)
+            if e.data["name"] == "ROLL_LIMIT_DEG"]  # fmt: skip
+    assert read == [roll_limit_deg]
+    said = [e for e in flight.events.events if "ROLL_LIMIT_DEG" in e.message
+            and e.kind in (EventKind.ABORTED, EventKind.WARNING)]  # fmt: skip
+    asked = [e for e in flight.events.of_kind(EventKind.MODE) if "requested" in e.data]
+    if outcome == "flown":
+        assert not said and asked and flight.outcome.setpoints_sent > 0
+        return
+    (event,) = said
+    assert event.kind is EventKind.ABORTED and event.data["cause"] == "heading_loop"
+    assert event.data["turn_share"] == pytest.approx(0.73 * 9.80665 * math.tan(
+        math.radians(roll_limit_deg)) / 4.5, rel=0.01)
+    assert event.data["roll_limit_needed_deg"] == pytest.approx(32.0, abs=1.0)
+    assert not asked and flight.outcome.setpoints_sent == 0
 
 
 @pytest.mark.parametrize(

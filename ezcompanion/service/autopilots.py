@@ -70,12 +70,17 @@ class AutopilotProfile:
     # the parameter that sets it (GUIDED_P, in cd/rad); None: no such loop
     heading_roll_gain: float | None = None
     heading_gain_parameter: str | None = None
+    # ... and the roll it clips that demand at (rad), with its parameter (ROLL_LIMIT_DEG, in
+    # degrees); pi / 2: none
+    roll_limit_rad: float = 0.5 * math.pi
+    roll_limit_parameter: str | None = None
 
     @property
     def steering_parameter_names(self) -> tuple[str, ...]:
         """The parameters the setpoints are shaped by (read whether or not the abandon
-        check is on): the heading loop's gain."""
-        return () if self.heading_gain_parameter is None else (self.heading_gain_parameter,)
+        check is on): the heading loop's gain and roll limit."""
+        return tuple(n for n in (self.heading_gain_parameter, self.roll_limit_parameter)
+                     if n is not None)
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
@@ -91,12 +96,15 @@ class AutopilotProfile:
 
     def with_parameters(self, values: Mapping[str, float]) -> AutopilotProfile:
         """This profile with the hold the vehicle's own timeout parameter gives, the
-        braking its shaping parameters give and the roll gain of its heading loop, where it
-        answered for them."""
+        braking its shaping parameters give and the roll gain and limit of its heading
+        loop, where it answered for them."""
         profile = self
         gain = self.heading_gain_parameter
         if gain is not None and gain in values:  # cd/rad: a hundredth of a degree per radian
             profile = replace(profile, heading_roll_gain=math.radians(values[gain] / 100.0))
+        limit = self.roll_limit_parameter
+        if limit is not None and limit in values:  # degrees
+            profile = replace(profile, roll_limit_rad=math.radians(values[limit]))
         name = self.timeout_parameter
         if name is not None and name in values:
             profile = replace(profile, abandon_hold_s=values[name] + self.timeout_overshoot_s)
@@ -124,7 +132,8 @@ PX4_COPTER = AutopilotProfile(
 ARDUPLANE = AutopilotProfile(
     name="ArduPlane", response_lag_s=1.0, turn_ratio=0.73, abandon_turn_s=6.0, abandon_hold_s=4.0,
     abandon_brake_m_s2=0.0, heading_roll_gain=GUIDED_P_DEFAULT_RAD_PER_RAD,
-    heading_gain_parameter="GUIDED_P",
+    heading_gain_parameter="GUIDED_P", roll_limit_rad=math.radians(45.0),
+    roll_limit_parameter="ROLL_LIMIT_DEG",
 )  # fmt: skip
 
 

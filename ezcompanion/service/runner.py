@@ -38,6 +38,7 @@ from ezcompanion.config import Scenario, scenario_to_dict, scenario_update
 from ezcompanion.errors import ConfigError
 from ezcompanion.field import VehiclePlacement, place_fixed, placement_warnings
 from ezcompanion.guidance import LawName, kernels_cached
+from ezcompanion.guidance.scaling import GRAVITY_M_S2
 from ezcompanion.records import EventKind, Hold, TickCommand
 from ezcompanion.service.autopilots import AutopilotProfile
 from ezcompanion.service.clock import Clock, LockstepClock, ScaledClock
@@ -544,36 +545,47 @@ class CompanionService:
         return True
 
     def _check_heading_loop(self, now: float, profile: AutopilotProfile) -> bool:
-        """A plane whose heading loop (ArduPlane's GUIDED_P, as read) cannot fly the law's
-        hardest turn with the course asked at most the cap ahead (the share it can fly,
-        ``setpoints.course_turn_share``, below ``_TURN_SHARE_MIN``) is refused before its
-        guided mode is asked for: the law's safety argument assumes the turn it asks is
-        flown. With ``accept_soft_heading_loop``, a warning instead. False if refused."""
+        """A plane whose heading loop (ArduPlane's GUIDED_P and roll limit, as read)
+        cannot fly the law's hardest turn with the course asked at most the cap ahead (the
+        share it can fly, ``setpoints.course_turn_share``, below ``_TURN_SHARE_MIN``) is
+        refused before its guided mode is asked for: the law's safety argument assumes the
+        turn it asks is flown. With ``accept_soft_heading_loop``, a warning instead. False
+        if refused."""
         setpoints = self.engagement.setpoints
         gain = profile.heading_roll_gain
         if setpoints is None or setpoints.kind is not SetpointKind.COURSE or gain is None:
             return True
         accel = self.scenario.guidance.accel_max_m_s2
         speed = self.loop.flown_speed_m_s
-        share = course_turn_share(gain, accel, speed, profile.turn_ratio)
+        limit = profile.roll_limit_rad
+        share = course_turn_share(gain, accel, speed, profile.turn_ratio, limit)
         if share >= _TURN_SHARE_MIN:
             return True
-        guided_p = 100.0 * math.degrees(gain)
-        needed = 100.0 * math.degrees(guided_p_needed(accel, speed, profile.turn_ratio))
-        why = (f"GUIDED_P {guided_p:.0f} cd/rad: ArduPlane's heading loop turns this plane at "
-               f"most {share:.2f} of the law's hardest turn ({accel:g} m/s^2 at {speed:g} m/s) "
-               f"with the course asked at most 6 s of turning ahead (GUIDED_P {needed:.0f} "
-               "cd/rad flies all of it)")  # fmt: skip
+        # the roll a steady turn at a_max takes, flown as turn_ratio g tan(roll)
+        roll_needed = math.degrees(math.atan(accel / (profile.turn_ratio * GRAVITY_M_S2)))
+        what = (f"most {share:.2f} of the law's hardest turn ({accel:g} m/s^2 at {speed:g} "
+                "m/s)")
+        if course_turn_share(gain, accel, speed, profile.turn_ratio) >= _TURN_SHARE_MIN:
+            # the gain would do: the roll limit is what stops it
+            why = (f"ROLL_LIMIT_DEG {math.degrees(limit):g}: ArduPlane's roll limit turns this "
+                   f"plane at {what} (a limit of {roll_needed:.0f} degrees flies all of it)")
+            fix, data = "raise ROLL_LIMIT_DEG", {"roll_limit_needed_deg": roll_needed}
+        else:
+            guided_p = 100.0 * math.degrees(gain)
+            needed = 100.0 * math.degrees(guided_p_needed(accel, speed, profile.turn_ratio))
+            why = (f"GUIDED_P {guided_p:.0f} cd/rad: ArduPlane's heading loop turns this plane "
+                   f"at {what} with the course asked at most 6 s of turning ahead (GUIDED_P "
+                   f"{needed:.0f} cd/rad flies all of it)")
+            fix, data = "raise GUIDED_P", {"guided_p_needed": needed}
         if self.settings.accept_soft_heading_loop:
             self.events.emit(EventKind.WARNING, now, f"{why}; flown anyway "
                              "(accept_soft_heading_loop): the safety argument does not hold",
-                             turn_share=share, guided_p_needed=needed)  # fmt: skip
+                             turn_share=share, **data)  # fmt: skip
             return True
         self.events.emit(EventKind.ABORTED, now, f"{why}; the law's safety argument assumes "
-                         "the turn it asks is flown: not guided (raise GUIDED_P, or set "
+                         f"the turn it asks is flown: not guided ({fix}, or set "
                          "companion.accept_soft_heading_loop to fly it without the argument)",
-                         cause="heading_loop", turn_share=share,
-                         guided_p_needed=needed)  # fmt: skip
+                         cause="heading_loop", turn_share=share, **data)  # fmt: skip
         self.engagement.done = True
         self.phase = Phase.DONE
         return False

@@ -311,15 +311,15 @@ def course_lead_rad(turn_rate_rad_s: float, limit_m_s2: float,
 
 
 def course_turn_share(roll_gain: float, accel_m_s2: float, speed_m_s: float,
-                      turn_ratio: float) -> float:
+                      turn_ratio: float, roll_limit_rad: float = 0.5 * math.pi) -> float:
     """The most of a steady turn at ``accel_m_s2`` that ArduPlane's heading loop flies at
     ``speed_m_s`` with the course asked at most ``course_lead_rad``'s cap ahead: its roll
-    demand there (``roll_gain`` rad/rad times the lead), flown as ``turn_ratio`` g tan(roll),
-    over ``accel_m_s2``, at most 1 (the clip of p3 then sets the turn). Below 1 the plane
-    cannot be made to turn as the law asks (a GUIDED_P softer than about 3,000 cd/rad at
-    22 m/s and 4.5 m/s^2)."""
+    demand there (``roll_gain`` rad/rad times the lead, within ``roll_limit_rad``), flown as
+    ``turn_ratio`` g tan(roll), over ``accel_m_s2``, at most 1 (the clip of p3 then sets the
+    turn). Below 1 the plane cannot be made to turn as the law asks (a GUIDED_P softer than
+    about 3,000 cd/rad at 22 m/s and 4.5 m/s^2, or a roll limit below 32 degrees there)."""
     lead = min(accel_m_s2 / speed_m_s * _COURSE_HORIZON_MAX_S, _MAX_COURSE_LEAD_RAD)
-    roll = min(roll_gain * lead, 0.5 * math.pi - 1e-9)
+    roll = min(roll_gain * lead, roll_limit_rad, 0.5 * math.pi - 1e-9)
     return min(1.0, turn_ratio * GRAVITY_M_S2 * math.tan(roll) / accel_m_s2)
 
 

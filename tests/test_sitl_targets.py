@@ -22,6 +22,7 @@ import sys
 import threading
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pytest
 import yaml
@@ -131,6 +132,25 @@ def test_scenario_1_scaled_to_a_22_m_s_plane(tmp_path: Path) -> None:
     assert accel > 0.6
 
 
+def plane_with(tmp_path: Path, key: str, value: float, parameter: str,
+               **companion: Any) -> tuple[Any, list[float], list[Any], list[Any]]:
+    """Paper scenario 1 at 22 m/s on the loopback plane with ``sitl_stub.key`` set to
+    ``value``, 4 s in lockstep: the run, the values of ``parameter`` the companion read,
+    its refusals or warnings naming it, and its requests for a mode."""
+    data = yaml.safe_load((CONFIG / "paper_scenario1_plane22.yaml").read_text())
+    data["sitl_stub"][key] = value
+    config = tmp_path / "plane.yaml"
+    config.write_text(yaml.safe_dump(data))
+    flight = fly_service(config, tmp_path, profile="plane", start_mode="LOITER",
+                         max_time_s=4.0, lockstep=True, **companion)
+    read = [e.data["value"] for e in flight.events.of_kind(EventKind.PARAMETER)
+            if e.data["name"] == parameter]  # fmt: skip
+    said = [e for e in flight.events.events if parameter in e.message
+            and e.kind in (EventKind.ABORTED, EventKind.WARNING)]  # fmt: skip
+    asked = [e for e in flight.events.of_kind(EventKind.MODE) if "requested" in e.data]
+    return flight, read, said, asked
+
+
 @pytest.mark.parametrize(("roll_limit_deg", "outcome"), [(25.0, "refused"), (65.0, "flown")])
 def test_a_plane_whose_roll_limit_stops_the_laws_turn_is_refused_before_guided(
     roll_limit_deg: float, outcome: str, tmp_path: Path
@@ -140,18 +160,9 @@ def test_a_plane_whose_roll_limit_stops_the_laws_turn_is_refused_before_guided(
     hardest turn takes a roll of 32 degrees: a limit of 25 turns the plane at most at 0.74
     of it, so the companion refuses to guide it, naming the limit (GUIDED_P would not help);
     SITL's 65 (its plane.parm) and the firmware's 45 fly it."""
-    data = yaml.safe_load((CONFIG / "paper_scenario1_plane22.yaml").read_text())
-    data["sitl_stub"]["roll_limit_deg"] = roll_limit_deg
-    config = tmp_path / "plane.yaml"
-    config.write_text(yaml.safe_dump(data))
-    flight = fly_service(config, tmp_path, profile="plane", start_mode="LOITER",
-                         max_time_s=4.0, lockstep=True)
-    read = [e.data["value"] for e in flight.events.of_kind(EventKind.PARAMETER)
-            if e.data["name"] == "ROLL_LIMIT_DEG"]  # fmt: skip
+    flight, read, said, asked = plane_with(tmp_path, "roll_limit_deg", roll_limit_deg,
+                                           "ROLL_LIMIT_DEG")  # fmt: skip
     assert read == [roll_limit_deg]
-    said = [e for e in flight.events.events if "ROLL_LIMIT_DEG" in e.message
-            and e.kind in (EventKind.ABORTED, EventKind.WARNING)]  # fmt: skip
-    asked = [e for e in flight.events.of_kind(EventKind.MODE) if "requested" in e.data]
     if outcome == "flown":
         assert not said and asked and flight.outcome.setpoints_sent > 0
         return
@@ -175,17 +186,9 @@ def test_a_plane_too_soft_to_turn_as_the_law_asks_is_refused_before_guided(
     the course asked at most 6 s of turning ahead, refuses to guide it (the safety argument
     assumes that turn is flown) before asking for GUIDED, naming the share it can fly and
     the GUIDED_P that flies all of it; with ``accept_soft_heading_loop``, a warning."""
-    data = yaml.safe_load((CONFIG / "paper_scenario1_plane22.yaml").read_text())
-    data["sitl_stub"]["guided_p"] = guided_p
-    config = tmp_path / "plane.yaml"
-    config.write_text(yaml.safe_dump(data))
-    flight = fly_service(config, tmp_path, profile="plane", start_mode="LOITER",
-                         max_time_s=4.0, lockstep=True, accept_soft_heading_loop=accept)
-    read = [e for e in flight.events.of_kind(EventKind.PARAMETER) if e.data["name"] == "GUIDED_P"]
-    assert [e.data["value"] for e in read] == [guided_p]
-    said = [e for e in flight.events.events if "GUIDED_P" in e.message
-            and e.kind in (EventKind.ABORTED, EventKind.WARNING)]  # fmt: skip
-    asked = [e for e in flight.events.of_kind(EventKind.MODE) if "requested" in e.data]
+    flight, read, said, asked = plane_with(tmp_path, "guided_p", guided_p, "GUIDED_P",
+                                           accept_soft_heading_loop=accept)  # fmt: skip
+    assert read == [guided_p]
     if outcome == "flown":
         assert not said and asked and flight.outcome.setpoints_sent > 0
         return

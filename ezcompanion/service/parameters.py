@@ -31,8 +31,8 @@ PARAMETER_RANGES = {
     # ArduPlane: the GUIDED heading loop's roll per course error (cd/rad; default 5000). Its
     # docs give no range: 5 to 200 degrees of roll per radian is ours
     "GUIDED_P": (500.0, 20000.0),
-    # ArduPlane: the roll limit (degrees; 45 by default, 65 in SITL's plane.parm), which clips
-    # that loop's roll: its docs give 0 to 90, of which 0 would be no roll at all
+    # ArduPlane: the roll limit (degrees; 45 by default, 65 in SITL's models/plane.parm),
+    # which clips that loop's roll: its docs give 0 to 90, of which 0 would be no roll at all
     "ROLL_LIMIT_DEG": (1.0, 90.0),
 }
 _RETRY_S = 0.5

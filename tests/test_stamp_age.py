@@ -31,6 +31,8 @@ from ezcompanion.records import Hold
 from ezcompanion.service.demo import free_udp_port, wait_for_line
 from ezcompanion.service.events import EventKind
 from ezcompanion.service.loop import GuidanceLoop
+from ezcompanion.service.trust import HeartbeatJudge
+from ezcompanion.wire import Frame, mode_name
 
 BUDGET_S = 0.25  # stale_after_s, the default
 # what the tlog's wall stamps may add at 5x on a loaded machine (90 ms of wall time between
@@ -199,3 +201,81 @@ def test_a_stopped_and_continued_companion_sends_nothing_from_what_waited(
     after = [age for wall, age in ages if wall >= continued]
     assert before and after, "guidance did not run on both sides of the stop"
     assert max(after) <= BUDGET_S + SLACK_S, f"a setpoint from a position {max(after):.2f} s old"
+
+
+def test_heartbeats_that_waited_through_a_stall_are_not_a_burst(tmp_path: Path) -> None:
+    # Against ArduCopter 4.5.1 SITL over TCP a companion stopped for 20 s read, when
+    # continued, the heartbeats that had waited in its socket one after another, took "4
+    # heartbeats within 1 s" for a second sender of the vehicle's id, and ended guidance on
+    # a spoof. Here over TCP too (the companion listening, the stub connecting): stopped for
+    # 8 s of vehicle time, eight heartbeats queued behind the telemetry.
+    port = free_udp_port()
+    companion = subprocess.Popen(
+        [sys.executable, "-m", "ezcompanion", "run", "--config", str(SCENARIO), "--connect",
+         f"tcpin:127.0.0.1:{port}", "--engage", "--speedup", f"{SPEEDUP:g}",
+         "--no-telemetry", "--max-time", "16"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    assert companion.stdout is not None
+    stub = None
+    try:
+        wait_for_line(companion.stdout, "listening:")
+        stub = subprocess.Popen(
+            [sys.executable, "-m", "sitl_stub", "--config", str(SCENARIO), "--connect",
+             f"tcp:127.0.0.1:{port}", "--speedup", f"{SPEEDUP:g}", "--duration", "40",
+             "--initial-mode", "GUIDED"],
+            stdout=subprocess.DEVNULL,
+        )  # fmt: skip
+        wait_for_line(companion.stdout, "following velocity")
+        time.sleep(0.5 / SPEEDUP)
+        companion.send_signal(signal.SIGSTOP)
+        time.sleep(8.0 / SPEEDUP)
+        companion.send_signal(signal.SIGCONT)
+        out, _ = companion.communicate(timeout=120.0)
+    finally:
+        companion.kill()
+        companion.wait()
+        if stub is not None:
+            stub.terminate()
+            stub.wait(timeout=10)
+    assert "heartbeats within" not in out and "conflicting heartbeats" not in out, out
+    # the stall is said, and guidance starts afresh (engagement.STALL_S) and intercepts
+    assert "(the companion stalled): guidance starts afresh" in out, out
+    assert "ended: intercepted" in out, out
+
+
+def _heartbeat() -> Frame:
+    mav = mavutil.mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    hb = mav.heartbeat_encode(mavutil.mavlink.MAV_TYPE_QUADROTOR,
+                              mavutil.mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                              mavutil.mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4,
+                              mavutil.mavlink.MAV_STATE_ACTIVE)  # fmt: skip
+    hb.pack(mav)  # as it arrives: a MAVLink 2 frame
+    return Frame(hb, ("127.0.0.1", 14550))
+
+
+def test_a_burst_is_counted_on_the_vehicles_clock_where_its_stream_has_one() -> None:
+    """``HeartbeatJudge``: heartbeats read one after another (the same clock time) that the
+    vehicle's stamped frames between them place 1 s apart are no burst; heartbeats with no
+    stamped frame between them are, on either clock; a clock that goes back (a reboot)
+    starts the count afresh."""
+    beat = _heartbeat()
+    mode = mode_name(beat.message)
+    judge = HeartbeatJudge()
+    judge.lock(beat.message)
+    # a backlog: ten heartbeats and the telemetry between them, all read at 100 s
+    for k in range(10):
+        judge.stamp(50.0 + k)
+        assert judge.conflict(beat, 100.0, mode) is None
+    # a second sender: more heartbeats before the vehicle's next stamped frame (the last two
+    # real ones, at 58 and 59 s of its clock, are within 1 s of them)
+    verdicts = [judge.conflict(beat, 100.0 + 0.1 * k, mode) for k in range(2)]
+    assert verdicts == [None, "4 heartbeats within 1 s"], verdicts
+    # the vehicle rebooted: its clock starts again, the count with it
+    judge.stamp(0.5)
+    assert judge.conflict(beat, 101.0, mode) is None
+    # no stamps at all (before the streams): our clock, where a burst is a burst
+    bare = HeartbeatJudge()
+    bare.lock(beat.message)
+    verdicts = [bare.conflict(beat, 10.0 + 0.01 * k, mode) for k in range(4)]
+    assert verdicts[:3] == [None, None, None] and verdicts[3] == "4 heartbeats within 1 s"

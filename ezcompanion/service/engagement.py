@@ -27,6 +27,13 @@ from ezcompanion.service.setpoints import Setpoints
 from ezcompanion.sim.output import TrackWriter
 from ezcompanion.wire import Message
 
+# No tick for longer than this (clock s) is a stall of the companion, after which guidance
+# starts afresh. Against ArduCopter 4.5.1 SITL a companion stopped for 20 s went on with its
+# actuator state and its setpoints' reference turned 40 degrees off the hovering copter's
+# yaw, and entered a zone by 0.47 m by its own estimate (docs/field.md). PX4 stops flying a
+# setpoint after 1 s, ArduCopter after 3 s.
+STALL_S = 1.0
+
 if TYPE_CHECKING:
     from ezcompanion.telemetry import TelemetryPublisher
 
@@ -76,10 +83,12 @@ class Engagement:
         self.failsafe_active = False
         self._guiding_since_s: float | None = None
         self._guiding_total_s = 0.0
+        self._last_tick_s: float | None = None
 
     def start(self, now: float, mode_name: str) -> None:
         """The vehicle follows setpoints from now on."""
         self._guiding_since_s = now
+        self._last_tick_s = None
         self.events.emit(
             EventKind.ENGAGED, now, f"guiding in {mode_name}", setpoints_sent=self.setpoints_sent
         )
@@ -88,6 +97,18 @@ class Engagement:
         """One tick on ``state`` (None: no position yet); ``distrust`` holds it, whatever the
         state says."""
         self.ticks += 1
+        last, self._last_tick_s = self._last_tick_s, now
+        if last is not None and now - last > STALL_S and not self.failsafe_active:
+            # the companion itself stopped (a stall): the vehicle flew its last setpoint on
+            # and may have stopped at its own timeout; the law's actuator state and the
+            # setpoints' reference no longer say what it does: start afresh, as after a
+            # lost link (from the measured turn or, at rest, along a clear line)
+            self.loop.reset()
+            if self.setpoints is not None:
+                self.setpoints.reset()
+            self.events.emit(EventKind.WARNING, now, f"no tick for {now - last:.1f} s (the "
+                             "companion stalled): guidance starts afresh from what the vehicle "
+                             "does now", stalled_s=now - last)  # fmt: skip
         result = distrust if distrust is not None else self.loop.tick(state, now)
         if isinstance(result, TickCommand):
             self._command(now, result)
@@ -103,6 +124,7 @@ class Engagement:
             return
         self.failsafe_active = True
         self.failsafes += 1
+        self._last_tick_s = None
         self.loop.reset()
         stop = None
         if self.setpoints is not None:
@@ -179,6 +201,7 @@ class Engagement:
         if self._guiding_since_s is not None:
             self._guiding_total_s += now - self._guiding_since_s
             self._guiding_since_s = None
+        self._last_tick_s = None
         self.loop.reset()
         if self.setpoints is not None:
             self.setpoints.reset()

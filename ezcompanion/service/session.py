@@ -188,12 +188,12 @@ class VehicleSession(StreamRequests):
         if frame.source != self.address:
             self._refuse_foreign(frame, now)
             return None
-        boot_ms = getattr(msg, "time_boot_ms", None)
-        if boot_ms is not None:  # the vehicle's clock, for the heartbeats that follow
-            self._judge.stamp(float(boot_ms) / 1000.0)
         used = self.telemetry.update(msg, now, kind)
         if used is not None:
             self.received[used] = self.received.get(used, 0) + 1
+            boot_ms = getattr(msg, "time_boot_ms", None)
+            if boot_ms is not None:  # the vehicle's clock (a sample the telemetry took), for
+                self._judge.stamp(float(boot_ms) / 1000.0)  # the heartbeats that follow
             if used == "GPS_GLOBAL_ORIGIN":
                 self._next_origin_s = math.inf
         refusal = self.telemetry.take_refusal()

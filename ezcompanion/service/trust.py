@@ -64,11 +64,11 @@ class HeartbeatJudge:
     """Heartbeats from the vehicle's id and address, against its first one.
 
     A burst is counted on the vehicle's own clock where its stream carries one (the newest
-    ``time_boot_ms`` taken before each heartbeat, ``stamp``), else on ours: heartbeats that
-    waited in a socket while the companion was stalled are read one after another, and
-    counted on our clock they were a burst (against ArduCopter SITL over TCP, 20 s stopped:
-    "4 heartbeats within 1 s", a spoof failsafe); a second sender's heartbeats between the
-    vehicle's stamped frames still share its stamp."""
+    ``time_boot_ms`` of a sample taken before each heartbeat, ``stamp``), else on ours:
+    heartbeats that waited in a socket while the companion was stalled are read one after
+    another, and counted on our clock they were a burst (against ArduCopter SITL over TCP,
+    20 s stopped: "4 heartbeats within 1 s", a spoof failsafe); a second sender's
+    heartbeats between the vehicle's stamped samples still share its stamp."""
 
     def __init__(self) -> None:
         self.first: Message | None = None

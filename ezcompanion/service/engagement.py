@@ -29,7 +29,7 @@ from ezcompanion.wire import Message
 
 # No tick for longer than this (clock s) is a stall of the companion, after which guidance
 # starts afresh. Against ArduCopter 4.5.1 SITL a companion stopped for 20 s went on with its
-# actuator state and its setpoints' reference turned 40 degrees off the hovering copter's
+# actuator state and its setpoints' reference turned about 40 degrees off the hovering copter's
 # yaw, and entered a zone by 0.47 m by its own estimate (docs/field.md). PX4 stops flying a
 # setpoint after 1 s, ArduCopter after 3 s.
 STALL_S = 1.0

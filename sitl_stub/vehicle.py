@@ -314,6 +314,31 @@ def shaped_step(
                            a_n, a_e)
 
 
+def _flown_to(
+    state: VehicleState, ground: tuple[float, float], ground_next: tuple[float, float],
+    wind: Wind, dt_s: float, height: float, climb: float,
+    shaped: ShapedReference | None = None,
+) -> VehicleState:
+    """The state after a step whose velocity over ground went from ``ground`` to
+    ``ground_next`` (north, east), linearly: the position by the trapezoid, the heading and
+    airspeed from the air velocity (the heading kept while hovering), the lateral
+    acceleration and the yaw rate over the step."""
+    (g_n, g_e), (n_next, e_next) = ground, ground_next
+    air_n, air_e = n_next - wind.north_m_s, e_next - wind.east_m_s
+    speed_next = math.hypot(air_n, air_e)
+    heading = state.heading_rad if speed_next <= _HOVER_M_S else math.atan2(air_e, air_n)
+    a_n, a_e = (n_next - g_n) / dt_s, (e_next - g_e) / dt_s
+    return VehicleState(
+        t_s=state.t_s + dt_s,
+        north_m=state.north_m + 0.5 * (g_n + n_next) * dt_s,
+        east_m=state.east_m + 0.5 * (g_e + e_next) * dt_s,
+        heading_rad=heading, speed_m_s=speed_next,
+        accel_lat_m_s2=-a_n * math.sin(heading) + a_e * math.cos(heading),
+        yaw_rate_rad_s=float(wrap_pi(heading - state.heading_rad)) / dt_s,
+        height_m=height, climb_m_s=climb, shaped=shaped,
+    )
+
+
 def _shaped_vehicle_step(
     state: VehicleState, command: FollowCourse | Stop, params: VehicleParams,
     shaping: VelocityShaping, dt_s: float, height: float, climb: float,
@@ -334,19 +359,8 @@ def _shaped_vehicle_step(
     if (isinstance(command, Stop) and math.hypot(n_next, e_next) < _STOPPED_M_S
             and math.hypot(reference.north_m_s, reference.east_m_s) < _STOPPED_M_S):
         reference, n_next, e_next = ShapedReference(0.0, 0.0, 0.0, 0.0), 0.0, 0.0  # held
-    air_n, air_e = n_next - wind.north_m_s, e_next - wind.east_m_s
-    speed_next = math.hypot(air_n, air_e)
-    heading = state.heading_rad if speed_next <= _HOVER_M_S else math.atan2(air_e, air_n)
-    a_n, a_e = (n_next - g_n) / dt_s, (e_next - g_e) / dt_s
-    return VehicleState(
-        t_s=state.t_s + dt_s,
-        north_m=state.north_m + 0.5 * (g_n + n_next) * dt_s,
-        east_m=state.east_m + 0.5 * (g_e + e_next) * dt_s,
-        heading_rad=heading, speed_m_s=speed_next,
-        accel_lat_m_s2=-a_n * math.sin(heading) + a_e * math.cos(heading),
-        yaw_rate_rad_s=float(wrap_pi(heading - state.heading_rad)) / dt_s,
-        height_m=height, climb_m_s=climb, shaped=reference,
-    )
+    return _flown_to(state, (g_n, g_e), (n_next, e_next), wind, dt_s, height, climb,
+                     shaped=reference)
 
 
 def _vector_lag_step(
@@ -366,19 +380,7 @@ def _vector_lag_step(
     keep = math.exp(-dt_s / params.vector_lag_s)
     d_n, d_e = _limit((target_n - g_n) * (1.0 - keep), (target_e - g_e) * (1.0 - keep),
                       params.accel_max_m_s2 * dt_s)  # fmt: skip
-    n_next, e_next = g_n + d_n, g_e + d_e
-    air_n, air_e = n_next - wind.north_m_s, e_next - wind.east_m_s
-    speed_next = math.hypot(air_n, air_e)
-    heading = state.heading_rad if speed_next <= _HOVER_M_S else math.atan2(air_e, air_n)
-    return VehicleState(
-        t_s=state.t_s + dt_s,
-        north_m=state.north_m + 0.5 * (g_n + n_next) * dt_s,
-        east_m=state.east_m + 0.5 * (g_e + e_next) * dt_s,
-        heading_rad=heading, speed_m_s=speed_next,
-        accel_lat_m_s2=(-d_n * math.sin(heading) + d_e * math.cos(heading)) / dt_s,
-        yaw_rate_rad_s=float(wrap_pi(heading - state.heading_rad)) / dt_s,
-        height_m=height, climb_m_s=climb,
-    )
+    return _flown_to(state, (g_n, g_e), (g_n + d_n, g_e + d_e), wind, dt_s, height, climb)
 
 
 def step(

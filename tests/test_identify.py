@@ -156,13 +156,18 @@ def test_a_lag_beyond_the_grid_and_a_short_window_are_refused() -> None:
         fit_course_lag(fly(Flight(0.5, 1.0, 0.0, duration_s=0.2)))
 
 
-def test_a_gap_in_the_samples_restarts_the_fit_instead_of_bridging_it() -> None:
-    window = fly(Flight(0.6, 0.8, 0.4, seed=3))
-    cut = np.ones(len(window), dtype=bool)
-    cut[120:160] = False  # 0.8 s of telemetry lost
-    holed = ResponseWindow(*(getattr(window, name)[cut] for name in (
+def without_samples(window: ResponseWindow, start: int, stop: int) -> ResponseWindow:
+    """``window`` with its samples ``start`` to ``stop`` (exclusive) lost."""
+    kept = np.ones(len(window), dtype=bool)
+    kept[start:stop] = False
+    return ResponseWindow(*(getattr(window, name)[kept] for name in (
         "time_s", "velocity_north_m_s", "velocity_east_m_s", "command_north_m_s",
         "command_east_m_s")))
+
+
+def test_a_gap_in_the_samples_restarts_the_fit_instead_of_bridging_it() -> None:
+    window = fly(Flight(0.6, 0.8, 0.4, seed=3))
+    holed = without_samples(window, 120, 160)  # 0.8 s of telemetry lost
     lag = fit_course_lag(holed)
     assert abs(lag.lag_s - 0.6) <= LAG_BOUND_S + LAG_BOUND_RATIO * 0.6
     assert lag.samples == len(holed)  # two runs, each from its own (fitted) start
@@ -268,11 +273,7 @@ def test_the_compiled_speed_sums_are_the_whole_array_simulations(
     uncompiled (``EZCOMPANION_JIT=0``: whole-array simulations), on a flight with a gap and
     a hover: the same fits to round-off."""
     window = fly(Flight(0.6, 0.8, 0.4, start_speed_m_s=0.0, seed=3))
-    cut = np.ones(len(window), dtype=bool)
-    cut[120:160] = False  # 0.8 s of telemetry lost
-    holed = ResponseWindow(*(getattr(window, name)[cut] for name in (
-        "time_s", "velocity_north_m_s", "velocity_east_m_s", "command_north_m_s",
-        "command_east_m_s")))
+    holed = without_samples(window, 120, 160)  # 0.8 s of telemetry lost
     for flight in (holed, fly_velocity_loop(1.0, 0.9, 1.0, seed=4)):
         compiled = identify.speed_models(flight)
         monkeypatch.setattr(identify, "JIT_ENABLED", False)

@@ -75,7 +75,6 @@ class HeartbeatJudge:
         self._beats: deque[float] = deque()
         self._last_change_s = -math.inf
         self._vehicle_s: float | None = None  # the newest time_boot_ms seen (s)
-        self._clock_of_beats: str = ""  # "vehicle" or "ours": the clock _beats are on
 
     def lock(self, heartbeat: Message) -> None:
         """The vehicle was (re)locked on ``heartbeat``."""
@@ -86,8 +85,13 @@ class HeartbeatJudge:
 
     def stamp(self, boot_s: float) -> None:
         """A frame from the vehicle stamped ``boot_s`` (its time_boot_ms) was taken."""
-        if math.isfinite(boot_s):
+        if not math.isfinite(boot_s):
+            return
+        if self._vehicle_s is None or boot_s < self._vehicle_s - 1.0:
+            self._beats.clear()  # from our clock to the vehicle's, or it restarted (a reboot)
             self._vehicle_s = boot_s
+        else:  # one message type's stamp may trail another's: the clock never goes back
+            self._vehicle_s = max(self._vehicle_s, boot_s)
 
     def mode_changed(self, now: float) -> None:
         """A heartbeat's mode change was taken."""
@@ -105,11 +109,7 @@ class HeartbeatJudge:
                 f"{first.type}/{first.autopilot}"
             )
         beats = self._beats
-        vehicle = self._vehicle_s
-        clock, at = ("ours", now) if vehicle is None else ("vehicle", vehicle)
-        if clock != self._clock_of_beats or (beats and at < beats[-1]):
-            beats.clear()  # another clock, or the vehicle's went back (a reboot)
-            self._clock_of_beats = clock
+        at = now if self._vehicle_s is None else self._vehicle_s
         beats.append(at)
         while beats and beats[0] < at - 1.0:
             beats.popleft()

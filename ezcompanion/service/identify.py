@@ -56,6 +56,13 @@ _MIN_SAMPLES = 20
 # ratio: a copter's first 2 s from a hover at 0.3 of the speed asked, fitted 0.21 (the
 # magnitudes, 0.0252 m/s) and 0.30 (the vectors, 0.0264 m/s)
 _SPEED_MODEL_TIE = 1.1
+# k is identified only where it does not move with the speed's lag: over the lags whose
+# cost is within 4 sigma^2 of the best (about two standard errors) it must stay within this
+# fraction of itself. From a hover ArduCopter 4.5.1 SITL climbed to 5 m/s under its
+# acceleration limit (4.1 m/s after 2 s): its first 2 s fitted k 2.63 at the 6 s end of the
+# lag grid (the near lags' k 2.49 to 2.63), its first 4 s k 1.47 (1.37 to 1.60), its first
+# 8 s k 1.06 (1.050 to 1.063); on the move, 2 s fitted 1.003 (alone) and 0.954 (0.954 to 0.960)
+_SETTLED_SPREAD = 0.02
 _MAX_GAP_S = 0.5  # a longer gap between samples restarts the simulation
 
 
@@ -136,6 +143,10 @@ class SpeedFit:
     residual_m_s: float  # RMS of the flown minus the modelled ground speed
     samples: int
     model: str = "speed"  # "speed" (the magnitudes lag) or "velocity" (the vectors lag)
+    # k over the lags as good as the best (``_SETTLED_SPREAD``): where it moves along them,
+    # the speed had not settled in the window and k is not identified
+    factor_range: tuple[float, float] = (math.nan, math.nan)
+    settled: bool = True
 
 
 def _restarts(window: ResponseWindow, usable: BoolArray) -> BoolArray:
@@ -300,11 +311,23 @@ def fit_speed_factor(window: ResponseWindow) -> SpeedFit:
     For each tau_v the simulated response is ``A + k B`` (A: the free response from the
     measured speed or velocity at each restart, B: the response to the command with k = 1),
     so k is the least-squares ratio in closed form. Raises :class:`IdentificationError` on
-    a window too short or where no speed was commanded.
+    a window too short, where no speed was commanded, or where neither model saw the speed
+    settle (``SpeedFit.settled``: from a hover, a speed still climbing under the
+    autopilot's acceleration limit fits any k with a lag to match).
     """
-    fits = speed_models(window)
-    if not fits:
+    models = speed_models(window)
+    if not models:
         raise IdentificationError("command_speed_m_s", 0.0, "no speed commanded")
+    fits = [f for f in models if f.settled]
+    if not fits:
+        low, high = max((f.factor_range for f in models), key=lambda r: r[1] - r[0])
+        raise IdentificationError(
+            "speed_lag_s", models[0].speed_lag_s,
+            f"the speed had not settled in the window: k moves with the lag ({low:.2f} to "
+            f"{high:.2f}), only k over the lag is measured",
+        )
+    if len(fits) == 1:
+        return fits[0]
     better, worse = sorted(fits, key=lambda f: f.residual_m_s)
     if worse.residual_m_s > _SPEED_MODEL_TIE * better.residual_m_s:
         return better
@@ -363,10 +386,13 @@ def _speed_fit(
     count = int(fitted.sum())
     sigma2 = max(float(cost[best]), 0.0) / max(count * len(components) - 1, 1)
     miss = speed[fitted] - np.sqrt(modelled_sq[fitted])
+    near = (cost <= cost[best] + 4.0 * sigma2) & (sum_bb > 0.0)
+    low, high = float(factor[near].min()), float(factor[near].max())
     return SpeedFit(speed_factor=k, stderr=math.sqrt(sigma2 / float(sum_bb[best])),
                     speed_lag_s=float(_SPEED_LAG_GRID_S[best]),
                     residual_m_s=float(np.sqrt(np.mean(miss * miss))), samples=count,
-                    model=model)
+                    model=model, factor_range=(low, high),
+                    settled=high - low <= _SETTLED_SPREAD * abs(k))
 
 
 def _lag_sums(decay: FloatArray, restart: BoolArray, fitted: BoolArray, flown: FloatArray,

@@ -111,8 +111,9 @@ class Faults:
     jump_north_m: float = 0.0
     jump_east_m: float = 0.0
     # < 0 = none; at reboot_at_s the autopilot goes down (disarmed, silent both ways) for
-    # reboot_s, then starts afresh: time_boot_ms from 0, its initial mode, disarmed, the
-    # streams at their defaults (a power cycle, a watchdog reset)
+    # reboot_s, then starts afresh: time_boot_ms from 0, its initial mode, disarmed, and as
+    # ArduCopter 4.5.1 SITL came back from a forced reboot (docs/sitl_stub.md): no telemetry
+    # streamed until asked for, its first two heartbeats each sent twice
     reboot_at_s: float = -1.0
     reboot_s: float = 3.0
 

@@ -6,8 +6,8 @@ the clock, sends the HEARTBEAT (1 Hz) and the telemetry streams when due, and ot
 sleeps in ``select`` on the link until the next thing is due or a message arrives. Incoming
 messages take effect at the simulated time they are read. ``time_boot_ms`` is the simulated
 time since the stub started, or since its autopilot last rebooted (``faults.reboot_at_s``:
-down and silent for ``faults.reboot_s``, then up afresh, disarmed, in its initial mode, its
-streams at their defaults).
+down and silent for ``faults.reboot_s``, then up afresh, disarmed, in its initial mode,
+nothing streamed until asked for, its first heartbeats sent in pairs).
 
 With ``lockstep=True`` (``sitl-stub --lockstep``) the simulated clock also waits for the
 companion: it stops after every position sample and at the time the companion granted, and
@@ -34,7 +34,7 @@ from types import TracebackType
 from ezcompanion.errors import ConfigError
 from ezcompanion.sim.kinematics import Wind
 from sitl_stub.autopilot import Autopilot
-from sitl_stub.config import StubConfig
+from sitl_stub.config import StreamRates, StubConfig
 from sitl_stub.faults import FaultInjector
 from sitl_stub.lockstep import LockstepGate
 from sitl_stub.mav import Message, StubLink
@@ -47,6 +47,13 @@ __all__ = ["SitlStub"]
 _log = logging.getLogger(__name__)
 
 _HEARTBEAT_PERIOD_S = 1.0
+# after a reboot, as ArduCopter 4.5.1 SITL after a forced MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN:
+# its heartbeats of the first 2 s each sent twice (sequence n and n + 1 at once), and no
+# stamped message on the companion's port in the 4 s it was watched (the streams it had
+# been asked for are gone)
+_BOOT_PAIRS_S = 2.0
+_NO_STREAMS = StreamRates(global_position_int_hz=0.0, local_position_ned_hz=0.0,
+                          attitude_hz=0.0, vfr_hud_hz=0.0)
 _MAX_WAIT_WALL_S = 0.1  # wake at least this often (wall time) to publish the clock
 _MAX_STEPS_PER_PASS = 500  # then look at the link again before catching up further
 _POSITIONS = frozenset({"LOCAL_POSITION_NED", "GLOBAL_POSITION_INT"})
@@ -274,8 +281,8 @@ class SitlStub:
 
     def _power(self, t_s: float) -> None:
         """The reboot of ``faults.reboot_at_s``: the autopilot goes down (disarmed, no
-        guidance), and ``reboot_s`` later boots afresh: a new clock, its initial mode, its
-        default streams, the origin sent again once set."""
+        guidance), and ``reboot_s`` later boots afresh: a new clock, its initial mode, no
+        streams until asked for, the origin sent again once set."""
         f = self.config.settings.faults
         assert self.autopilot is not None and self._link is not None
         if self.reboots or f.reboot_at_s < 0.0 or t_s < f.reboot_at_s:
@@ -285,8 +292,8 @@ class SitlStub:
             return
         self._boot_s = t_s
         self.reboots = 1
-        self._scheduler = StreamScheduler(self.config.settings.streams,
-                                          self.config.max_stream_rate_hz)
+        # nothing streamed until asked for (the requests before the reboot are gone)
+        self._scheduler = StreamScheduler(_NO_STREAMS, self.config.max_stream_rate_hz)
         self._scheduler.shift(t_s)
         self.autopilot = Autopilot(self.config, self._scheduler, self._link.mav)
         self.autopilot.armed = False
@@ -359,6 +366,8 @@ class SitlStub:
         while self._next_heartbeat_s <= t_s + 1e-9:
             if not self._link_down():
                 self._link.send(self.autopilot.heartbeat())
+                if self.reboots and self._next_heartbeat_s < self._boot_s + _BOOT_PAIRS_S:
+                    self._link.send(self.autopilot.heartbeat())  # booting: sent in pairs
                 for msg in self.autopilot.periodic_status(self._state, t_s):
                     self._link.send(msg)
             self._next_heartbeat_s += _HEARTBEAT_PERIOD_S

@@ -7,9 +7,11 @@ from __future__ import annotations
 import collections
 import itertools
 import math
+from typing import Any
 
 import pytest
 from conftest_sitl import Gcs, gcs_link, make_config, running_stub, stamps_s
+from pymavlink import mavutil
 
 from ezcompanion.errors import ConfigError
 from sitl_stub import Faults
@@ -96,20 +98,40 @@ def test_stale_freeze_repeats_old_values(gcs: Gcs) -> None:
 
 
 def test_a_reboot_is_silent_then_boots_disarmed_on_a_new_clock(gcs: Gcs) -> None:
+    """As ArduCopter 4.5.1 SITL came back from a forced reboot: disarmed, its first two
+    heartbeats each sent twice, nothing streamed until asked for, then on a clock from 0."""
     faults = Faults(reboot_at_s=2.0, reboot_s=1.5)
-    got = _run(gcs, faults, until_s=5.0, speedup=20.0, types=("LOCAL_POSITION_NED", "HEARTBEAT"))
+    out: list[tuple[float, Any]] = []
+    types = ("LOCAL_POSITION_NED", "HEARTBEAT")
+    with running_stub(gcs, speedup=20.0, faults=faults, seed=1) as stub:
+        while stub.sim_time_s < 6.5:
+            msg = gcs.recv(types, 0.2)
+            if msg is not None:
+                out.append((stub.sim_time_s, msg))
+        asked = stub.sim_time_s
+        gcs.mav.command_long_send(1, 1, mavutil.mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                                  mavutil.mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, 1e5,
+                                  0, 0, 0, 0, 0)  # fmt: skip
+        while stub.sim_time_s < asked + 2.0:
+            msg = gcs.recv(types, 0.2)
+            if msg is not None:
+                out.append((stub.sim_time_s, msg))
     # judged by the messages themselves, in the order sent, not by when this test read them
-    armed = [bool(m.base_mode & 128) for _, m in got if m.get_type() == "HEARTBEAT"]
+    beats = [m for _, m in out if m.get_type() == "HEARTBEAT"]
+    armed = [bool(m.base_mode & 128) for m in beats]
     assert armed[0] and not armed[-1]  # it boots disarmed (the stub starts armed)
     assert armed == sorted(armed, reverse=True)  # armed, then disarmed: once
-    stamps = [m.time_boot_ms for _, m in got if m.get_type() == "LOCAL_POSITION_NED"]
-    back = [k for k in range(1, len(stamps)) if stamps[k] < stamps[k - 1]]
-    assert len(back) == 1  # one new clock
-    before, after = stamps[: back[0]], stamps[back[0] :]
-    assert 1800 < before[-1] < 2000 and after[0] < 300  # down at 2 s, up again from 0
-    assert after[-1] - after[0] > 1000  # and streaming again on its new clock
+    booted = armed.index(False)
+    seqs = [m.get_seq() for m in beats[booted:]]
+    assert seqs[1] == (seqs[0] + 1) % 256 and seqs[3] == (seqs[2] + 1) % 256  # two pairs
+    stamps = [(t, m.time_boot_ms / 1000.0) for t, m in out if m.get_type() == "LOCAL_POSITION_NED"]
+    before = [b for t, b in stamps if t < asked]
+    after = [(t, b) for t, b in stamps if t >= asked]
+    assert 1.8 < before[-1] < 2.0 and before == sorted(before)  # down at 2 s, silent after
+    assert len(after) > 10 and after[-1][1] - after[0][1] > 1.0  # streaming once asked,
+    assert all(abs(b - (t - 3.5)) < 0.3 for t, b in after)  # on a clock from 0 at 3.5 s
     # disarmed, the copter stops where it was
-    last = [m for _, m in got if m.get_type() == "LOCAL_POSITION_NED"][-1]
+    last = [m for _, m in out if m.get_type() == "LOCAL_POSITION_NED"][-1]
     assert math.hypot(last.vx, last.vy) < 0.05
     with pytest.raises(ConfigError, match=r"faults\.reboot_at_s"):
         SitlStub(make_config(gcs.port, faults=faults), lockstep=True)

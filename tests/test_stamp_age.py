@@ -244,12 +244,13 @@ def test_heartbeats_that_waited_through_a_stall_are_not_a_burst(tmp_path: Path) 
     assert "ended: intercepted" in out, out
 
 
-def _heartbeat() -> Frame:
+def _heartbeat(seq: int = 0, status: int = mavutil.mavlink.MAV_STATE_ACTIVE) -> Frame:
     mav = mavutil.mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    mav.seq = seq
     hb = mav.heartbeat_encode(mavutil.mavlink.MAV_TYPE_QUADROTOR,
                               mavutil.mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
                               mavutil.mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4,
-                              mavutil.mavlink.MAV_STATE_ACTIVE)  # fmt: skip
+                              status)  # fmt: skip
     hb.pack(mav)  # as it arrives: a MAVLink 2 frame
     return Frame(hb, ("127.0.0.1", 14550))
 
@@ -265,17 +266,45 @@ def test_a_burst_is_counted_on_the_vehicles_clock_where_its_stream_has_one() -> 
     judge.lock(beat.message)
     # a backlog: ten heartbeats and the telemetry between them, all read at 100 s
     for k in range(10):
-        judge.stamp(50.0 + k)
+        judge.stamp(50.0 + k, 100.0)
         assert judge.conflict(beat, 100.0, mode) is None
     # a second sender: more heartbeats before the vehicle's next stamped frame (the last two
     # real ones, at 58 and 59 s of its clock, are within 1 s of them)
     verdicts = [judge.conflict(beat, 100.0 + 0.1 * k, mode) for k in range(2)]
     assert verdicts == [None, "4 heartbeats within 1 s"], verdicts
     # the vehicle rebooted: its clock starts again, the count with it
-    judge.stamp(0.5)
+    judge.stamp(0.5, 101.0)
     assert judge.conflict(beat, 101.0, mode) is None
     # no stamps at all (before the streams): our clock, where a burst is a burst
     bare = HeartbeatJudge()
     bare.lock(beat.message)
     verdicts = [bare.conflict(beat, 10.0 + 0.01 * k, mode) for k in range(4)]
     assert verdicts[:3] == [None, None, None] and verdicts[3] == "4 heartbeats within 1 s"
+
+
+def test_a_rebooted_autopilots_paired_heartbeats_are_not_a_burst() -> None:
+    """``HeartbeatJudge`` after a reboot, as ArduCopter 4.5.1 SITL came back from a forced
+    one: no stamped sample (nothing streamed until asked), so the last stamp from before
+    would put every heartbeat at one time ("7 heartbeats within 1 s"); and its first
+    heartbeats each sent twice, sequence n and n + 1 at once. Once no stamp has come for
+    1 s they are counted on our clock, and a pair is one heartbeat; four distinct ones
+    within 1 s are still a burst, and so are repeats that do not follow in sequence."""
+    mode = mode_name(_heartbeat().message)
+    judge = HeartbeatJudge()
+    judge.lock(_heartbeat().message)
+    judge.stamp(70.0, 10.0)  # the last sample before the reboot, taken at 10 s (ours)
+    at = [12.2, 12.2, 13.1, 13.1, 14.1, 15.1]  # as the SITL's companion read them
+    seqs = [0, 1, 8, 9, 27, 28]
+    verdicts = [judge.conflict(_heartbeat(q), t, mode) for q, t in zip(seqs, at, strict=True)]
+    assert verdicts == [None] * 6, verdicts
+    # four heartbeats in 1 s on our clock, each a sequence number after the last but not
+    # the same heartbeat (another state), are a burst
+    states = [mavutil.mavlink.MAV_STATE_STANDBY, mavutil.mavlink.MAV_STATE_ACTIVE] * 2
+    verdicts = [judge.conflict(_heartbeat(40 + k, states[k]), 20.0 + 0.01 * k, mode)
+                for k in range(4)]
+    assert verdicts[3] == "4 heartbeats within 1 s", verdicts
+    # the same heartbeat four times with the same sequence number is a burst too
+    again = HeartbeatJudge()
+    again.lock(_heartbeat().message)
+    verdicts = [again.conflict(_heartbeat(5), 30.0 + 0.01 * k, mode) for k in range(4)]
+    assert verdicts[3] == "4 heartbeats within 1 s", verdicts

@@ -193,7 +193,7 @@ class VehicleSession(StreamRequests):
             self.received[used] = self.received.get(used, 0) + 1
             boot_ms = getattr(msg, "time_boot_ms", None)
             if boot_ms is not None:  # the vehicle's clock (a sample the telemetry took), for
-                self._judge.stamp(float(boot_ms) / 1000.0)  # the heartbeats that follow
+                self._judge.stamp(float(boot_ms) / 1000.0, now)  # the heartbeats after
             if used == "GPS_GLOBAL_ORIGIN":
                 self._next_origin_s = math.inf
         refusal = self.telemetry.take_refusal()

@@ -21,6 +21,14 @@ __all__ = ["FLIP_S", "Alarms", "HeartbeatJudge"]
 
 FLIP_S = 1.5  # a mode change back within this is a conflict, not a mode change
 _MAX_HEARTBEATS_PER_S = 3  # ArduPilot and PX4 send 1 Hz; a burst is a conflict
+# the vehicle's clock counts heartbeats only while its stamped samples keep coming: after
+# this long (ours) without one, ours (after a reboot ArduCopter 4.5.1 SITL streamed nothing
+# until asked, and every heartbeat took the last stamp from before: "7 heartbeats within 1 s")
+_STAMPS_STALE_S = 1.0
+# booting, ArduCopter 4.5.1 SITL sent each heartbeat twice, sequence n and n + 1 at once: a
+# heartbeat that repeats the one before, with the next sequence number, within this, is
+# the same heartbeat (counted once)
+_REPEAT_S = 0.1
 _ALARM_REPEAT_S = 1.0  # the same alarm is announced at most this often
 _PRIORITY = (Hold.ORIGIN, Hold.SPOOF, Hold.DISAGREE, Hold.GATE)
 
@@ -68,13 +76,19 @@ class HeartbeatJudge:
     heartbeats that waited in a socket while the companion was stalled are read one after
     another, and counted on our clock they were a burst (against ArduCopter SITL over TCP,
     20 s stopped: "4 heartbeats within 1 s", a spoof failsafe); a second sender's
-    heartbeats between the vehicle's stamped samples still share its stamp."""
+    heartbeats between the vehicle's stamped samples still share its stamp. Where no
+    stamped sample has come for ``_STAMPS_STALE_S`` (a rebooted autopilot streams nothing
+    until asked), ours again; and a heartbeat that repeats the one before with the next
+    sequence number, at once, is counted once (an ArduPilot booting sends its heartbeats
+    so in pairs)."""
 
     def __init__(self) -> None:
         self.first: Message | None = None
         self._beats: deque[float] = deque()
         self._last_change_s = -math.inf
         self._vehicle_s: float | None = None  # the newest time_boot_ms seen (s)
+        self._stamped_at_s = -math.inf  # our clock when a stamped sample last came
+        self._last: tuple[Message, float] | None = None  # the last heartbeat, and when
 
     def lock(self, heartbeat: Message) -> None:
         """The vehicle was (re)locked on ``heartbeat``."""
@@ -82,11 +96,14 @@ class HeartbeatJudge:
             self.first = heartbeat
         self._beats.clear()
         self._vehicle_s = None
+        self._last = None
 
-    def stamp(self, boot_s: float) -> None:
-        """A frame from the vehicle stamped ``boot_s`` (its time_boot_ms) was taken."""
+    def stamp(self, boot_s: float, now: float) -> None:
+        """A frame from the vehicle stamped ``boot_s`` (its time_boot_ms) was taken at
+        ``now``."""
         if not math.isfinite(boot_s):
             return
+        self._stamped_at_s = now
         if self._vehicle_s is None or boot_s < self._vehicle_s - 1.0:
             self._beats.clear()  # from our clock to the vehicle's, or it restarted (a reboot)
             self._vehicle_s = boot_s
@@ -109,8 +126,13 @@ class HeartbeatJudge:
                 f"{first.type}/{first.autopilot}"
             )
         beats = self._beats
+        if self._vehicle_s is not None and now - self._stamped_at_s > _STAMPS_STALE_S:
+            beats.clear()  # the vehicle's stamps stopped: back to our clock
+            self._vehicle_s = None
         at = now if self._vehicle_s is None else self._vehicle_s
-        beats.append(at)
+        if not self._repeats(msg, at):
+            beats.append(at)
+        self._last = (msg, at)
         while beats and beats[0] < at - 1.0:
             beats.popleft()
         if len(beats) > _MAX_HEARTBEATS_PER_S:
@@ -119,3 +141,13 @@ class HeartbeatJudge:
         if name != mode and now - self._last_change_s < FLIP_S:
             return f"mode {name} {now - self._last_change_s:.2f} s after mode {mode}"
         return None
+
+    def _repeats(self, msg: Message, at: float) -> bool:
+        """``msg`` repeats the last heartbeat: the same fields, the next sequence number, at
+        once."""
+        if self._last is None:
+            return False
+        last, last_at = self._last
+        fields = ("type", "autopilot", "base_mode", "custom_mode", "system_status")
+        return (msg.get_seq() == (last.get_seq() + 1) % 256 and at - last_at <= _REPEAT_S
+                and all(getattr(msg, f) == getattr(last, f) for f in fields))

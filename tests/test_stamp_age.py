@@ -97,11 +97,13 @@ def test_a_lost_link_starts_the_vehicles_clock_afresh() -> None:
     assert state is not None and state.age_s(31.2) == 0.0
 
 
-def setpoint_ages(tlog: Path) -> list[tuple[float, float]]:
+def setpoint_ages(tlog: Path, *, computed_after_s: float = -math.inf
+                  ) -> list[tuple[float, float]]:
     """Every guidance setpoint (velocity not zero) the companion sent, as (wall time sent,
     vehicle seconds between the newest LOCAL_POSITION_NED it had read and the vehicle's
     clock then). The vehicle's clock on the wall's: the least (wall x speedup - stamp) over
-    every frame read, that is the promptest one."""
+    every frame read, that is the promptest one. ``computed_after_s``: only setpoints whose
+    own stamp (the companion's clock when its tick computed it) is later."""
     log = mavutil.mavlink_connection(str(tlog))
     read: list[tuple[float, float]] = []  # (wall, stamp) of each position read
     sent: list[tuple[float, int]] = []  # (wall, index into read of the newest before)
@@ -113,7 +115,8 @@ def setpoint_ages(tlog: Path) -> list[tuple[float, float]]:
             offset = min(offset, msg._timestamp * SPEEDUP - stamp / 1000.0)
         if kind == "LOCAL_POSITION_NED":
             read.append((msg._timestamp, msg.time_boot_ms / 1000.0))
-        elif kind == "SET_POSITION_TARGET_LOCAL_NED" and (msg.vx, msg.vy) != (0.0, 0.0):
+        elif (kind == "SET_POSITION_TARGET_LOCAL_NED" and (msg.vx, msg.vy) != (0.0, 0.0)
+              and msg.time_boot_ms / 1000.0 > computed_after_s):
             sent.append((msg._timestamp, len(read) - 1))
     newest = [max(stamp for _, stamp in read[: i + 1]) for i in range(len(read))]
     return [(wall, wall * SPEEDUP - offset - newest[i]) for wall, i in sent if i >= 0]
@@ -198,9 +201,25 @@ def test_a_stopped_and_continued_companion_sends_nothing_from_what_waited(
         companion.wait()
     ages = setpoint_ages(tlog)
     before = [age for wall, age in ages if wall < stopped]
-    after = [age for wall, age in ages if wall >= continued]
+    # the ticks after the stop, by the companion's own clock (the setpoint's stamp): a tick
+    # computed just before the stop can be written out just after it (stopped between the
+    # two), from a position fresh when it was computed: no tick read what waited
+    stop_s = last_setpoint_stamp_s(tlog, before_wall=stopped)
+    after = [age for wall, age in setpoint_ages(tlog, computed_after_s=stop_s + 0.5)
+             if wall >= continued]  # fmt: skip
     assert before and after, "guidance did not run on both sides of the stop"
     assert max(after) <= BUDGET_S + SLACK_S, f"a setpoint from a position {max(after):.2f} s old"
+
+
+def last_setpoint_stamp_s(tlog: Path, *, before_wall: float) -> float:
+    """The companion's clock (the setpoint's own stamp) at its last setpoint logged before
+    ``before_wall``."""
+    log = mavutil.mavlink_connection(str(tlog))
+    stamp = -math.inf
+    while (msg := log.recv_match(type="SET_POSITION_TARGET_LOCAL_NED")) is not None:
+        if msg._timestamp < before_wall:
+            stamp = msg.time_boot_ms / 1000.0
+    return stamp
 
 
 def test_heartbeats_that_waited_through_a_stall_are_not_a_burst(tmp_path: Path) -> None:

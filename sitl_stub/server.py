@@ -27,7 +27,7 @@ import select
 import socket
 import threading
 import time
-from dataclasses import replace
+from dataclasses import fields, replace
 from pathlib import Path
 from types import TracebackType
 
@@ -52,8 +52,7 @@ _HEARTBEAT_PERIOD_S = 1.0
 # stamped message on the companion's port in the 4 s it was watched (the streams it had
 # been asked for are gone)
 _BOOT_PAIRS_S = 2.0
-_NO_STREAMS = StreamRates(global_position_int_hz=0.0, local_position_ned_hz=0.0,
-                          attitude_hz=0.0, vfr_hud_hz=0.0)
+_NO_STREAMS = StreamRates(**{f.name: 0.0 for f in fields(StreamRates)})
 _MAX_WAIT_WALL_S = 0.1  # wake at least this often (wall time) to publish the clock
 _MAX_STEPS_PER_PASS = 500  # then look at the link again before catching up further
 _POSITIONS = frozenset({"LOCAL_POSITION_NED", "GLOBAL_POSITION_INT"})

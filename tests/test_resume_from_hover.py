@@ -19,7 +19,6 @@ import numpy as np
 
 from ezcompanion import wire
 from ezcompanion.config import load_scenario
-from ezcompanion.frames import wrap_pi
 from ezcompanion.guidance.law import evaluate_law
 from ezcompanion.guidance.params import LawName
 from ezcompanion.records import TickCommand, VehicleState
@@ -27,7 +26,7 @@ from ezcompanion.service.autopilots import ARDUCOPTER
 from ezcompanion.service.loop import GuidanceLoop
 from ezcompanion.service.setpoints import make_setpoints
 from ezcompanion.service.settings import SetpointKind
-from ezcompanion.service.state import _COURSE_RATE_TAU_S
+from ezcompanion.service.state import filtered_course_rate
 from sitl_stub.vehicle import FollowCourse, Stop, VehicleParams, VelocityShaping, step
 from sitl_stub.vehicle import VehicleState as StubState
 
@@ -63,19 +62,6 @@ def draw_starts(seed: int, draws: int) -> list[tuple[float, float, float]]:
     return starts
 
 
-def measured_course_rate(before: tuple[float, float], now: tuple[float, float],
-                         rate: float | None) -> float | None:
-    """The course rate as the service measures it (``service/state.py``): the turn of the
-    ground velocity between samples, filtered over ``_COURSE_RATE_TAU_S`` (not the stub's
-    yaw rate, which a copter speeding up from rest does not fly; until 2026-12-04 this
-    flight fed that: the same 0 entries, the worst start +0.135 m against +0.116 now)."""
-    if math.hypot(*before) < 0.1 or math.hypot(*now) < 0.1:
-        return rate
-    turn = float(wrap_pi(math.atan2(now[1], now[0]) - math.atan2(before[1], before[0])))
-    gain = TICK_S / (TICK_S + _COURSE_RATE_TAU_S)
-    return turn / TICK_S if rate is None else rate + gain * (turn / TICK_S - rate)
-
-
 def fly(link: wire.Link, north_m: float, east_m: float, yaw_rad: float, speed_m_s: float,
         abandon: bool, seconds: float = 4.0, lag_s: float = ARDUCOPTER.response_lag_s,
         speed_factor: float = 0.945) -> tuple[float, float]:
@@ -100,7 +86,10 @@ def fly(link: wire.Link, north_m: float, east_m: float, yaw_rad: float, speed_m_
         t = i * TICK_S
         v_n, v_e = state.ground_velocity(SHAPED.wind)
         moving = math.hypot(v_n, v_e) > 0.3
-        rate = measured_course_rate(before, (v_n, v_e), rate)
+        # the course rate as the service measures it (until 2026-12-04 the stub's yaw rate,
+        # which a copter speeding up from rest does not fly: the same 0 entries, the
+        # worst start +0.135 m against +0.116 now)
+        rate = filtered_course_rate(rate, before, (v_n, v_e), TICK_S)
         before = (v_n, v_e)
         seen = VehicleState(
             north_m=state.north_m, east_m=state.east_m, down_m=-20.0, velocity_north_m_s=v_n,

@@ -143,10 +143,15 @@ class SpeedFit:
     residual_m_s: float  # RMS of the flown minus the modelled ground speed
     samples: int
     model: str = "speed"  # "speed" (the magnitudes lag) or "velocity" (the vectors lag)
-    # k over the lags as good as the best (``_SETTLED_SPREAD``): where it moves along them,
-    # the speed had not settled in the window and k is not identified
-    factor_range: tuple[float, float] = (math.nan, math.nan)
-    settled: bool = True
+    # k over the lags as good as the best (``_SETTLED_SPREAD``)
+    factor_range: tuple[float, float]
+
+    @property
+    def settled(self) -> bool:
+        """k does not move with the lag (within ``_SETTLED_SPREAD`` of itself): where it
+        does, the speed had not settled in the window and k is not identified."""
+        low, high = self.factor_range
+        return high - low <= _SETTLED_SPREAD * abs(self.speed_factor)
 
 
 def _restarts(window: ResponseWindow, usable: BoolArray) -> BoolArray:
@@ -391,8 +396,7 @@ def _speed_fit(
     return SpeedFit(speed_factor=k, stderr=math.sqrt(sigma2 / float(sum_bb[best])),
                     speed_lag_s=float(_SPEED_LAG_GRID_S[best]),
                     residual_m_s=float(np.sqrt(np.mean(miss * miss))), samples=count,
-                    model=model, factor_range=(low, high),
-                    settled=high - low <= _SETTLED_SPREAD * abs(k))
+                    model=model, factor_range=(low, high))
 
 
 def _lag_sums(decay: FloatArray, restart: BoolArray, fitted: BoolArray, flown: FloatArray,

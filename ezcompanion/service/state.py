@@ -77,7 +77,7 @@ from ezcompanion.wire import (
     ms_to_s,
 )
 
-__all__ = ["CROSS_CHECK_PERIOD_S", "TelemetryState", "VehicleState"]
+__all__ = ["CROSS_CHECK_PERIOD_S", "TelemetryState", "VehicleState", "filtered_course_rate"]
 
 # While the local position is fresh, global positions are taken this often (vehicle time):
 # the cross-check's rate. 10 Hz: a local sample is compared with a global one at most
@@ -522,20 +522,24 @@ class TelemetryState:
 
     @staticmethod
     def _course_rate(track: _Track, last: _Position, sample: _Position) -> None:
-        dt = sample.boot_s - last.boot_s
-        if math.hypot(last.vn_m_s, last.ve_m_s) < 0.1 or math.hypot(
-            sample.vn_m_s, sample.ve_m_s
-        ) < 0.1:
-            return
-        turn = float(
-            wrap_pi(
-                math.atan2(sample.ve_m_s, sample.vn_m_s) - math.atan2(last.ve_m_s, last.vn_m_s)
-            )
-        )
-        rate = turn / dt
-        old = track.course_rate_rad_s
-        gain = min(1.0, dt / (dt + _COURSE_RATE_TAU_S))
-        track.course_rate_rad_s = rate if old is None else old + gain * (rate - old)
+        track.course_rate_rad_s = filtered_course_rate(
+            track.course_rate_rad_s, (last.vn_m_s, last.ve_m_s), (sample.vn_m_s, sample.ve_m_s),
+            sample.boot_s - last.boot_s,
+        )  # fmt: skip
+
+
+def filtered_course_rate(rate_rad_s: float | None, before: tuple[float, float],
+                         now: tuple[float, float], dt_s: float) -> float | None:
+    """The measured course rate after one more velocity sample (north, east) ``dt_s`` after
+    ``before``: the turn of the ground velocity over ``dt_s``, filtered over
+    ``_COURSE_RATE_TAU_S`` (first-order); unchanged where either velocity is below 0.1 m/s
+    (no course)."""
+    if math.hypot(*before) < 0.1 or math.hypot(*now) < 0.1:
+        return rate_rad_s
+    turn = float(wrap_pi(math.atan2(now[1], now[0]) - math.atan2(before[1], before[0])))
+    rate = turn / dt_s
+    gain = min(1.0, dt_s / (dt_s + _COURSE_RATE_TAU_S))
+    return rate if rate_rad_s is None else rate_rad_s + gain * (rate - rate_rad_s)
 
 
 def _advances(last_boot_s: float, boot_s: float) -> bool:

@@ -308,7 +308,7 @@ def _us(times: list[float]) -> str:
 # one tick's inputs to the compiled step: the state as the law sees it and the
 # controller's own state (actuator, model's flown acceleration, held backup, the nominal's
 # weight) before it
-_Inputs = tuple[float, float, float, float, float, float, Any, Any, Any, Any]
+_Inputs = tuple[float, float, float, float, float, float, Any, Any, Any, Any, Any]
 
 
 def _record(loop: GuidanceLoop, states: list[VehicleState]) -> list[_Inputs]:
@@ -317,7 +317,8 @@ def _record(loop: GuidanceLoop, states: list[VehicleState]) -> list[_Inputs]:
     inputs: list[_Inputs] = []
     for k, state in enumerate(states):
         c = loop.controller
-        before = (c._accel.copy(), c._flown.copy(), c._backup.copy(), c._weight.copy())
+        before = (c._accel.copy(), c._flown.copy(), c._backup.copy(), c._weight.copy(),
+                  c._plan.copy())
         command = loop.tick(state, 0.02 * k)
         assert isinstance(command, TickCommand)
         rate = math.nan if state.course_rate_rad_s is None else state.course_rate_rad_s
@@ -380,19 +381,19 @@ def _timed_parts(
     rows = [
         (np.array([n]), np.array([e]), np.array([h]), np.array([v]),
          np.array([min(max(v * r, -bound), bound) if math.isfinite(r) else flown[0]]))
-        for n, e, h, v, r, _, _, flown, _, _ in inputs
+        for n, e, h, v, r, _, _, flown, _, _, _ in inputs
     ]  # fmt: skip
     tn1, te1 = c._target_n, c._target_e
     clock = time.perf_counter
     kernel, parts = [], []
     for _ in range(passes):
-        for (n, e, h, v, r, dt, accel, flown, held, weight), (n1, e1, h1, v1, av1) in zip(
+        for (n, e, h, v, r, dt, accel, flown, held, weight, plan), (n1, e1, h1, v1, av1) in zip(
             inputs, rows, strict=True
         ):
-            flown_k, weight_k = flown.copy(), weight.copy()
+            flown_k, weight_k, plan_k = flown.copy(), weight.copy(), plan.copy()
             start = clock()
             step_one(c._single, single_zones, n, e, h, v, r, dt, accel, flown_k, held, weight_k,
-                     out, out_zone, scratch, result, flags, captured)  # fmt: skip
+                     plan_k, out, out_zone, scratch, result, flags, captured)  # fmt: skip
             kernel.append(clock() - start)
             start = clock()
             evaluate_batch(c._packed, zn, ze, zmur, zterm, tn1, te1, n1, e1, h1, v1, accel, out,
@@ -400,7 +401,7 @@ def _timed_parts(
             _advance_batch(c._packed, out, accel, dt, a_next, mode)
             if shielded:
                 shield_batch(c._shield, zn, ze, zmur, zreach, n1, e1, h1, accel, av1, v1,
-                             nominal, active, dt, held, weight, sout)  # fmt: skip
+                             nominal, active, dt, held, weight, plan.copy(), sout)  # fmt: skip
             parts.append(clock() - start)
     return kernel, parts
 

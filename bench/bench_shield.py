@@ -55,7 +55,7 @@ def recorded_states(
 
     def recording(s: Any, zn: Any, ze: Any, zmur: Any, zreach: Any, n: Any, e: Any, h: Any,
                   a: Any, av: Any, speed: Any, nominal: Any, active: Any, dt: float,
-                  current: Any, weight: Any, out: Any) -> None:  # fmt: skip
+                  current: Any, weight: Any, plan: Any, out: Any) -> None:  # fmt: skip
         nonlocal calls
         calls += 1
         if calls % every == 0:
@@ -65,9 +65,9 @@ def recorded_states(
                 zones = tuple(np.ascontiguousarray(x[row]) for x in (zn, ze, zmur, zreach))
                 states.append((s.copy(), *zones, 0, float(n[k]), float(e[k]), float(h[k]),
                                float(a[k]), float(av[k]), float(speed[k]), float(nominal[k]),
-                               dt, int(current[k]), float(weight[k])))  # fmt: skip
+                               dt, int(current[k]), float(weight[k]), plan[k].copy()))  # fmt: skip
         kernel(s, zn, ze, zmur, zreach, n, e, h, a, av, speed, nominal, active, dt, current,
-               weight, out)  # fmt: skip
+               weight, plan, out)  # fmt: skip
 
     controller_module.shield_batch = recording  # type: ignore[assignment]
     try:

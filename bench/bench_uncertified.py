@@ -71,7 +71,8 @@ def step_cost_us(runs: ScenarioBatch, params: GuidanceParams) -> np.ndarray:
     times = []
     for k in range(len(runs)):
         s, z, n, e, h, v = _shield_inputs(runs, k, params)
-        args = (s, *z, 0, n, e, h, 0.0, 0.0, v, 0.0, DT_S, bk.BACKUP_NONE, math.nan, out, 0)
+        plan = np.zeros(bk.PLAN_SIZE, dtype=np.int64)
+        args = (s, *z, 0, n, e, h, 0.0, 0.0, v, 0.0, DT_S, bk.BACKUP_NONE, math.nan, plan, out, 0)
         bk.shield_one(*args)
         start = time.perf_counter()
         bk.shield_one(*args)

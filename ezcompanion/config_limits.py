@@ -22,6 +22,7 @@ floors (gradient, range)       (0, 1] m                 numerical guards, never 
 response_lag_s                 [0, 60] s
 actuator_n                     even, [2, 32]            (a/a_max)^n underflows beyond
 shield_rungs                   integer, [0, 12]         the backup law's lower rungs (0: none)
+shield_plan_depth              integer, [0, 16]         the backup law's plans' segments (0: none)
 simulation dt_s                (0, 1] s
 simulation duration_s          (0, 86400] s, and at most 1e6 steps of dt_s
 origin alt_m                   [-1000, 100000] m
@@ -129,6 +130,7 @@ GUIDANCE_LIMITS: dict[str, dict[str, Bound]] = {
         "range_floor_m": FLOOR,
         "actuator_n": Bound(2, 32),
         "shield_rungs": Bound(0, 12),
+        "shield_plan_depth": Bound(0, 16),
     },
     "SimulationSettings": {
         "dt_s": Bound(0.0, 1.0, low_open=True),

@@ -309,13 +309,14 @@ def run_shield(
     out = np.empty((1, 6))
     current = bk.BACKUP_NONE
     weight = math.nan
+    plan = np.zeros(bk.PLAN_SIZE, dtype=np.int64)
     least = true_gap(zones, north, east, course)
     weights, certs, aheads = [], [], []
     for command in nominal:
         n, e, h, av = vehicle.x
         bk.shield_one(
             s, zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0, n, e, h, a, av,
-            speed, command, dt, current, weight, out, 0,
+            speed, command, dt, current, weight, plan, out, 0,
         )  # fmt: skip
         a_next, current, weight = float(out[0, 0]), int(out[0, 2]), float(out[0, 3])
         weights.append(weight)
@@ -461,7 +462,7 @@ def held_after_one_step(
     certs, out = np.empty(3), np.empty((1, 6))
     bk.backup_certificates(s, *z, *state, 0.0, 0.0, 1.0, 0.02, math.inf, certs)
     bk.shield_one(s, *z, *state, 0.0, 0.0, 1.0, -PARAMS.command_limit_m_s3, 0.02, held,
-                  0.0, out, 0)  # fmt: skip
+                  0.0, np.zeros(bk.PLAN_SIZE, dtype=np.int64), out, 0)  # fmt: skip
     theta = bk.acceptance_level_m(s, zones.mu_range_m, zones.reach_m, 0, 1.0, 0.02)
     return int(out[0, 2]), certs, theta
 

@@ -84,22 +84,27 @@ from ezcompanion.guidance.lookahead import (
     point_gap_below,
     segment_gap,
 )
-from ezcompanion.guidance.params import SHIELD_RUNGS_MAX, GuidanceParams
+from ezcompanion.guidance.params import SHIELD_PLAN_DEPTH_MAX, SHIELD_RUNGS_MAX, GuidanceParams
 
 __all__ = [
     "BACKUP_LEFT",
     "BACKUP_NONE",
+    "BACKUP_PLAN",
     "BACKUP_RIGHT",
     "BACKUP_RUNG0",
     "BACKUP_STRAIGHT",
     "N_POLICIES",
+    "PLAN_SIZE",
     "exit_level_m",
     "pack_shield",
+    "plan_search",
+    "plan_value",
     "rung_certificates",
     "turn_side",
 ]
 
 FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
 
 # Backup policies (``GuidanceStep`` reports them; -1: none, the law is not shielded)
 BACKUP_NONE, BACKUP_LEFT, BACKUP_RIGHT, BACKUP_STRAIGHT = -1, 0, 1, 2
@@ -112,7 +117,19 @@ _N_BACKUPS = 3
 # the cost of a step.)
 RUNG_STEP = 0.5
 BACKUP_RUNG0 = _N_BACKUPS
-N_POLICIES = _N_BACKUPS + 2 * SHIELD_RUNGS_MAX
+# Where no rung keeps the margin either, a plan: up to ``shield_plan_depth`` segments, each a
+# hard turn or STRAIGHT held for PLAN_SEGMENT_TURN_TIMES v / a_max, then STRAIGHT for ever
+# (``plan_search``); held as policy BACKUP_PLAN, its segments in the vehicle's plan row:
+BACKUP_PLAN = BACKUP_RUNG0 + 2 * SHIELD_RUNGS_MAX
+N_POLICIES = BACKUP_PLAN + 1
+PLAN_SEGMENT_TURN_TIMES = 0.5
+# the search's budget: control steps flown in all (some 1-2 us each, the STRAIGHT
+# certificates at its nodes besides)
+PLAN_BUDGET_STEPS = 20_000
+# the plan row: segments, the segment flying, its control steps flown, control steps a
+# segment, then each segment's policy (BACKUP_LEFT, BACKUP_RIGHT or BACKUP_STRAIGHT)
+PLAN_COUNT, PLAN_SEGMENT, PLAN_DONE, PLAN_STEPS, PLAN_POLICIES = range(5)
+PLAN_SIZE = PLAN_POLICIES + SHIELD_PLAN_DEPTH_MAX
 
 # Packed shield settings (private to the kernels)
 (
@@ -130,8 +147,9 @@ N_POLICIES = _N_BACKUPS + 2 * SHIELD_RUNGS_MAX
     S_FALL,
     S_ROBUST,
     S_RUNGS,
+    S_PLAN,
     S_SIZE,
-) = range(15)
+) = range(16)
 
 # The sampled part of a flow ends when the heading change still to come is bounded by this
 # (it is then accounted for in closed form), or after this many samples; a turn looks for
@@ -177,6 +195,7 @@ def pack_shield(params: GuidanceParams, **abandon: float) -> FloatArray:
     p[S_FALL] = params.shield_weight_fall_1_s
     p[S_ROBUST] = params.shield_robust_m
     p[S_RUNGS] = params.shield_rungs
+    p[S_PLAN] = params.shield_plan_depth
     return p
 
 
@@ -783,8 +802,8 @@ def exit_level_m(s: FloatArray, policy: int, theta: float) -> float:
     it: theta for LEFT and RIGHT; for a turn of rung r theta below its certificate's exit
     level, so that the exit its certificate counts on is taken though the certificate
     recomputed there falls short of that level (by less than theta)."""
-    if policy < _N_BACKUPS:
-        return theta
+    if policy < _N_BACKUPS or policy == BACKUP_PLAN:
+        return theta  # a plan leaves for STRAIGHT where STRAIGHT is certified
     return rung_level_m(s, (policy - BACKUP_RUNG0) // 2 + 1, theta) - theta
 
 
@@ -891,16 +910,150 @@ def backup_command(s: FloatArray, policy: int, a: float) -> float:
     return float(-cmd / s[S_AMAX] * a)
 
 
+# ---------------------------------------------------------------------------------------
+# 5a. a plan, where no rung keeps the margin
+
+
+@jit_inline
+def plan_policy(plan: IntArray) -> int:
+    """The policy a held plan flies at its present step: its segment's, STRAIGHT after."""
+    if plan[PLAN_SEGMENT] < plan[PLAN_COUNT]:
+        return int(plan[PLAN_POLICIES + plan[PLAN_SEGMENT]])
+    return BACKUP_STRAIGHT
+
+
+@jit_inline
+def _plan_advance(plan: IntArray) -> None:
+    """A held plan after one of its control steps was flown."""
+    if plan[PLAN_SEGMENT] < plan[PLAN_COUNT]:
+        plan[PLAN_DONE] += 1
+        if plan[PLAN_DONE] >= plan[PLAN_STEPS]:
+            plan[PLAN_SEGMENT] += 1
+            plan[PLAN_DONE] = 0
+
+
+@jit_inline
+def _plan_segment(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, policy: int, steps: int, n: float, e: float, h: float, a: float, av: float,
+    speed: float, dt: float, floor: float, stop_below: float,
+) -> tuple[float, float, float, float, float, float]:
+    """``steps`` control steps of ``policy`` flown as the shield flies them (``_fly_step``),
+    each step's least gap (and abandon gap, where a profile is set) taken into ``floor``;
+    stops once that is below ``stop_below``. Returns the floor and the state after."""
+    for _ in range(steps):
+        gap, n, e, h, a, av = _fly_step(s, zn, ze, zmur, zreach, kz, policy, 0.0, n, e, h, a,
+                                        av, speed, dt)  # fmt: skip
+        floor = min(floor, _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, gap))
+        if floor < stop_below:
+            break
+    return floor, n, e, h, a, av
+
+
+@jit_borrow
+def plan_value(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, plan: IntArray, n: float, e: float, h: float, a: float, av: float, speed: float,
+    dt: float,
+) -> float:
+    """The value of a held plan from this state: the least gap (margin subtracted) of the
+    control steps it still has to fly, each flown as the shield flies it, and then of
+    STRAIGHT for ever (its certificate). Under the model the flight comes no nearer."""
+    floor = math.inf
+    steps = int(plan[PLAN_STEPS])
+    for j in range(int(plan[PLAN_SEGMENT]), int(plan[PLAN_COUNT])):
+        left = steps - (int(plan[PLAN_DONE]) if j == plan[PLAN_SEGMENT] else 0)
+        floor, n, e, h, a, av = _plan_segment(s, zn, ze, zmur, zreach, kz,
+                                              int(plan[PLAN_POLICIES + j]), left, n, e, h, a,
+                                              av, speed, dt, floor, -math.inf)  # fmt: skip
+    straight = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
+                                    -math.inf, math.inf)  # fmt: skip
+    return min(floor, straight)
+
+
+@jit
+def plan_search(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
+    need: float, plan: IntArray,
+) -> float:
+    """A plan worth at least ``need``: up to ``shield_plan_depth`` segments, each LEFT,
+    RIGHT or STRAIGHT held for ``PLAN_SEGMENT_TURN_TIMES`` v / a_max (whole control steps),
+    then STRAIGHT for ever. Depth first, the children of a node best first (by the least
+    gap of their flight so far), a child dropped as soon as its flight falls below
+    ``need``; at every node the terminal STRAIGHT is tried (its certificate), and the first
+    node whose flight and terminal both reach ``need`` is the plan. Writes it into
+    ``plan`` (from its first step) and returns its value (a lower bound, >= ``need``);
+    returns -inf, ``plan`` untouched, where none is found within ``PLAN_BUDGET_STEPS``
+    control steps flown. The value is exact under the model: the plan is flown step by
+    step as it was searched."""
+    depth = int(s[S_PLAN])
+    steps = max(1, round(PLAN_SEGMENT_TURN_TIMES * speed / s[S_AMAX] / dt))
+    nodes = np.empty((depth + 1, 3, 6))  # per level, the children: state and floor
+    policies = np.zeros((depth + 1, 3), dtype=np.int64)
+    count = np.zeros(depth + 1, dtype=np.int64)
+    taken = np.zeros(depth + 1, dtype=np.int64)
+    path = np.zeros(depth + 1, dtype=np.int64)
+    nodes[0, 0, 0], nodes[0, 0, 1], nodes[0, 0, 2] = n, e, h
+    nodes[0, 0, 3], nodes[0, 0, 4], nodes[0, 0, 5] = a, av, math.inf
+    count[0] = 1
+    level = 0
+    spent = 0
+    while level >= 0:
+        if taken[level] >= count[level]:
+            level -= 1
+            continue
+        x = nodes[level, taken[level]]
+        path[level] = policies[level, taken[level]]
+        taken[level] += 1
+        n0, e0, h0, a0, av0, floor = x[0], x[1], x[2], x[3], x[4], x[5]
+        terminal = straight_certificate(s, zn, ze, zmur, zreach, kz, n0, e0, h0, a0, av0,
+                                        speed, dt, need, need)  # fmt: skip
+        if min(floor, terminal) >= need:
+            plan[PLAN_COUNT], plan[PLAN_SEGMENT], plan[PLAN_DONE] = level, 0, 0
+            plan[PLAN_STEPS] = steps
+            for j in range(level):
+                plan[PLAN_POLICIES + j] = path[j + 1]
+            return float(min(floor, terminal))
+        if level >= depth:
+            continue
+        if spent >= PLAN_BUDGET_STEPS:
+            return -math.inf
+        below = level + 1
+        count[below] = 0
+        taken[below] = 0
+        for policy in (BACKUP_LEFT, BACKUP_RIGHT, BACKUP_STRAIGHT):
+            f, n1, e1, h1, a1, av1 = _plan_segment(s, zn, ze, zmur, zreach, kz, policy, steps,
+                                                   n0, e0, h0, a0, av0, speed, dt, floor,
+                                                   need)  # fmt: skip
+            spent += steps
+            if f < need:
+                continue
+            j = count[below]  # insertion, best first
+            while j > 0 and nodes[below, j - 1, 5] < f:
+                nodes[below, j] = nodes[below, j - 1]
+                policies[below, j] = policies[below, j - 1]
+                j -= 1
+            nodes[below, j, 0], nodes[below, j, 1], nodes[below, j, 2] = n1, e1, h1
+            nodes[below, j, 3], nodes[below, j, 4], nodes[below, j, 5] = a1, av1, f
+            policies[below, j] = policy
+            count[below] += 1
+        level = below
+    return -math.inf
+
+
 @jit
 def shield_one(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float,
-    nominal: float, dt: float, current: int, weight_before: float, out: FloatArray, k: int,
+    nominal: float, dt: float, current: int, weight_before: float, plan: IntArray,
+    out: FloatArray, k: int,
 ) -> None:
     """One shielded step for vehicle ``k``: writes ``out[k, :]`` = (a after the step, the
     model's a_v after it, the backup held after the step, the nominal's weight, the
     certificate of the held backup at the start, the certificate one step ahead on the
-    nominal)."""
+    nominal). ``plan``: the vehicle's plan row (``PLAN_SIZE``), read and updated where the
+    held backup is (or becomes) BACKUP_PLAN."""
     theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
     # what the nominal (or a blend) must leave to be flown: theta, and with a lag a reserve
     # above it, so that a state whose measured a_v is a little off keeps the exits its
@@ -934,12 +1087,32 @@ def shield_one(
         backup_certificates(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, math.inf,
                             certs)  # fmt: skip
         single = max(certs[BACKUP_LEFT], certs[BACKUP_RIGHT], certs[BACKUP_STRAIGHT])
+        planned = False
         if single < theta:
             # none certified: the lower rungs' turns, for the least shortfall
             rung_certificates(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, theta,
                               certs[BACKUP_STRAIGHT], single, certs)  # fmt: skip
+            if s[S_PLAN] > 0.0:
+                # and a plan: the held one's value from here; a new one where none is held
+                # or the held one falls short of theta - eps (outside every zone by theta)
+                if current == BACKUP_PLAN:
+                    certs[BACKUP_PLAN] = plan_value(s, zn, ze, zmur, zreach, kz, plan, n, e, h,
+                                                    a, av, speed, dt)  # fmt: skip
+                floor = theta - s[S_EPS]
+                if certs[BACKUP_PLAN] < floor:
+                    others = certs[:BACKUP_PLAN].max()
+                    need = max(floor, others + 2.0 * theta, certs[BACKUP_PLAN] + 2.0 * theta)
+                    found = np.empty(PLAN_SIZE, dtype=np.int64)
+                    value = plan_search(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
+                                        dt, need, found)  # fmt: skip
+                    if value >= need:
+                        plan[:] = found
+                        certs[BACKUP_PLAN] = value
+                        planned = True
         best = int(np.argmax(certs))
-        if not 0 <= current < N_POLICIES or (
+        if planned:
+            current = BACKUP_PLAN  # found better by 2 theta than every other, at >= floor
+        elif not 0 <= current < N_POLICIES or (
             (certs[best] >= theta or certs[current] < -s[S_EPS])
             and certs[best] > certs[current] + 2.0 * theta
         ):
@@ -948,10 +1121,12 @@ def shield_one(
                                                                                 theta):
             current = BACKUP_STRAIGHT  # a turn backup leaves here (its own rule)
         cert_now = certs[current]
+        # what the held backup flies at this step: a plan's present segment
+        flies = plan_policy(plan) if current == BACKUP_PLAN else current
         accepted = False
         if weight > 0.0:
             # blend with the held backup's command, held over the step, and verify the blend
-            blended = weight * nominal + (1.0 - weight) * backup_command(s, current, a)
+            blended = weight * nominal + (1.0 - weight) * backup_command(s, flies, a)
             check, which_b, a_b, av_b = _ahead(s, zn, ze, zmur, zreach, kz, blended, n, e, h, a,
                                                av, speed, dt, dt, accept, certs)  # fmt: skip
             if check >= accept:
@@ -960,8 +1135,10 @@ def shield_one(
         if not accepted:
             weight = 0.0
             which = current
-            _, _, _, _, a_next, av_next = _fly_step(s, zn, ze, zmur, zreach, kz, current, 0.0, n,
+            _, _, _, _, a_next, av_next = _fly_step(s, zn, ze, zmur, zreach, kz, flies, 0.0, n,
                                                     e, h, a, av, speed, dt)  # fmt: skip
+            if current == BACKUP_PLAN:
+                _plan_advance(plan)
     out[k, 0] = a_next
     out[k, 1] = av_next
     out[k, 2] = which
@@ -988,15 +1165,17 @@ def shield_batch(
     dt: float,
     current: npt.NDArray[np.int8],
     weight_before: FloatArray,
+    plan: IntArray,
     out: FloatArray,
 ) -> None:
-    """``shield_one`` for every vehicle with ``active`` set (zone row k, or 0 if shared)."""
+    """``shield_one`` for every vehicle with ``active`` set (zone row k, or 0 if shared;
+    plan row k)."""
     shared = zn.shape[0] == 1
     for k in range(n.shape[0]):
         if active[k]:
             shield_one(
                 s, zn, ze, zmur, zreach, 0 if shared else k, n[k], e[k], h[k], a[k], av[k],
-                speed[k], nominal[k], dt, int(current[k]), weight_before[k], out, k,
+                speed[k], nominal[k], dt, int(current[k]), weight_before[k], plan[k], out, k,
             )  # fmt: skip
 
 

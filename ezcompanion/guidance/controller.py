@@ -28,6 +28,7 @@ from ezcompanion.guidance._jit import jit
 from ezcompanion.guidance.actuator import advance_one
 from ezcompanion.guidance.backup import (
     BACKUP_NONE,
+    PLAN_SIZE,
     pack_shield,
     rest_course,
     rest_line_gap_m,
@@ -109,7 +110,8 @@ class GuidanceStep:
     ``accel_lat_cmd_m_s2`` the state at its end: the lateral acceleration to fly next.
     ``mode`` holds ``GuidanceMode`` values. The backup law's shield adds ``backup`` (the
     executed backup policy, ``ezcompanion.guidance.backup.BACKUP_*``, or a turn of a
-    lower rung, ``BACKUP_RUNG0`` and above, where none is certified; -1 for other laws),
+    lower rung, ``BACKUP_RUNG0`` and above, or a plan, ``BACKUP_PLAN``, where none is
+    certified; -1 for other laws),
     ``shield_weight`` (the nominal command's share: 1 unshielded, 0 the backup alone),
     ``certificate_m`` (the executed backup's certificate at the step's start, a lower
     rung's value: >= 0 means a bounded manoeuvre keeps the vehicle out of every zone for
@@ -156,6 +158,7 @@ class GuidanceController:
         self._flown = np.zeros(1)  # the model's flown lateral acceleration (backup law)
         self._backup = np.full(1, BACKUP_NONE, dtype=np.int8)
         self._weight = np.full(1, math.nan)  # the nominal's weight at the last step (backup)
+        self._plan = np.zeros((1, PLAN_SIZE), dtype=np.int64)  # the shield's plans (backup)
         self._shield = pack_shield(self.params)
         self._no_shield: _ShieldViews | None = None
         # one vehicle's path (``step_one``): its constants, zones and work space
@@ -186,6 +189,7 @@ class GuidanceController:
         self._flown = self._accel.copy()
         self._backup = np.full(self._accel.shape, BACKUP_NONE, dtype=np.int8)
         self._weight = np.full(self._accel.shape, math.nan)
+        self._plan = np.zeros((self._accel.shape[0], PLAN_SIZE), dtype=np.int64)
 
     def restrict(
         self, mask: npt.NDArray[np.bool_], *, zones: ZoneSet, target: Target | Sequence[Target]
@@ -197,6 +201,7 @@ class GuidanceController:
         new._flown = self._flown[mask].copy()
         new._backup = self._backup[mask].copy()
         new._weight = self._weight[mask].copy()
+        new._plan = self._plan[mask].copy()
         return new
 
     def evaluate(self, state: KinematicState) -> LawOutput:
@@ -311,8 +316,8 @@ class GuidanceController:
         captured = np.empty(1, dtype=np.bool_)
         step_one(
             self._single, zones, north_m, east_m, course_rad, speed_m_s, rate_1_s, dt_s, accel,
-            self._flown, self._backup, self._weight, out, out_zone, self._scratch, result, flags,
-            captured,
+            self._flown, self._backup, self._weight, self._plan, out, out_zone, self._scratch,
+            result, flags, captured,
         )  # fmt: skip
         self._accel = result[:1]
         if self._shielded:
@@ -366,7 +371,7 @@ class GuidanceController:
         shield_batch(
             self._shield, zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m,
             north, east, course, self._accel, flown, speed, out[:, O_AC], active, dt_s,
-            self._backup, self._weight, shield,
+            self._backup, self._weight, self._plan, shield,
         )  # fmt: skip
         accel_next[active] = shield[active, 0]
         self._flown = np.where(active, shield[:, 1], accel_next)

@@ -33,9 +33,18 @@ from enum import StrEnum
 
 from ezcompanion.errors import ConfigError
 
-__all__ = ["SHIELD_RUNGS_MAX", "BlendMode", "Defender", "GuidanceParams", "LawName", "Target"]
+__all__ = [
+    "SHIELD_PLAN_DEPTH_MAX",
+    "SHIELD_RUNGS_MAX",
+    "BlendMode",
+    "Defender",
+    "GuidanceParams",
+    "LawName",
+    "Target",
+]
 
 SHIELD_RUNGS_MAX = 12  # the backup law's lower rungs at most (``shield_rungs``)
+SHIELD_PLAN_DEPTH_MAX = 16  # the backup law's plans' segments at most (``shield_plan_depth``)
 
 
 class LawName(StrEnum):
@@ -160,6 +169,10 @@ class GuidanceParams:
     # ... and where no backup is certified, its turns are tried again leaving for STRAIGHT
     # at this many lower levels, theta - r eps / 2 (0: none; docs/guidance.md, step 5)
     shield_rungs: int = 6
+    # ... and there, where no rung keeps the margin, it searches for a plan of up to this
+    # many hard-turn or straight segments (each v / (2 a_max) long) ending in STRAIGHT
+    # (0: none; docs/guidance.md, step 5)
+    shield_plan_depth: int = 16
     # ... and its nominal's own safety share fades out within this many turn radii
     # (v^2 / a_max) beyond one of the target, so that it arrives (0: no fade)
     safety_fade_turn_radii: float = 4.0
@@ -220,6 +233,14 @@ class GuidanceParams:
             raise ConfigError(
                 "shield_rungs", rungs, f"must be an integer in [0, {SHIELD_RUNGS_MAX}]"
             )
+        depth = self.shield_plan_depth
+        if not isinstance(depth, int) or isinstance(depth, bool) or not (
+            0 <= depth <= SHIELD_PLAN_DEPTH_MAX
+        ):
+            raise ConfigError(
+                "shield_plan_depth", depth,
+                f"must be an integer in [0, {SHIELD_PLAN_DEPTH_MAX}]",
+            )  # fmt: skip
         _non_negative("safety_fade_turn_radii", self.safety_fade_turn_radii)
         _finite("prediction_step_ratio", self.prediction_step_ratio)
         if not 0.0 < self.prediction_step_ratio <= 0.25:

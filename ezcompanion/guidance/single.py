@@ -43,6 +43,7 @@ __all__ = ["MODE_PURE", "check_state", "checked_rate", "pack_single", "stack_zon
 
 FloatArray = npt.NDArray[np.float64]
 Int8Array = npt.NDArray[np.int8]
+IntArray = npt.NDArray[np.int64]
 BoolArray = npt.NDArray[np.bool_]
 
 # alpha (or the safety share) within this of 0 or 1 counts as one law acting alone
@@ -121,6 +122,7 @@ def step_one(
     flown: FloatArray,
     held: Int8Array,
     weight_before: FloatArray,
+    plan: IntArray,
     out: FloatArray,
     out_zone: FloatArray,
     scratch: FloatArray,
@@ -134,7 +136,8 @@ def step_one(
     ``n, e, course, v`` (checked finite, v > 0); ``rate``, the measured course rate or NaN
     for none (the model's ``flown`` is then used); ``dt``. State: ``accel[0]`` (a, read),
     ``flown[0]`` (the model's a_v, updated), ``held[0]`` (the held backup, read) and
-    ``weight_before[0]`` (the nominal's weight at the step before, NaN for none; updated).
+    ``weight_before[0]`` (the nominal's weight at the step before, NaN for none; updated)
+    and ``plan[0]`` (the shield's plan row, ``backup.PLAN_SIZE``; updated).
     Outputs: the law's ``out[0, O_*]`` and ``out_zone[0, Z_*, i]``; ``result`` = (a after
     the step, the nominal's weight, the held backup's certificate at the start, the
     certificate one step ahead), NaN where unshielded; ``flags`` = (mode, the backup held
@@ -169,7 +172,7 @@ def step_one(
             # shield (16 s of a cold compile, against 1.6 s for what is left)
             one = min(held.shape[0], 1) - 1  # 0: held has one element at least
             shield_one(s, zn, ze, zmur, zreach, one, n, e, course, a, av, v, out[0, O_AC], dt,
-                       int(held[0]), weight_before[0], shield, one)  # fmt: skip
+                       int(held[0]), weight_before[0], plan[one], shield, one)  # fmt: skip
             a_next = shield[0, 0]
             flown[0] = shield[0, 1]
             backup = int(shield[0, 2])

@@ -127,8 +127,10 @@ PLAN_SEGMENT_TURN_TIMES = 0.5
 # certificates at its nodes besides)
 PLAN_BUDGET_STEPS = 20_000
 # the plan row: segments, the segment flying, its control steps flown, control steps a
-# segment, then each segment's policy (BACKUP_LEFT, BACKUP_RIGHT or BACKUP_STRAIGHT)
-PLAN_COUNT, PLAN_SEGMENT, PLAN_DONE, PLAN_STEPS, PLAN_POLICIES = range(5)
+# segment, the shield steps to wait before searching again (after a search that spent its
+# budget and found none: one segment's time), then each segment's policy (BACKUP_LEFT,
+# BACKUP_RIGHT or BACKUP_STRAIGHT)
+PLAN_COUNT, PLAN_SEGMENT, PLAN_DONE, PLAN_STEPS, PLAN_WAIT, PLAN_POLICIES = range(6)
 PLAN_SIZE = PLAN_POLICIES + SHIELD_PLAN_DEPTH_MAX
 
 # Packed shield settings (private to the kernels)
@@ -976,17 +978,18 @@ def plan_search(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
     need: float, plan: IntArray,
-) -> float:
+) -> tuple[float, int]:
     """A plan worth at least ``need``: up to ``shield_plan_depth`` segments, each LEFT,
     RIGHT or STRAIGHT held for ``PLAN_SEGMENT_TURN_TIMES`` v / a_max (whole control steps),
     then STRAIGHT for ever. Depth first, the children of a node best first (by the least
     gap of their flight so far), a child dropped as soon as its flight falls below
     ``need``; at every node the terminal STRAIGHT is tried (its certificate), and the first
     node whose flight and terminal both reach ``need`` is the plan. Writes it into
-    ``plan`` (from its first step) and returns its value (a lower bound, >= ``need``);
-    returns -inf, ``plan`` untouched, where none is found within ``PLAN_BUDGET_STEPS``
-    control steps flown. The value is exact under the model: the plan is flown step by
-    step as it was searched."""
+    ``plan`` (from its first step) and returns its value (a lower bound, >= ``need``),
+    with the control steps the search flew; returns -inf, of ``plan`` only its segment
+    length written, where none is found, the family exhausted or ``PLAN_BUDGET_STEPS``
+    control steps flown. The value is
+    exact under the model: the plan is flown step by step as it was searched."""
     depth = int(s[S_PLAN])
     steps = max(1, round(PLAN_SEGMENT_TURN_TIMES * speed / s[S_AMAX] / dt))
     nodes = np.empty((depth + 1, 3, 6))  # per level, the children: state and floor
@@ -994,6 +997,7 @@ def plan_search(
     count = np.zeros(depth + 1, dtype=np.int64)
     taken = np.zeros(depth + 1, dtype=np.int64)
     path = np.zeros(depth + 1, dtype=np.int64)
+    plan[PLAN_STEPS] = steps
     nodes[0, 0, 0], nodes[0, 0, 1], nodes[0, 0, 2] = n, e, h
     nodes[0, 0, 3], nodes[0, 0, 4], nodes[0, 0, 5] = a, av, math.inf
     count[0] = 1
@@ -1011,14 +1015,13 @@ def plan_search(
                                         speed, dt, need, need)  # fmt: skip
         if min(floor, terminal) >= need:
             plan[PLAN_COUNT], plan[PLAN_SEGMENT], plan[PLAN_DONE] = level, 0, 0
-            plan[PLAN_STEPS] = steps
             for j in range(level):
                 plan[PLAN_POLICIES + j] = path[j + 1]
-            return float(min(floor, terminal))
+            return float(min(floor, terminal)), spent
         if level >= depth:
             continue
         if spent >= PLAN_BUDGET_STEPS:
-            return -math.inf
+            return -math.inf, spent
         below = level + 1
         count[below] = 0
         taken[below] = 0
@@ -1039,7 +1042,7 @@ def plan_search(
             policies[below, j] = policy
             count[below] += 1
         level = below
-    return -math.inf
+    return -math.inf, spent
 
 
 @jit
@@ -1098,17 +1101,23 @@ def shield_one(
                 if current == BACKUP_PLAN:
                     certs[BACKUP_PLAN] = plan_value(s, zn, ze, zmur, zreach, kz, plan, n, e, h,
                                                     a, av, speed, dt)  # fmt: skip
+                # (after a search that spent its whole budget in vain, not for a segment's
+                # time: a vehicle boxed in would otherwise pay the budget at every step)
                 floor = theta - s[S_EPS]
-                if certs[BACKUP_PLAN] < floor:
+                if certs[BACKUP_PLAN] < floor and plan[PLAN_WAIT] > 0:
+                    plan[PLAN_WAIT] -= 1
+                elif certs[BACKUP_PLAN] < floor:
                     others = certs[:BACKUP_PLAN].max()
                     need = max(floor, others + 2.0 * theta, certs[BACKUP_PLAN] + 2.0 * theta)
-                    found = np.empty(PLAN_SIZE, dtype=np.int64)
-                    value = plan_search(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
-                                        dt, need, found)  # fmt: skip
+                    found = np.zeros(PLAN_SIZE, dtype=np.int64)
+                    value, spent = plan_search(s, zn, ze, zmur, zreach, kz, n, e, h, a, av,
+                                               speed, dt, need, found)  # fmt: skip
                     if value >= need:
                         plan[:] = found
                         certs[BACKUP_PLAN] = value
                         planned = True
+                    elif spent >= PLAN_BUDGET_STEPS:
+                        plan[PLAN_WAIT] = found[PLAN_STEPS]
         best = int(np.argmax(certs))
         if planned:
             current = BACKUP_PLAN  # found better by 2 theta than every other, at >= floor

@@ -1,17 +1,19 @@
 """Starts short of the margin: the backup law from the campaign starts where no backup is
-certified, with the lower rungs (``shield_rungs``, the default 6) and without them (0).
+certified, as it is (the lower rungs, ``shield_rungs`` 6, and the plans,
+``shield_plan_depth`` 16), with the rungs and no plans, and with neither.
 
 Draws the campaign's runs (``ezcompanion validate``'s distribution and seed), keeps those
 whose start has no backup certified (every single backup's certificate below theta, from
 rest, with the run's lag and flown speed, as the campaign starts the law), asks the
-feasibility oracle of them, and flies them (40 s at 20 ms, the campaign's simulator) with
-and without the rungs. Prints, for each: the runs that entered a zone, those among them
-where the oracle found a safe manoeuvre (with their depths), the median depth, and the
-runs intercepted outside every zone; then the shield step's cost at those starts (its
-first step, timed alone after an untimed one: median, p90 and max). The runs whose start
-is certified fly the same bytes either way (the rungs are computed only where no backup is
-certified): ``--certified N`` flies the first N of them both ways and says whether every
-outcome is identical. The figures of docs/validation.md, "A start short of the margin":
+feasibility oracle of them, and flies them (40 s at 20 ms, the campaign's simulator) each
+way. Prints, for each: the runs that entered a zone, those among them where the oracle
+found a safe manoeuvre (with their depths), the median depth, and the runs intercepted
+outside every zone; then the shield step's cost at those starts (its first step, timed
+alone after an untimed one: median, p90 and max). The runs whose start is certified fly
+the same bytes every way (the rungs and the plans are computed only where no backup is
+certified): ``--certified N`` flies the first N of them as the law is and with neither,
+and says whether every outcome is identical. The figures of docs/validation.md, "A start
+short of the margin":
 
     python bench/bench_uncertified.py --runs 10000 --seed 2027 --certified 600
 """
@@ -32,6 +34,7 @@ from ezcompanion.validation.oracle import run_oracle
 from ezcompanion.validation.scenarios import ScenarioBatch, ScenarioDistribution, draw_scenarios
 
 DT_S = BatchSettings().dt_s
+BEFORE = replace(GuidanceParams(), shield_rungs=0, shield_plan_depth=0)  # neither
 
 
 def _shield_inputs(
@@ -71,11 +74,11 @@ def step_cost_us(runs: ScenarioBatch, params: GuidanceParams) -> np.ndarray:
     times = []
     for k in range(len(runs)):
         s, z, n, e, h, v = _shield_inputs(runs, k, params)
-        plan = np.zeros(bk.PLAN_SIZE, dtype=np.int64)
-        args = (s, *z, 0, n, e, h, 0.0, 0.0, v, 0.0, DT_S, bk.BACKUP_NONE, math.nan, plan, out, 0)
-        bk.shield_one(*args)
+        args = (s, *z, 0, n, e, h, 0.0, 0.0, v, 0.0, DT_S, bk.BACKUP_NONE, math.nan)
+        bk.shield_one(*args, np.zeros(bk.PLAN_SIZE, dtype=np.int64), out, 0)
+        plan = np.zeros(bk.PLAN_SIZE, dtype=np.int64)  # fresh: the search is made again
         start = time.perf_counter()
-        bk.shield_one(*args)
+        bk.shield_one(*args, plan, out, 0)
         times.append(time.perf_counter() - start)
     return np.array(times) * 1e6
 
@@ -94,8 +97,12 @@ def main() -> None:
     safe = run_oracle(runs, params, duration_s=BatchSettings().duration_s).safe_feasible
     print(f"{args.runs} runs of seed {args.seed}: {len(chosen)} start with no backup certified,"
           f" {int(safe.sum())} of them where the oracle found a safe manoeuvre")  # fmt: skip
-    for rungs in (params.shield_rungs, 0):
-        chosen_params = replace(params, shield_rungs=rungs)
+    ways = {
+        f"shield_rungs {params.shield_rungs}, shield_plan_depth {params.shield_plan_depth}": params,
+        f"shield_rungs {params.shield_rungs}, no plans": replace(params, shield_plan_depth=0),
+        "neither": BEFORE,
+    }
+    for name, chosen_params in ways.items():
         started = time.perf_counter()
         m = fly(runs, chosen_params)
         wall = time.perf_counter() - started
@@ -103,7 +110,7 @@ def main() -> None:
         safe_depths = sorted(round(float(d), 3) for d in -m.min_clearance_m[m.entered & safe])
         cost = step_cost_us(runs, chosen_params)
         kept = m.intercepted & ~m.entered
-        print(f"shield_rungs {rungs}: entered {int(m.entered.sum())} (median depth "
+        print(f"{name}: entered {int(m.entered.sum())} (median depth "
               f"{np.median(depth):.3f} m, deepest {depth.max():.3f} m); where a safe manoeuvre "
               f"existed {len(safe_depths)} {safe_depths}; intercepted outside every zone "
               f"{int(kept.sum())} ({int((kept & safe).sum())} where safe existed); "
@@ -112,8 +119,7 @@ def main() -> None:
               f"{np.percentile(cost, 90):.0f} us, max {cost.max():.0f} us")  # fmt: skip
     if args.certified:
         rest = np.setdiff1d(np.arange(args.runs), chosen)[: args.certified]
-        both = [fly(drawn.subset(rest), replace(params, shield_rungs=r))
-                for r in (params.shield_rungs, 0)]
+        both = [fly(drawn.subset(rest), chosen) for chosen in (params, BEFORE)]
         same = all(
             np.array_equal(a, b, equal_nan=True)
             for a, b in zip(both[0].as_arrays().values(), both[1].as_arrays().values(),

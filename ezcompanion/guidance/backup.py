@@ -61,7 +61,13 @@ assumptions named; tests/test_backup.py checks each step):
    levels (``rung_certificates``), each worth min(its certificate, its exit level - theta),
    and the best value is held: the flight then comes no nearer than that value less theta
    (and the widening), so a value of theta - margin plus the widening keeps it outside
-   every zone.
+   every zone. There a *plan* is searched as well
+   (``plan_search``: a few segments of hard turns and STRAIGHT, then STRAIGHT for ever,
+   each step flown in the search as the shield then flies it, so its value bounds its
+   flight with nothing lost to sampling); one worth theta - margin, and better by 2 theta
+   than every other, is held (``BACKUP_PLAN``, its segments in the vehicle's plan row)
+   while its value from the measured state stays there, and given up only for a certified
+   backup.
 
 Pure and compiled like the law (:mod:`ezcompanion.guidance.law`); one vehicle per call of
 ``shield_one``, any batch through ``shield_batch``.
@@ -117,14 +123,14 @@ _N_BACKUPS = 3
 # the cost of a step.)
 RUNG_STEP = 0.5
 BACKUP_RUNG0 = _N_BACKUPS
-# Where no rung keeps the margin either, a plan: up to ``shield_plan_depth`` segments, each a
-# hard turn or STRAIGHT held for PLAN_SEGMENT_TURN_TIMES v / a_max, then STRAIGHT for ever
-# (``plan_search``); held as policy BACKUP_PLAN, its segments in the vehicle's plan row:
+# There, too, a plan: up to ``shield_plan_depth`` segments, each a hard turn or STRAIGHT
+# held for PLAN_SEGMENT_TURN_TIMES v / a_max, then STRAIGHT for ever (``plan_search``); held
+# as policy BACKUP_PLAN, its segments in the vehicle's plan row:
 BACKUP_PLAN = BACKUP_RUNG0 + 2 * SHIELD_RUNGS_MAX
 N_POLICIES = BACKUP_PLAN + 1
 PLAN_SEGMENT_TURN_TIMES = 0.5
-# the search's budget: control steps flown in all (some 1-2 us each, the STRAIGHT
-# certificates at its nodes besides)
+# the search's budget: control steps flown in all (the STRAIGHT certificates at its nodes
+# besides; 8 ms in all up a dead-end corridor of 29 zones, docs/guidance.md)
 PLAN_BUDGET_STEPS = 20_000
 # the plan row: segments, the segment flying, its control steps flown, control steps a
 # segment, the shield steps to wait before searching again (after a search that spent its
@@ -913,7 +919,7 @@ def backup_command(s: FloatArray, policy: int, a: float) -> float:
 
 
 # ---------------------------------------------------------------------------------------
-# 5a. a plan, where no rung keeps the margin
+# 5a. a plan, where no backup is certified
 
 
 @jit_inline
@@ -934,7 +940,7 @@ def _plan_advance(plan: IntArray) -> None:
             plan[PLAN_DONE] = 0
 
 
-@jit_inline
+@jit_borrow  # on its own, not inlined: its two callers would each compile a copy
 def _plan_segment(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, policy: int, steps: int, n: float, e: float, h: float, a: float, av: float,
@@ -1007,10 +1013,11 @@ def plan_search(
         if taken[level] >= count[level]:
             level -= 1
             continue
-        x = nodes[level, taken[level]]
-        path[level] = policies[level, taken[level]]
+        c = taken[level]
+        path[level] = policies[level, c]
         taken[level] += 1
-        n0, e0, h0, a0, av0, floor = x[0], x[1], x[2], x[3], x[4], x[5]
+        n0, e0, h0 = nodes[level, c, 0], nodes[level, c, 1], nodes[level, c, 2]
+        a0, av0, floor = nodes[level, c, 3], nodes[level, c, 4], nodes[level, c, 5]
         terminal = straight_certificate(s, zn, ze, zmur, zreach, kz, n0, e0, h0, a0, av0,
                                         speed, dt, need, need)  # fmt: skip
         if min(floor, terminal) >= need:
@@ -1034,7 +1041,8 @@ def plan_search(
                 continue
             j = count[below]  # insertion, best first
             while j > 0 and nodes[below, j - 1, 5] < f:
-                nodes[below, j] = nodes[below, j - 1]
+                for q in range(6):
+                    nodes[below, j, q] = nodes[below, j - 1, q]
                 policies[below, j] = policies[below, j - 1]
                 j -= 1
             nodes[below, j, 0], nodes[below, j, 1], nodes[below, j, 2] = n1, e1, h1
@@ -1043,6 +1051,45 @@ def plan_search(
             count[below] += 1
         level = below
     return -math.inf, spent
+
+
+@jit
+def _plan_step(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
+    theta: float, current: int, certs: FloatArray, plan: IntArray,
+) -> bool:
+    """The plan where no single backup is certified (``certs``: the single backups' and
+    the rungs' values): the held one's value from here into ``certs[BACKUP_PLAN]``; a new
+    one searched where none is held or the held one falls short of theta - eps (outside
+    every zone by theta), better by 2 theta than every other backup. True where a new one
+    was found: written into ``plan``, its value into ``certs``. (On its own, not in
+    ``shield_one``: compiled once, and the shield's own compile stays as it was.)"""
+    if current == BACKUP_PLAN:
+        certs[BACKUP_PLAN] = plan_value(s, zn, ze, zmur, zreach, kz, plan, n, e, h, a, av,
+                                        speed, dt)  # fmt: skip
+    floor = theta - s[S_EPS]
+    if certs[BACKUP_PLAN] >= floor:
+        return False
+    if plan[PLAN_WAIT] > 0:
+        # a search spent its whole budget in vain less than a segment ago: not yet (a
+        # vehicle boxed in would otherwise pay the budget every step)
+        plan[PLAN_WAIT] -= 1
+        return False
+    need = max(floor, certs[BACKUP_PLAN] + 2.0 * theta)
+    for policy in range(BACKUP_PLAN):
+        need = max(need, certs[policy] + 2.0 * theta)
+    found = np.zeros(PLAN_SIZE, dtype=np.int64)
+    value, spent = plan_search(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, need,
+                               found)  # fmt: skip
+    if value >= need:
+        for j in range(PLAN_SIZE):
+            plan[j] = found[j]
+        certs[BACKUP_PLAN] = value
+        return True
+    if spent >= PLAN_BUDGET_STEPS:
+        plan[PLAN_WAIT] = found[PLAN_STEPS]
+    return False
 
 
 @jit
@@ -1096,28 +1143,8 @@ def shield_one(
             rung_certificates(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, theta,
                               certs[BACKUP_STRAIGHT], single, certs)  # fmt: skip
             if s[S_PLAN] > 0.0:
-                # and a plan: the held one's value from here; a new one where none is held
-                # or the held one falls short of theta - eps (outside every zone by theta)
-                if current == BACKUP_PLAN:
-                    certs[BACKUP_PLAN] = plan_value(s, zn, ze, zmur, zreach, kz, plan, n, e, h,
-                                                    a, av, speed, dt)  # fmt: skip
-                # (after a search that spent its whole budget in vain, not for a segment's
-                # time: a vehicle boxed in would otherwise pay the budget at every step)
-                floor = theta - s[S_EPS]
-                if certs[BACKUP_PLAN] < floor and plan[PLAN_WAIT] > 0:
-                    plan[PLAN_WAIT] -= 1
-                elif certs[BACKUP_PLAN] < floor:
-                    others = certs[:BACKUP_PLAN].max()
-                    need = max(floor, others + 2.0 * theta, certs[BACKUP_PLAN] + 2.0 * theta)
-                    found = np.zeros(PLAN_SIZE, dtype=np.int64)
-                    value, spent = plan_search(s, zn, ze, zmur, zreach, kz, n, e, h, a, av,
-                                               speed, dt, need, found)  # fmt: skip
-                    if value >= need:
-                        plan[:] = found
-                        certs[BACKUP_PLAN] = value
-                        planned = True
-                    elif spent >= PLAN_BUDGET_STEPS:
-                        plan[PLAN_WAIT] = found[PLAN_STEPS]
+                planned = _plan_step(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
+                                     theta, current, certs, plan)  # fmt: skip
         best = int(np.argmax(certs))
         if planned:
             current = BACKUP_PLAN  # found better by 2 theta than every other, at >= floor

@@ -152,7 +152,10 @@ def test_where_the_single_backups_and_the_rungs_entered_a_plan_keeps_the_vehicle
 def test_where_a_backup_is_certified_the_plans_change_nothing() -> None:
     """The plans are searched only where no single backup is certified: the first 24
     campaign starts (seed 2026) with a backup certified at the start fly the same bytes
-    with ``shield_plan_depth`` 0 and 16 (every metric equal, NaN for NaN)."""
+    with ``shield_plan_depth`` 0 and 16 (every metric equal, NaN for NaN). (A certified
+    start can come where none is, mid-flight, its certificate falling within theta: 21 of
+    the 92,065 of the 100,000-run campaign did; these 24 do not. Fails if the plans acted
+    where a backup is certified.)"""
     drawn = draw_scenarios(ScenarioDistribution(), 2026, 0, 40)
     certified = [k for k in range(len(drawn)) if certified_at_start(drawn, k)]
     assert len(certified) >= 24

@@ -994,8 +994,8 @@ def plan_search(
     ``plan`` (from its first step) and returns its value (a lower bound, >= ``need``),
     with the control steps the search flew; returns -inf, of ``plan`` only its segment
     length written, where none is found, the family exhausted or ``PLAN_BUDGET_STEPS``
-    control steps flown. The value is
-    exact under the model: the plan is flown step by step as it was searched."""
+    control steps flown. The value is exact under the model: the plan is flown step by
+    step as it was searched."""
     depth = int(s[S_PLAN])
     steps = max(1, round(PLAN_SEGMENT_TURN_TIMES * speed / s[S_AMAX] / dt))
     nodes = np.empty((depth + 1, 3, 6))  # per level, the children: state and floor
@@ -1063,8 +1063,8 @@ def _plan_step(
     the rungs' values): the held one's value from here into ``certs[BACKUP_PLAN]``; a new
     one searched where none is held or the held one falls short of theta - eps (outside
     every zone by theta), better by 2 theta than every other backup. True where a new one
-    was found: written into ``plan``, its value into ``certs``. (On its own, not in
-    ``shield_one``: compiled once, and the shield's own compile stays as it was.)"""
+    was found: written into ``plan``, its value into ``certs``. (On its own, not inlined
+    into ``shield_one``: inlined, the shield's cold compile grew twice as much.)"""
     if current == BACKUP_PLAN:
         certs[BACKUP_PLAN] = plan_value(s, zn, ze, zmur, zreach, kz, plan, n, e, h, a, av,
                                         speed, dt)  # fmt: skip

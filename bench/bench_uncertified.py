@@ -13,8 +13,8 @@ alone after an untimed one: median, p90 and max). The runs whose start is certif
 the same bytes every way unless they come, mid-flight, where no backup is certified (the
 rungs and the plans are computed only there; 21 of the 92,065 certified starts of the
 100,000-run campaign of seed 2026 did): ``--certified N`` flies the first N of them as the
-law is and with neither, and says whether every outcome is identical. The figures of docs/validation.md, "A start
-short of the margin":
+law is and with neither, and says whether every outcome is identical. The figures of
+docs/validation.md, "A start short of the margin":
 
     python bench/bench_uncertified.py --runs 10000 --seed 2027 --certified 600
 """

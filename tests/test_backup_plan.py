@@ -18,9 +18,10 @@ import math
 import numpy as np
 import pytest
 from test_backup import PARAMS, Vehicle, close_start, settings_for
+from test_single import assert_same
 
 from ezcompanion.errors import ConfigError
-from ezcompanion.guidance import Defender, GuidanceParams
+from ezcompanion.guidance import Defender, GuidanceController, GuidanceParams, KinematicState
 from ezcompanion.guidance import backup as bk
 from ezcompanion.guidance.actuator import advance_one
 from ezcompanion.guidance.zones import ZoneSet
@@ -216,3 +217,30 @@ def test_a_search_that_spends_its_budget_in_vain_waits_a_segment_before_the_next
         held, weight = int(out[0, 2]), float(out[0, 3])
         assert held != bk.BACKUP_PLAN
         assert plan[bk.PLAN_WAIT] == (25 - step if step < 26 else 25), step
+
+
+def test_the_services_one_vehicle_step_holds_and_flies_a_plan_as_the_batch_does() -> None:
+    """Run 77555 of seed 2026 (no backup certified at the start, a plan found there): the
+    service's one-vehicle path (``step_one``) and the campaign's batch path stepped on the
+    same states (3 s of the batch's own commands, flown by a plain unicycle): every output
+    the same at every step, and the plan held (``BACKUP_PLAN``) on both. Fails if either
+    path lost the plan row between steps."""
+    runs = campaign_start(77555)
+    params = dataclasses.replace(PARAMS, response_lag_s=float(runs.response_lag_s[0]))
+    zones, target = runs.zones(), runs.targets()[0]
+    batch = GuidanceController(zones=zones, target=target, params=params)
+    one = GuidanceController(zones=zones, target=target, params=params)
+    batch.reset(np.zeros(1))
+    one.reset(0.0)
+    n, e, h = float(runs.north_m[0]), float(runs.east_m[0]), float(runs.course_rad[0])
+    v, dt = float(runs.flown_speed_m_s[0]), 0.02
+    held = set()
+    for _ in range(150):
+        rows = (np.array([n]), np.array([e]), np.array([h]), np.array([v]))
+        stepped = batch.step(KinematicState(*rows), dt)
+        single = one.step_one(north_m=n, east_m=e, course_rad=h, speed_m_s=v, dt_s=dt)
+        assert_same(single, stepped, 0)
+        held.add(int(single.backup))
+        h += float(single.accel_lat_cmd_m_s2) / v * dt
+        n, e = n + v * math.cos(h) * dt, e + v * math.sin(h) * dt
+    assert bk.BACKUP_PLAN in held

@@ -130,7 +130,7 @@ BACKUP_PLAN = BACKUP_RUNG0 + 2 * SHIELD_RUNGS_MAX
 N_POLICIES = BACKUP_PLAN + 1
 PLAN_SEGMENT_TURN_TIMES = 0.5
 # the search's budget: control steps flown in all (the STRAIGHT certificates at its nodes
-# besides; 8 ms in all up a dead-end corridor of 29 zones, docs/guidance.md)
+# besides; 5.5 ms in all up a dead-end corridor of 29 zones, 33 ms at 300, docs/guidance.md)
 PLAN_BUDGET_STEPS = 20_000
 # the plan row: segments, the segment flying, its control steps flown, control steps a
 # segment, the shield steps to wait before searching again (after a search that spent its

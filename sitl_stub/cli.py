@@ -4,7 +4,8 @@
               --speedup 10 --profile copter --truth-out truth.csv --duration 60
 
 Settings come from the scenario's ``sitl_stub:`` section, then from these flags. The run
-ends after ``--duration`` simulated seconds, or on SIGINT/SIGTERM. Exit codes are
+ends after ``--duration`` simulated seconds, or on SIGINT/SIGTERM (SIGUSR1 dumps every
+thread's stack to stderr and goes on: for a stub that does not stop). Exit codes are
 ``ezcompanion.exit_codes.ExitCode``: 0 done, 2 bad input (one line naming the field), 3 the
 link failed during the run, 4 a file error, 70 a bug (the stub's thread failed).
 """
@@ -12,6 +13,7 @@ link failed during the run, 4 a file error, 70 a bug (the stub's thread failed).
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import signal
 import sys
 import threading
@@ -112,6 +114,8 @@ def run(args: argparse.Namespace) -> int:
         done.set()
 
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+    # where it is stuck, on demand (a test whose stub did not stop on SIGTERM asks for it)
+    faulthandler.register(signal.SIGUSR1, all_threads=True)
     try:
         with stub:
             if stub.serial_device is not None:

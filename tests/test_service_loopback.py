@@ -8,10 +8,12 @@ vehicle's own track (``--truth-out``), not by what the companion believed.
 from __future__ import annotations
 
 import math
+import signal
 import socket
 import subprocess
 import sys
 import threading
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -70,12 +72,26 @@ def stub_process(
     try:
         yield process
     finally:
-        process.terminate()
-        try:
-            process.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
+        stop_or_dump(process)
+
+
+STUCK = "the stub did not stop within 10 s of SIGTERM: its threads' stacks are in its stderr"
+
+
+def stop_or_dump(process: subprocess.Popen[bytes] | subprocess.Popen[str]) -> bool:
+    """SIGTERM the stub and wait 10 s for it to end: True if it did. If not, SIGUSR1 first
+    (it dumps every thread's stack to its stderr, the test's captured stderr: where it was
+    stuck), then kill it; False."""
+    process.terminate()
+    try:
+        process.wait(timeout=10)
+        return True
+    except subprocess.TimeoutExpired:
+        process.send_signal(signal.SIGUSR1)
+        time.sleep(1.0)
+        process.kill()
+        process.wait()
+        return False
 
 
 def frozen_budget(tlog: Path) -> tuple[float, float]:

@@ -5,8 +5,11 @@ from __future__ import annotations
 
 import csv
 import math
+import signal
+import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -74,3 +77,32 @@ def test_cli_config_errors_name_the_field(
     )
     assert done.returncode == 2
     assert f"{field}:" in done.stderr
+
+
+def test_sigusr1_dumps_every_threads_stack_and_the_run_goes_on() -> None:
+    """``kill -USR1`` on a running stub writes each thread's Python stack to stderr (the
+    simulation thread's in ``sitl_stub/server.py``) and the stub keeps running; SIGTERM then
+    ends it with exit code 0. The loopback tests ask a stub that did not stop for this
+    before they kill it."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as listener:
+        listener.bind(("127.0.0.1", 0))
+        port = listener.getsockname()[1]
+        stub = subprocess.Popen(
+            [sys.executable, "-m", "sitl_stub", "--config", str(SCENARIO), "--connect",
+             f"udpout:127.0.0.1:{port}", "--duration", "60"],
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+        )  # fmt: skip
+        try:
+            listener.settimeout(30.0)
+            listener.recvfrom(4096)  # it runs: a frame came
+            stub.send_signal(signal.SIGUSR1)
+            time.sleep(0.5)
+            assert stub.poll() is None  # still running
+            stub.terminate()
+            _, err = stub.communicate(timeout=10.0)
+        finally:
+            stub.kill()
+    text = err.decode()
+    assert text.count("hread 0x") >= 2, text  # "Current thread 0x..." and "Thread 0x..."
+    assert "sitl_stub/server.py" in text, text
+    assert stub.returncode == 0

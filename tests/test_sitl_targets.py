@@ -26,6 +26,7 @@ from typing import Any
 
 import pytest
 import yaml
+from test_service_loopback import STUCK, stop_or_dump
 from test_service_loopback import fly as fly_service
 
 from ezcompanion.config import load_scenario
@@ -78,8 +79,7 @@ def fly(config: Path, tmp_path: Path, *, profile: str, start_mode: str, speedup:
         service.stop()
         thread.join(timeout=10.0)
         if stub is not None:
-            stub.terminate()
-            stub.wait(timeout=10.0)
+            assert stop_or_dump(stub), STUCK
     assert result, "the companion did not finish"
     return Flown(result[0], events, truth)
 

@@ -22,7 +22,7 @@ from conftest_sitl import Relay
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from pymavlink import mavutil
-from test_service_loopback import CONFIG, SPEEDUP, fly, stub_process
+from test_service_loopback import CONFIG, SPEEDUP, STUCK, fly, stop_or_dump, stub_process
 from test_service_units import known_origin, local
 from test_trust_link import LIGHT, SCENARIO, Clock, assert_honest, wait_for
 
@@ -255,8 +255,7 @@ def test_heartbeats_that_waited_through_a_stall_are_not_a_burst(tmp_path: Path) 
         companion.kill()
         companion.wait()
         if stub is not None:
-            stub.terminate()
-            stub.wait(timeout=10)
+            assert stop_or_dump(stub), STUCK
     assert "heartbeats within" not in out and "conflicting heartbeats" not in out, out
     # the stall is said, and guidance starts afresh (engagement.STALL_S) and intercepts
     assert "(the companion stalled): guidance starts afresh" in out, out

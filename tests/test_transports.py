@@ -36,6 +36,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from test_service_loopback import STUCK, stop_or_dump
 
 from ezcompanion.config import load_scenario
 from ezcompanion.service.demo import free_udp_port, judge_truth
@@ -156,8 +157,7 @@ def fly(name: str, tmp_path: Path) -> Flown:
         service.stop()
         thread.join(timeout=10.0)
         if stub is not None:
-            stub.terminate()
-            stub.communicate(timeout=10.0)
+            assert stop_or_dump(stub), STUCK
     assert result, "the companion did not finish"
     return Flown(result[0], events, truth)
 

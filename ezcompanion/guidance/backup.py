@@ -1064,7 +1064,7 @@ def _plan_step(
     one searched where none is held or the held one falls short of theta - eps (outside
     every zone by theta), better by 2 theta than every other backup. True where a new one
     was found: written into ``plan``, its value into ``certs``. (On its own, not inlined
-    into ``shield_one``: inlined, the shield's cold compile grew twice as much.)"""
+    into ``shield_one``: inlined, a cold first step took some 3 s more, docs/service.md.)"""
     if current == BACKUP_PLAN:
         certs[BACKUP_PLAN] = plan_value(s, zn, ze, zmur, zreach, kz, plan, n, e, h, a, av,
                                         speed, dt)  # fmt: skip

@@ -1,7 +1,8 @@
 """A vehicle that disarms, or reboots, during the engagement (``VehicleSession``'s arming
 judgement): one heartbeat saying disarmed makes it pending, a second ``FLIP_S`` or more
-later with no armed one between confirms it, named a reboot after 2.5 s unheard. A forged
-disarmed heartbeat between the vehicle's armed ones never confirms.
+later with no armed one between confirms it, named a reboot after 1.5 s in which nothing at
+all was heard from the vehicle. A forged disarmed heartbeat between the vehicle's armed ones
+never confirms.
 
 Heartbeats are fed as frames from the vehicle's address to a session whose link is a real
 UDP socket on loopback (what the session sends goes to a listening link, counted)."""
@@ -34,6 +35,13 @@ def heartbeat(armed: bool, mode: int = 4) -> Frame:
     msg = M.MAVLink_heartbeat_message(
         M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA, base, mode, M.MAV_STATE_ACTIVE, 3
     )
+    (decoded,) = _READER.parse_buffer(frame(_MAV, msg))
+    return Frame(decoded, VEHICLE)
+
+
+def attitude(time_s: float) -> Frame:
+    """A telemetry frame from the vehicle (its streams run between its heartbeats)."""
+    msg = M.MAVLink_attitude_message(int(time_s * 1000), 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
     (decoded,) = _READER.parse_buffer(frame(_MAV, msg))
     return Frame(decoded, VEHICLE)
 
@@ -76,6 +84,29 @@ def test_two_disarmed_heartbeats_end_it_named_by_the_silence_before(
         assert session.disarmed is None  # too soon after the first
         session.on_frame(heartbeat(armed=False), first_s + FLIP_S)
         assert session.disarmed == (first_s, first_s - 2.0)
+        assert session.rebooted is (cause == "rebooted")
+
+
+@pytest.mark.parametrize(
+    ("streamed_until_s", "disarmed_s", "cause"),
+    [(4.4, 4.5, "disarmed"), (2.15, 4.19, "rebooted")],
+)
+def test_the_silence_that_names_a_reboot_is_of_every_frame_not_the_heartbeats(
+    streamed_until_s: float, disarmed_s: float, cause: str
+) -> None:
+    """Telemetry at 20 Hz after the last armed heartbeat (2 s), then one saying disarmed.
+    Streamed until 0.1 s before it, 2.5 s after the last heartbeat: a disarm within the
+    stream (a landing, a pilot), not a reboot, though the heartbeats alone were 2.5 s
+    apart. As ArduCopter 4.5.1 SITL came back from a forced reboot: heard disarmed 2.2-2.4
+    s after its last heartbeat, 2.03-2.05 s after its last frame (here 2.19 and 2.04): a
+    reboot, though the heartbeats alone were less than 2.5 s apart (docs/field.md)."""
+    with session_and_vehicle() as (session, _):
+        last_beat_s = engaged(session)
+        for k in range(round((streamed_until_s - last_beat_s) * 20.0) + 1):
+            session.on_frame(attitude(last_beat_s + k / 20.0), last_beat_s + k / 20.0)
+        session.on_frame(heartbeat(armed=False), disarmed_s)
+        session.on_frame(heartbeat(armed=False), disarmed_s + FLIP_S)
+        assert session.disarmed == pytest.approx((disarmed_s, disarmed_s - streamed_until_s))
         assert session.rebooted is (cause == "rebooted")
 
 

@@ -33,9 +33,10 @@ is the engagement's (:mod:`ezcompanion.service.engagement`).
    runner pauses guidance, and nothing is asked of the vehicle); a second, ``FLIP_S`` or
    more after the first with no armed one between, confirms it
    (:attr:`VehicleSession.disarmed`: when, and whether it came back so after
-   ``_REBOOT_SILENCE_S`` unheard, a reboot: an autopilot always boots disarmed), and the
-   runner ends guidance. A forged disarmed heartbeat cannot confirm while the vehicle is
-   heard armed (at 1 Hz, within any ``FLIP_S``); an armed one clears the pending disarm.
+   ``_REBOOT_SILENCE_S`` in which nothing at all was heard from it, a reboot: an autopilot
+   always boots disarmed), and the runner ends guidance. A forged disarmed heartbeat
+   cannot confirm while the vehicle is heard armed (at 1 Hz, within any ``FLIP_S``); an
+   armed one clears the pending disarm.
 
 Trust (each refusal is an ``alarm`` event naming its ``cause``; see docs/service.md):
 frames claiming the vehicle's id from another address are refused (``foreign_address``);
@@ -82,9 +83,14 @@ _SPOOF_HOLD_S = 3.0  # a heartbeat conflict holds guidance this long after the l
 _TELEMETRY_HOLD_S = 0.5  # a refused position holds guidance this long after the last one
 _ORIGIN_RETRY_S = 0.5
 _ORIGIN_TRIES = 6  # then the scenario's origin is assumed (with a warning)
-# heard again disarmed after this long unheard: a reboot (ArduPilot and PX4 send a heartbeat
-# a second and boot disarmed; a disarm within the stream is a landing, a pilot, a failsafe)
-_REBOOT_SILENCE_S = 2.5
+# heard again disarmed after this long with nothing at all heard from it: a reboot (an
+# autopilot boots disarmed; a disarm within the stream is a landing, a pilot, a failsafe).
+# Counted over every frame, not the heartbeats alone: the streams the service asks for run
+# at 10 Hz or more, so within the stream the silence is a tenth of a second, and a heartbeat
+# lost (2 s between two) is no reboot; ArduCopter 4.5.1 SITL after a forced reboot was
+# unheard for 2.03-2.05 s (its heartbeats 2.2-2.4 s apart, docs/field.md), which 2.5 s of
+# heartbeats alone named a disarm
+_REBOOT_SILENCE_S = 1.5
 
 
 class VehicleSession(StreamRequests):
@@ -126,6 +132,7 @@ class VehicleSession(StreamRequests):
         self.mode = ""
         self.guided_mode: tuple[str, float, float, float] | None = None
         self.last_heartbeat_s = -math.inf
+        self.last_heard_s = -math.inf  # the last frame of any kind from the vehicle
         self._streams_requested_s: float | None = None
         self._rate_checks = 0
         self._counts_at_request: dict[str, int] = {}
@@ -188,6 +195,7 @@ class VehicleSession(StreamRequests):
         if frame.source != self.address:
             self._refuse_foreign(frame, now)
             return None
+        self.last_heard_s = now
         used = self.telemetry.update(msg, now, kind)
         if used is not None:
             self.received[used] = self.received.get(used, 0) + 1
@@ -358,7 +366,7 @@ class VehicleSession(StreamRequests):
                 self.request_streams(now)
             if self._origin_tries == 0:
                 self._next_origin_s = now
-        self.last_heartbeat_s = now
+        self.last_heartbeat_s = self.last_heard_s = now
         self.guided_mode = guided_mode(msg)
         name = mode_name(msg)
         if name != self.mode:
@@ -373,7 +381,7 @@ class VehicleSession(StreamRequests):
         if armed:
             self._disarm_seen = None
         elif seen is None and self._engaged_once and self.armed and self.disarmed is None:
-            self._disarm_seen = (now, now - self.last_heartbeat_s)
+            self._disarm_seen = (now, now - self.last_heard_s)
         elif seen is not None and now - seen[0] >= FLIP_S:
             self.disarmed = seen
         self.armed = armed
@@ -391,7 +399,8 @@ class VehicleSession(StreamRequests):
 
     @property
     def rebooted(self) -> bool:
-        """The vehicle came back disarmed after ``_REBOOT_SILENCE_S`` or more unheard."""
+        """The vehicle came back disarmed after ``_REBOOT_SILENCE_S`` or more in which
+        nothing was heard from it."""
         return self.disarmed is not None and self.disarmed[1] >= _REBOOT_SILENCE_S
 
     # --- trust ----------------------------------------------------------------------------

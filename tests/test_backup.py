@@ -564,6 +564,58 @@ def test_with_no_backup_certified_the_flight_comes_no_nearer_than_the_best_value
     assert flown == 20
 
 
+def test_each_rung_is_valued_as_its_turn_flown_alone() -> None:
+    """``rung_certificates`` flies each side's turn once for all its rungs and reads every
+    rung's certificate from that flight; each slot must equal what ``turn_certificate``
+    gives flying that rung's turn alone (exit level l, looked for at every step, stopping
+    below the best so far, in the rungs' order) capped at l - theta: the definition the
+    argument uses (docs/guidance.md, step 5). States next to a zone where no backup is
+    certified, with and without a lag and an abandon profile, at three steps; exact
+    equality (both run the same arithmetic)."""
+    rng = np.random.default_rng(31)
+    checked = valued = 0
+    while checked < 150:
+        zones = random_layout(rng, 6.0)
+        params = dataclasses.replace(
+            PARAMS, response_lag_s=float(rng.choice([0.0, 0.3, 1.2])),
+            abandon_hold_s=float(rng.choice([0.0, 3.6])), abandon_brake_m_s2=2.5,
+        )  # fmt: skip
+        dt = float(rng.choice([0.02, 0.01, 0.05]))
+        i = int(rng.integers(0, zones.north_m.shape[1]))
+        bearing = rng.uniform(-math.pi, math.pi)
+        out = float(zones.reach_m[0, i] + zones.mu_range_m[0, i]) + rng.uniform(-0.2, 0.8)
+        n = float(zones.north_m[0, i]) + out * math.cos(bearing)
+        e = float(zones.east_m[0, i]) + out * math.sin(bearing)
+        h = bearing + math.pi + rng.uniform(-1.2, 1.2)
+        a = float(rng.uniform(-1.0, 1.0))
+        av = a + float(rng.uniform(-0.2, 0.2)) * (params.response_lag_s > 0.0)
+        s = settings_for(params)
+        z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
+        theta = bk.acceptance_level_m(s, zones.mu_range_m, zones.reach_m, 0, 1.0, dt)
+        certs = np.full(bk.N_POLICIES, -math.inf)
+        bk.backup_certificates(s, *z, n, e, h, a, av, 1.0, dt, math.inf, certs)
+        single = float(certs[: bk.BACKUP_RUNG0].max())
+        if single >= theta:
+            continue
+        straight = float(certs[bk.BACKUP_STRAIGHT])
+        expected = certs.copy()
+        best = single
+        for rung in range(1, params.shield_rungs + 1):
+            level = theta - bk.RUNG_STEP * rung * params.shield_margin_m
+            if best >= level - theta:
+                break
+            for side in (bk.BACKUP_LEFT, bk.BACKUP_RIGHT):
+                alone = bk.turn_certificate(s, *z, side, n, e, h, a, av, 1.0, dt, straight,
+                                            level, best, math.inf, True)  # fmt: skip
+                expected[bk.BACKUP_RUNG0 + 2 * (rung - 1) + side] = min(level - theta, alone)
+                best = max(best, min(level - theta, alone))
+                valued += 1
+        bk.rung_certificates(s, *z, n, e, h, a, av, 1.0, dt, theta, straight, single, certs)
+        np.testing.assert_array_equal(certs, expected)
+        checked += 1
+    assert valued > 600  # most states value several rungs each way
+
+
 def test_a_start_short_of_the_margin_turns_away_at_a_lower_rung_and_stays_out() -> None:
     """Run 1038 of the seed-2027 campaign (lag 1.2 s, 0.83 m/s, from rest): no backup is
     certified (the best -0.985 m), yet the oracle's witness (hard left 0.5 s, then

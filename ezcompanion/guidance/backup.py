@@ -737,6 +737,19 @@ def turn_certificate(
                     return min(best, leave)
         if converged:
             turned += abs(h - h0)
+    return min(best, _circle_tail(s, zn, ze, zmur, zreach, kz, n, e, a, av, speed, ch, sh, limit))
+
+
+@jit_borrow  # on its own: its two callers each compile one call, not a copy
+def _circle_tail(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, n: float, e: float, a: float, av: float, speed: float, ch: float, sh: float,
+    limit: float,
+) -> float:
+    """A turn's flight after its sampled part, in closed form: the circle it converges to
+    about a*, widened by the residual heading change, and with an abandon profile the
+    abandon paths from it."""
+    p1, tau, eps = s[S_P1], s[S_TAU], s[S_EPS]
     # the circle: the residual heading change after the sampled part, about a*
     widen = _residual_turn_rad(s, a, av, limit, speed)
     radius = speed * speed / abs(limit)
@@ -757,7 +770,7 @@ def turn_certificate(
         stop = speed * hold + (0.5 * speed * speed / brake if brake > 0.0 else 0.0)
         tail = min(tail, annulus_gap(zn, ze, zmur, zreach, kz, cn, ce, radius, speed * hold,
                                       stop, eps, shift + widen * stop))  # fmt: skip
-    return min(best, tail)
+    return float(tail)
 
 
 @jit_borrow
@@ -816,6 +829,99 @@ def exit_level_m(s: FloatArray, policy: int, theta: float) -> float:
 
 
 @jit_borrow
+def _rung_turn(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, policy: int, n: float, e: float, h: float, a: float, av: float, speed: float,
+    dt: float, exit_now: float, levels: FloatArray, stop_below: float, floors: FloatArray,
+    exit_at: IntArray, exit_value: FloatArray,
+) -> tuple[int, float]:
+    """LEFT or RIGHT flown once for the exits of every rung (``levels``, descending), as
+    ``turn_certificate`` with ``every_step`` flies it for each level alone: the turn does
+    not depend on the level, only where it leaves does. Records the running least gap at
+    each sample (``floors[j]``), and for each rung the first control step where STRAIGHT's
+    certificate reaches its level (``exit_at[r]``: the sample it follows, -1 if none;
+    ``exit_value[r]``: that certificate). STRAIGHT's certificate at each step is taken to
+    the lowest level not yet reached (so exact wherever it reaches a level still looked
+    for); the flight ends once every level is reached, once the least gap is below
+    ``stop_below`` (the first rung's, the lowest any rung stops at), or as a turn's does
+    (half a revolution after converging). Returns the samples recorded and the circle's
+    closed form after them where the flight ended so (-inf where it ended on an exit or
+    the stop: nothing after it is needed). ``rung_value`` reads a rung's value from this."""
+    amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
+    cmd = s[S_CMD] * (-1.0 if policy == BACKUP_LEFT else 1.0)
+    ticks = sample_ticks(s, speed, dt)
+    step = ticks * dt
+    rate = _av_rate_bound(s)
+    limit = _turn_limit(s, -1.0 if policy == BACKUP_LEFT else 1.0)
+    slack = _SCREEN_SLACK * speed * speed / amax
+    waiting = levels.shape[0]  # the rungs [0, waiting) have not found their exit yet
+    for r in range(waiting):
+        exit_at[r] = -1
+    best = math.inf
+    turned = 0.0
+    converged = False
+    blocker = int(np.int64(0))
+    ch, sh = math.cos(h), math.sin(h)
+    j = 0
+    for j in range(_MAX_SAMPLES):
+        best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, ch, sh, eps, speed, amax, rate,
+                               step, best)  # fmt: skip
+        best = _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, best)
+        floors[j] = best
+        if best < stop_below:
+            return j + 1, -math.inf
+        leave = -math.inf
+        if j == 0:
+            leave = exit_now
+        elif j % _EXIT_EVERY == 0:
+            low = levels[waiting - 1]
+            leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
+                                        blocker, low - slack, low, math.inf)  # fmt: skip
+        while waiting > 0 and leave >= levels[waiting - 1]:
+            waiting -= 1
+            exit_at[waiting], exit_value[waiting] = j, leave
+        if waiting == 0:
+            return j + 1, -math.inf
+        if converged and turned >= _EXIT_SEARCH_RAD:
+            break
+        converged = converged or _residual_turn_rad(s, a, av, limit, speed) < _RESIDUAL_RAD
+        h0 = h
+        for tick in range(ticks):
+            a1 = advance_one(a, cmd, dt, amax, p1, int(s[S_N]), s[S_CMD])
+            n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a, a1, av, speed, tau, dt)
+            a = a1
+            if tick < ticks - 1:
+                low = levels[waiting - 1]
+                leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
+                                            dt, blocker, low - slack, low,
+                                            math.inf)  # fmt: skip
+                while waiting > 0 and leave >= levels[waiting - 1]:
+                    waiting -= 1
+                    exit_at[waiting], exit_value[waiting] = j, leave
+                if waiting == 0:
+                    return j + 1, -math.inf
+        if converged:
+            turned += abs(h - h0)
+    return j + 1, _circle_tail(s, zn, ze, zmur, zreach, kz, n, e, a, av, speed, ch, sh, limit)
+
+
+@jit_inline
+def rung_value(floors: FloatArray, samples: int, tail: float, exit_at: int, exit_value: float,
+               stop_below: float) -> float:
+    """One rung's turn certificate from its side's flight (``_rung_turn``), as
+    ``turn_certificate`` flying it alone with ``stop_below`` returns it: at each sample the
+    stop is looked at before the exit, so the exit counts where the least gap up to it is
+    not below ``stop_below`` (the least gap never rises: one look); else the first sample
+    below it (the stop); else the flight ended on the circle."""
+    if exit_at >= 0 and floors[exit_at] >= stop_below:
+        return float(min(floors[exit_at], exit_value))
+    for j in range(samples):
+        if floors[j] < stop_below:
+            return float(floors[j])
+    return float(min(floors[samples - 1], tail))
+
+
+@jit  # not borrowing: it makes the flights' records (once a step, where no backup is certified)
 def rung_certificates(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
@@ -836,16 +942,34 @@ def rung_certificates(
     short of the margin the vehicle may come. A turn that
     cannot beat ``below`` (the best so far) stops early, below it, and the rungs stop where
     their cap, l - theta, is no more than the best: their slots keep what the caller put
-    there (-inf in the shield: a held turn of such a rung gives way to the better one)."""
+    there (-inf in the shield: a held turn of such a rung gives way to the better one).
+    Each side's turn is flown once for all its rungs (``_rung_turn``), when its first rung
+    is valued, and each rung's certificate read from that flight (``rung_value``)."""
+    rungs = int(s[S_RUNGS])
+    if rungs == 0 or below >= rung_level_m(s, 1, theta) - theta:
+        return
+    levels = np.empty(rungs)
+    for r in range(rungs):
+        levels[r] = rung_level_m(s, r + 1, theta)
+    floors = np.empty((2, _MAX_SAMPLES))
+    exit_at = np.empty((2, rungs), dtype=np.int64)
+    exit_value = np.empty((2, rungs))
+    samples = np.zeros(2, dtype=np.int64)
+    tails = np.empty(2)
     best = below
-    for rung in range(1, int(s[S_RUNGS]) + 1):
-        level = rung_level_m(s, rung, theta)
+    for rung in range(1, rungs + 1):
+        level = levels[rung - 1]
         if best >= level - theta:
             break  # this rung and every lower one are worth at most their cap, below the best
         for side in (BACKUP_LEFT, BACKUP_RIGHT):
-            value = min(level - theta, turn_certificate(
-                s, zn, ze, zmur, zreach, kz, side, n, e, h, a, av, speed, dt, straight,
-                level, best, math.inf, _EVERY_STEP[1],
+            if rung == 1:  # flown as far as the first rung needs: no later rung needs more
+                samples[side], tails[side] = _rung_turn(
+                    s, zn, ze, zmur, zreach, kz, side, n, e, h, a, av, speed, dt, straight,
+                    levels, best, floors[side], exit_at[side], exit_value[side],
+                )  # fmt: skip
+            value = min(level - theta, rung_value(
+                floors[side], samples[side], tails[side], exit_at[side, rung - 1],
+                exit_value[side, rung - 1], best,
             ))  # fmt: skip
             out[BACKUP_RUNG0 + 2 * (rung - 1) + side] = value
             best = max(best, value)

@@ -677,6 +677,28 @@ def _exit_here(
     return leave, blocker
 
 
+@jit_inline
+def _turn_setup(s: FloatArray, policy: int, speed: float, dt: float
+                ) -> tuple[float, int, float, float, float]:
+    """A hard turn's constants: its actuator command, control steps a sample, the sample
+    step, the bound on a_v's rate, and the lateral acceleration it converges to."""  # fmt: skip
+    sign = -1.0 if policy == BACKUP_LEFT else 1.0
+    ticks = sample_ticks(s, speed, dt)
+    return s[S_CMD] * sign, ticks, ticks * dt, _av_rate_bound(s), _turn_limit(s, sign)
+
+
+@jit_inline
+def _turn_step(
+    s: FloatArray, cmd: float, n: float, e: float, h: float, a: float, av: float, ch: float,
+    sh: float, speed: float, dt: float,
+) -> tuple[float, float, float, float, float, float, float]:
+    """One control step of a hard turn (the actuator command ``cmd`` held): the state after
+    it (n, e, h, a, a_v, cos h, sin h)."""
+    a1 = advance_one(a, cmd, dt, s[S_AMAX], s[S_P1], int(s[S_N]), s[S_CMD])
+    n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a, a1, av, speed, s[S_TAU], dt)
+    return n, e, h, a1, av, ch, sh
+
+
 @jit_borrow
 def turn_certificate(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
@@ -693,12 +715,8 @@ def turn_certificate(
     the exit is looked for at every control step, not only at the samples: the first one
     the flown rule can take, wherever the samples fall (each sample's dip covers the steps
     up to the next)."""  # fmt: skip
-    amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
-    cmd = s[S_CMD] * (-1.0 if policy == BACKUP_LEFT else 1.0)
-    ticks = sample_ticks(s, speed, dt)
-    step = ticks * dt
-    rate = _av_rate_bound(s)
-    limit = _turn_limit(s, -1.0 if policy == BACKUP_LEFT else 1.0)
+    amax, eps = s[S_AMAX], s[S_EPS]
+    cmd, ticks, step, rate, limit = _turn_setup(s, policy, speed, dt)
     best = math.inf
     turned = 0.0
     converged = False
@@ -726,9 +744,7 @@ def turn_certificate(
         converged = converged or _residual_turn_rad(s, a, av, limit, speed) < _RESIDUAL_RAD
         h0 = h
         for tick in range(ticks):
-            a1 = advance_one(a, cmd, dt, amax, p1, int(s[S_N]), s[S_CMD])
-            n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a, a1, av, speed, tau, dt)
-            a = a1
+            n, e, h, a, av, ch, sh = _turn_step(s, cmd, n, e, h, a, av, ch, sh, speed, dt)
             if every_step and tick < ticks - 1:
                 leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
                                             dt, blocker, screen_level, exit_level,
@@ -847,12 +863,8 @@ def _rung_turn(
     (half a revolution after converging). Returns the samples recorded and the circle's
     closed form after them where the flight ended so (-inf where it ended on an exit or
     the stop: nothing after it is needed). ``rung_value`` reads a rung's value from this."""
-    amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
-    cmd = s[S_CMD] * (-1.0 if policy == BACKUP_LEFT else 1.0)
-    ticks = sample_ticks(s, speed, dt)
-    step = ticks * dt
-    rate = _av_rate_bound(s)
-    limit = _turn_limit(s, -1.0 if policy == BACKUP_LEFT else 1.0)
+    amax, eps = s[S_AMAX], s[S_EPS]
+    cmd, ticks, step, rate, limit = _turn_setup(s, policy, speed, dt)
     slack = _SCREEN_SLACK * speed * speed / amax
     waiting = levels.shape[0]  # the rungs [0, waiting) have not found their exit yet
     for r in range(waiting):
@@ -887,9 +899,7 @@ def _rung_turn(
         converged = converged or _residual_turn_rad(s, a, av, limit, speed) < _RESIDUAL_RAD
         h0 = h
         for tick in range(ticks):
-            a1 = advance_one(a, cmd, dt, amax, p1, int(s[S_N]), s[S_CMD])
-            n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a, a1, av, speed, tau, dt)
-            a = a1
+            n, e, h, a, av, ch, sh = _turn_step(s, cmd, n, e, h, a, av, ch, sh, speed, dt)
             if tick < ticks - 1:
                 low = levels[waiting - 1]
                 leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,

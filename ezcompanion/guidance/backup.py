@@ -179,6 +179,12 @@ _TAIL_EVERY = 4
 # A turn's exit is screened out where an upper bound on its certificate is below the exit
 # level by this much (in units of v^2 / a_max: round-off in the bound, nothing more).
 _SCREEN_SLACK = 1e-6
+# STRAIGHT's flight screens itself at each of its first samples, then at every this many: a
+# screen only ends early a flight whose certificate is below the level anyway, so when it
+# runs moves the cost, never the answer. Of the screens that ended a flight on the
+# costliest 300 of 120,000 campaign steps, 95% did by the 4th sample; a long flight paid
+# for one at every sample (bench/bench_shield.py, docs/service.md, "Cost").
+_SCREEN_EVERY = 4
 # turn_certificate's every_step, read from here so that it is a bool at run time: numba
 # compiles a kernel once more for each literal value of a bool or int argument, and a cold
 # compile of this one took 6.7 s (twice, with True and False, before)
@@ -627,7 +633,7 @@ def straight_certificate(
         delta, mid, w, drift = _straight_to_come(s, a, av, speed, trapezoid)
         if delta < _RESIDUAL_RAD:
             break
-        if j > 0 and screen > -math.inf:
+        if j > 0 and screen > -math.inf and (j <= _SCREEN_EVERY or j % _SCREEN_EVERY == 0):
             # the rest of the flight from here, from above: where even that is below the
             # level, so is every lower bound of the whole flight (the certificate)
             upper, blocker = _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
@@ -690,12 +696,14 @@ def _turn_setup(s: FloatArray, policy: int, speed: float, dt: float
 @jit_inline
 def _turn_step(
     s: FloatArray, cmd: float, n: float, e: float, h: float, a: float, av: float, ch: float,
-    sh: float, speed: float, dt: float,
+    sh: float, speed: float, dt: float, amax: float, p1: float, tau: float,
 ) -> tuple[float, float, float, float, float, float, float]:
     """One control step of a hard turn (the actuator command ``cmd`` held): the state after
-    it (n, e, h, a, a_v, cos h, sin h)."""
-    a1 = advance_one(a, cmd, dt, s[S_AMAX], s[S_P1], int(s[S_N]), s[S_CMD])
-    n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a, a1, av, speed, s[S_TAU], dt)
+    it (n, e, h, a, a_v, cos h, sin h). (``amax``, ``p1``, ``tau``: ``s``'s, read once by
+    the caller: read here, in a loop that writes to an array, they were read at every
+    step, 7% of a rung flight's time.)"""
+    a1 = advance_one(a, cmd, dt, amax, p1, int(s[S_N]), s[S_CMD])
+    n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a, a1, av, speed, tau, dt)
     return n, e, h, a1, av, ch, sh
 
 
@@ -715,7 +723,7 @@ def turn_certificate(
     the exit is looked for at every control step, not only at the samples: the first one
     the flown rule can take, wherever the samples fall (each sample's dip covers the steps
     up to the next)."""  # fmt: skip
-    amax, eps = s[S_AMAX], s[S_EPS]
+    amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
     cmd, ticks, step, rate, limit = _turn_setup(s, policy, speed, dt)
     best = math.inf
     turned = 0.0
@@ -744,7 +752,8 @@ def turn_certificate(
         converged = converged or _residual_turn_rad(s, a, av, limit, speed) < _RESIDUAL_RAD
         h0 = h
         for tick in range(ticks):
-            n, e, h, a, av, ch, sh = _turn_step(s, cmd, n, e, h, a, av, ch, sh, speed, dt)
+            n, e, h, a, av, ch, sh = _turn_step(s, cmd, n, e, h, a, av, ch, sh, speed, dt, amax,
+                                                p1, tau)  # fmt: skip
             if every_step and tick < ticks - 1:
                 leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
                                             dt, blocker, screen_level, exit_level,
@@ -863,7 +872,7 @@ def _rung_turn(
     (half a revolution after converging). Returns the samples recorded and the circle's
     closed form after them where the flight ended so (-inf where it ended on an exit or
     the stop: nothing after it is needed). ``rung_value`` reads a rung's value from this."""
-    amax, eps = s[S_AMAX], s[S_EPS]
+    amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
     cmd, ticks, step, rate, limit = _turn_setup(s, policy, speed, dt)
     slack = _SCREEN_SLACK * speed * speed / amax
     waiting = levels.shape[0]  # the rungs [0, waiting) have not found their exit yet
@@ -899,7 +908,8 @@ def _rung_turn(
         converged = converged or _residual_turn_rad(s, a, av, limit, speed) < _RESIDUAL_RAD
         h0 = h
         for tick in range(ticks):
-            n, e, h, a, av, ch, sh = _turn_step(s, cmd, n, e, h, a, av, ch, sh, speed, dt)
+            n, e, h, a, av, ch, sh = _turn_step(s, cmd, n, e, h, a, av, ch, sh, speed, dt, amax,
+                                                p1, tau)  # fmt: skip
             if tick < ticks - 1:
                 low = levels[waiting - 1]
                 leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,

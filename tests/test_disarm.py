@@ -47,11 +47,14 @@ def attitude(time_s: float) -> Frame:
 
 
 @contextmanager
-def session_and_vehicle() -> Iterator[tuple[VehicleSession, Link]]:
+def session_and_vehicle(telemetry_rate_hz: float = 50.0
+                        ) -> Iterator[tuple[VehicleSession, Link]]:  # fmt: skip
     scenario = load_scenario(CONFIG)
     with open_link("udpin:127.0.0.1:0", system_id=1, component_id=1) as vehicle:
         host, port = vehicle.local_address or ("", 0)
-        settings = companion_settings(scenario, connect=f"udpout:{host}:{port}", engage=True)
+        settings = companion_settings(scenario, connect=f"udpout:{host}:{port}", engage=True,
+                                      telemetry_rate_hz=telemetry_rate_hz,
+                                      stale_after_s=max(0.25, 2.0 / telemetry_rate_hz))  # fmt: skip
         with open_link(settings.connect, system_id=245, component_id=191) as link:
             yield VehicleSession(scenario, settings, EventLog(), link, link.send), vehicle
 
@@ -88,19 +91,20 @@ def test_two_disarmed_heartbeats_end_it_named_by_the_silence_before(
 
 
 @pytest.mark.parametrize(
-    ("streamed_until_s", "disarmed_s", "cause"),
-    [(4.4, 4.5, "disarmed"), (2.15, 4.19, "rebooted")],
+    ("streamed_until_s", "disarmed_s", "rate_hz", "cause"),
+    [(4.4, 4.5, 50.0, "disarmed"), (2.15, 4.19, 50.0, "rebooted"), (2.15, 4.19, 0.5, "disarmed")],
 )
 def test_the_silence_that_names_a_reboot_is_of_every_frame_not_the_heartbeats(
-    streamed_until_s: float, disarmed_s: float, cause: str
+    streamed_until_s: float, disarmed_s: float, rate_hz: float, cause: str
 ) -> None:
     """Telemetry at 20 Hz after the last armed heartbeat (2 s), then one saying disarmed.
     Streamed until 0.1 s before it, 2.5 s after the last heartbeat: a disarm within the
     stream (a landing, a pilot), not a reboot, though the heartbeats alone were 2.5 s
     apart. As ArduCopter 4.5.1 SITL came back from a forced reboot: heard disarmed 2.2-2.4
     s after its last heartbeat, 2.03-2.05 s after its last frame (here 2.19 and 2.04): a
-    reboot, though the heartbeats alone were less than 2.5 s apart (docs/field.md)."""
-    with session_and_vehicle() as (session, _):
+    reboot, though the heartbeats alone were less than 2.5 s apart (docs/field.md). With
+    the telemetry asked for at 0.5 Hz, 2 s unheard is a period of it: a disarm."""
+    with session_and_vehicle(rate_hz) as (session, _):
         last_beat_s = engaged(session)
         for k in range(round((streamed_until_s - last_beat_s) * 20.0) + 1):
             session.on_frame(attitude(last_beat_s + k / 20.0), last_beat_s + k / 20.0)

@@ -83,14 +83,15 @@ _SPOOF_HOLD_S = 3.0  # a heartbeat conflict holds guidance this long after the l
 _TELEMETRY_HOLD_S = 0.5  # a refused position holds guidance this long after the last one
 _ORIGIN_RETRY_S = 0.5
 _ORIGIN_TRIES = 6  # then the scenario's origin is assumed (with a warning)
-# heard again disarmed after this long with nothing at all heard from it: a reboot (an
-# autopilot boots disarmed; a disarm within the stream is a landing, a pilot, a failsafe).
-# Counted over every frame, not the heartbeats alone: the streams the service asks for run
-# at 10 Hz or more, so within the stream the silence is a tenth of a second, and a heartbeat
-# lost (2 s between two) is no reboot; ArduCopter 4.5.1 SITL after a forced reboot was
-# unheard for 2.03-2.05 s (its heartbeats 2.2-2.4 s apart, docs/field.md), which 2.5 s of
-# heartbeats alone named a disarm
+# heard again disarmed after this long with nothing at all heard from it (or three periods
+# of the telemetry asked for, if longer): a reboot (an autopilot boots disarmed; a disarm
+# within the stream is a landing, a pilot, a failsafe). Counted over every frame, not the
+# heartbeats alone: within the streams the service asks for (`telemetry_rate_hz`, 50 Hz by
+# default) the silence is a period or two, and a heartbeat lost (2 s between two) is no
+# reboot; ArduCopter 4.5.1 SITL after a forced reboot was unheard for 2.03-2.05 s (its
+# heartbeats 2.2-2.4 s apart, docs/field.md), which 2.5 s of heartbeats alone named a disarm
 _REBOOT_SILENCE_S = 1.5
+_REBOOT_SILENCE_PERIODS = 3.0
 
 
 class VehicleSession(StreamRequests):
@@ -399,9 +400,10 @@ class VehicleSession(StreamRequests):
 
     @property
     def rebooted(self) -> bool:
-        """The vehicle came back disarmed after ``_REBOOT_SILENCE_S`` or more in which
-        nothing was heard from it."""
-        return self.disarmed is not None and self.disarmed[1] >= _REBOOT_SILENCE_S
+        """The vehicle came back disarmed after ``_REBOOT_SILENCE_S`` (or three telemetry
+        periods, if longer) or more in which nothing was heard from it."""
+        silence = max(_REBOOT_SILENCE_S, _REBOOT_SILENCE_PERIODS / self.settings.telemetry_rate_hz)
+        return self.disarmed is not None and self.disarmed[1] >= silence
 
     # --- trust ----------------------------------------------------------------------------
 

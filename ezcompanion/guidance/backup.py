@@ -187,7 +187,9 @@ _SCREEN_SLACK = 1e-6
 _SCREEN_EVERY = 4
 # turn_certificate's every_step, read from here so that it is a bool at run time: numba
 # compiles a kernel once more for each literal value of a bool or int argument, and a cold
-# compile of this one took 6.7 s (twice, with True and False, before)
+# compile of this one took 6.7 s (twice, with True and False, before). (True is the lower
+# rungs' turn flown alone: ``_rung_turn`` flies all of them at once, and the tests hold it
+# to that.)
 _EVERY_STEP = np.array([False, True])
 
 
@@ -700,8 +702,8 @@ def _turn_step(
 ) -> tuple[float, float, float, float, float, float, float]:
     """One control step of a hard turn (the actuator command ``cmd`` held): the state after
     it (n, e, h, a, a_v, cos h, sin h). (``amax``, ``p1``, ``tau``: ``s``'s, read once by
-    the caller: read here, in a loop that writes to an array, they were read at every
-    step, 7% of a rung flight's time.)"""
+    the caller: read from ``s`` here, in a loop that writes to an array, they were read
+    again at every step, some 5% of the bench's straight-track tick.)"""
     a1 = advance_one(a, cmd, dt, amax, p1, int(s[S_N]), s[S_CMD])
     n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a, a1, av, speed, tau, dt)
     return n, e, h, a1, av, ch, sh

@@ -696,6 +696,17 @@ def _turn_setup(s: FloatArray, policy: int, speed: float, dt: float
 
 
 @jit_inline
+def _circled(s: FloatArray, a: float, av: float, limit: float, speed: float, converged: bool,
+             turned: float) -> tuple[bool, bool]:
+    """Whether a hard turn has turned half a revolution (``_EXIT_SEARCH_RAD``) since it
+    converged (its exit search ends there: the circle's closed form takes the rest), and
+    whether it has converged (the heading change still to come below ``_RESIDUAL_RAD``)."""
+    if converged and turned >= _EXIT_SEARCH_RAD:
+        return True, converged
+    return False, converged or _residual_turn_rad(s, a, av, limit, speed) < _RESIDUAL_RAD
+
+
+@jit_inline
 def _turn_step(
     s: FloatArray, cmd: float, n: float, e: float, h: float, a: float, av: float, ch: float,
     sh: float, speed: float, dt: float, amax: float, p1: float, tau: float,
@@ -749,9 +760,9 @@ def turn_certificate(
                                         blocker, screen_level, exit_level, enough)  # fmt: skip
         if leave >= exit_level:
             return min(best, leave)
-        if converged and turned >= _EXIT_SEARCH_RAD:
+        circled, converged = _circled(s, a, av, limit, speed, converged, turned)
+        if circled:
             break
-        converged = converged or _residual_turn_rad(s, a, av, limit, speed) < _RESIDUAL_RAD
         h0 = h
         for tick in range(ticks):
             n, e, h, a, av, ch, sh = _turn_step(s, cmd, n, e, h, a, av, ch, sh, speed, dt, amax,
@@ -905,9 +916,9 @@ def _rung_turn(
             exit_at[waiting], exit_value[waiting] = j, leave
         if waiting == 0:
             return j + 1, -math.inf
-        if converged and turned >= _EXIT_SEARCH_RAD:
+        circled, converged = _circled(s, a, av, limit, speed, converged, turned)
+        if circled:
             break
-        converged = converged or _residual_turn_rad(s, a, av, limit, speed) < _RESIDUAL_RAD
         h0 = h
         for tick in range(ticks):
             n, e, h, a, av, ch, sh = _turn_step(s, cmd, n, e, h, a, av, ch, sh, speed, dt, amax,

@@ -84,13 +84,13 @@ def stop_or_dump(process: subprocess.Popen[bytes] | subprocess.Popen[str]) -> bo
     stuck), then kill it; False."""
     process.terminate()
     try:
-        process.wait(timeout=10)
+        process.communicate(timeout=10)  # drains and closes any pipe it was given
         return True
     except subprocess.TimeoutExpired:
         process.send_signal(signal.SIGUSR1)
         time.sleep(1.0)
         process.kill()
-        process.wait()
+        process.communicate()
         return False
 
 

@@ -6,6 +6,7 @@
   (``--max-time nan`` and ``--max-time -1`` are refused, not run).
 - ``--version``, and ``-v``/``--log-level`` for the standard ``logging`` levels.
 - ``--connect`` takes MAVProxy's and MAVSDK's spellings (``ezcompanion.endpoint``).
+- SIGINT and SIGTERM end a run through ``stop_on_signals``.
 """
 
 from __future__ import annotations
@@ -13,8 +14,12 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import os
+import signal
 import sys
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import NoReturn
 
 from ezcompanion import __version__
@@ -31,6 +36,7 @@ __all__ = [
     "endpoint",
     "guarded",
     "number_within",
+    "stop_on_signals",
 ]
 
 _log = logging.getLogger("ezcompanion.cli")
@@ -135,3 +141,38 @@ def guarded(prog: str, job: Callable[[], int]) -> int:
             file=sys.stderr,
         )
         return ExitCode.INTERNAL_ERROR
+
+
+@contextmanager
+def stop_on_signals(stop: threading.Event) -> Iterator[None]:
+    """Within: SIGINT and SIGTERM set ``stop`` (from the main thread; elsewhere, nothing).
+
+    Not from the handler itself: Python runs a handler on the main thread between two
+    bytecodes, and a main thread waiting on ``stop`` may be inside ``Condition.wait``
+    holding the event's own lock (re-taking it), so ``stop.set()`` there waits for ever.
+    It did: a stub given SIGTERM did not stop, its stacks (SIGUSR1) in ``Event.set`` under
+    ``Event.wait``. The handler only writes a byte to a pipe (no lock), and a thread of
+    its own reads it and sets ``stop``."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    read_fd, write_fd = os.pipe()
+
+    def relay() -> None:
+        if os.read(read_fd, 1):  # b"" once the pipe is closed at the end
+            stop.set()
+
+    relayer = threading.Thread(target=relay, name="signals", daemon=True)
+    relayer.start()
+    previous = {
+        sig: signal.signal(sig, lambda *_: os.write(write_fd, b"s"))
+        for sig in (signal.SIGINT, signal.SIGTERM)
+    }
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        os.close(write_fd)
+        relayer.join(timeout=5.0)
+        os.close(read_fd)

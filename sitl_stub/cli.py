@@ -27,6 +27,7 @@ from ezcompanion.cli_args import (
     configure_logging,
     guarded,
     number_within,
+    stop_on_signals,
 )
 from ezcompanion.errors import ConfigError, shown
 from ezcompanion.exit_codes import ExitCode
@@ -110,9 +111,6 @@ def run(args: argparse.Namespace) -> int:
     )
     done = threading.Event()
 
-    def on_signal(_signum: int, _frame: FrameType | None) -> None:
-        done.set()
-
     def on_dump(_signum: int, _frame: FrameType | None) -> None:
         # where it is stuck, on demand (a test whose stub did not stop on SIGTERM asks for
         # it). From Python's handler, on the main thread with the GIL held, so that no other
@@ -121,17 +119,15 @@ def run(args: argparse.Namespace) -> int:
         # there once in a CI run and in 3 of 10 runs asked 30 times, 30 ms apart.
         faulthandler.dump_traceback(sys.stderr, all_threads=True)
 
-    handlers = {signal.SIGINT: on_signal, signal.SIGTERM: on_signal, signal.SIGUSR1: on_dump}
-    previous = {sig: signal.signal(sig, handler) for sig, handler in handlers.items()}
+    previous = signal.signal(signal.SIGUSR1, on_dump)
     try:
-        with stub:
+        with stop_on_signals(done), stub:
             if stub.serial_device is not None:
                 print(f"sitl-stub: serial port {stub.serial_device}", flush=True)
             while stub.running and not done.wait(0.2):
                 pass
     finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+        signal.signal(signal.SIGUSR1, previous)
     error = stub.error
     if error is None:
         return ExitCode.OK

@@ -292,3 +292,26 @@ def test_the_scenarios_connect_takes_mavsdk_urls_too(
     assert one_line(capsys).startswith(
         "ezcompanion: error: companion.connect: the port must be an integer within [0, 65535]"
     )
+
+
+_HELD = """
+import signal, threading
+from ezcompanion.cli_args import stop_on_signals
+
+stop = threading.Event()
+with stop_on_signals(stop):
+    with stop._cond:  # the event's lock held by the main thread, as Event.wait holds it
+        signal.raise_signal(signal.SIGTERM)  # its handler runs here, the lock still held
+    print("stopped" if stop.wait(5.0) else "not stopped")
+"""
+
+
+def test_a_signal_that_comes_while_the_main_thread_holds_the_stop_events_lock_stops_it() -> None:
+    """SIGTERM handled while the main thread holds the stop event's lock (as it does inside
+    ``Event.wait``, re-taking it) must still set the event and not wait for ever: a
+    handler that called ``stop.set()`` itself hung here, as a stub given SIGTERM hung in
+    CI (its stacks: ``Event.set`` under ``Event.wait``). Run in its own process, so that a
+    hang is a failure after 20 s, not a stuck suite."""
+    done = subprocess.run([sys.executable, "-c", _HELD], capture_output=True, text=True,
+                          timeout=20.0, check=False)  # fmt: skip
+    assert done.stdout.strip() == "stopped", done.stderr

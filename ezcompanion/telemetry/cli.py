@@ -11,16 +11,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import signal
 import sys
 import threading
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 from pathlib import Path
 
 import zenoh
 
-from ezcompanion.cli_args import number_within
+from ezcompanion.cli_args import number_within, stop_on_signals
 from ezcompanion.config import load_scenario
 from ezcompanion.telemetry.monitor import MonitorView, run_monitor
 from ezcompanion.telemetry.recording import iter_recording, plot_recording, read_recording
@@ -79,7 +77,7 @@ def run_router(
 ) -> int:
     """Route until ``stop`` is set (or SIGINT/SIGTERM, or ``duration_s``); returns 0."""
     stop = stop if stop is not None else threading.Event()
-    with open_session(conf, what="router") as session, _stop_on_signals(stop):
+    with open_session(conf, what="router") as session, stop_on_signals(stop):
         listen = conf.get_json("listen/endpoints")
         print(f"zenoh router {session.zid()} listening on {listen}; Ctrl-C to stop", flush=True)
         stop.wait(duration_s)
@@ -109,21 +107,6 @@ def replay(
     if plot_png is not None:
         print(f"  wrote {plot_recording(path, plot_png, scenario, vehicle=vehicle)}", file=notes)
     return 0
-
-
-@contextmanager
-def _stop_on_signals(stop: threading.Event) -> Iterator[None]:
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = {
-        sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)
-    }
-    try:
-        yield
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
 
 
 def _add_watch_flags(parser: argparse.ArgumentParser) -> None:
@@ -208,7 +191,7 @@ def run_telemetry_command(args: argparse.Namespace) -> int | None:
         from ezcompanion.telemetry.foxglove_bridge import run_bridge
 
         stop = threading.Event()
-        with _stop_on_signals(stop):
+        with stop_on_signals(stop):
             run_bridge(
                 _watch_config(args),
                 host=args.host,
@@ -232,7 +215,7 @@ def run_telemetry_command(args: argparse.Namespace) -> int | None:
             json_lines=args.json,
         )
     stop = threading.Event()
-    with _stop_on_signals(stop):
+    with stop_on_signals(stop):
         run_monitor(
             _watch_config(args),
             vehicle=args.vehicle,

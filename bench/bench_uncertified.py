@@ -58,7 +58,7 @@ def uncertified(runs: ScenarioBatch, params: GuidanceParams) -> np.ndarray:
     out = []
     for k in range(len(runs)):
         s, z, n, e, h, v = _shield_inputs(runs, k, params)
-        bk.backup_certificates(s, *z, 0, n, e, h, 0.0, 0.0, v, DT_S, math.inf, certs)
+        bk.backup_certificates(s, *z, 0, n, e, h, 0.0, 0.0, v, DT_S, math.inf, -math.inf, certs)
         if certs.max() < bk.acceptance_level_m(s, z[2], z[3], 0, v, DT_S):
             out.append(k)
     return np.array(out, dtype=np.int64)

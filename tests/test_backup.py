@@ -335,7 +335,7 @@ def start_certificate(
     n, e, h, a = start
     bk.backup_certificates(
         settings_for(params), zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0,
-        n, e, h, a, a, 1.0, dt, math.inf, certs,
+        n, e, h, a, a, 1.0, dt, math.inf, -math.inf, certs,
     )  # fmt: skip
     return float(certs.max())
 
@@ -460,7 +460,7 @@ def held_after_one_step(
     )
     s, z = settings_for(PARAMS), (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
     certs, out = np.empty(3), np.empty((1, 6))
-    bk.backup_certificates(s, *z, *state, 0.0, 0.0, 1.0, 0.02, math.inf, certs)
+    bk.backup_certificates(s, *z, *state, 0.0, 0.0, 1.0, 0.02, math.inf, -math.inf, certs)
     bk.shield_one(s, *z, *state, 0.0, 0.0, 1.0, -PARAMS.command_limit_m_s3, 0.02, held,
                   0.0, np.zeros(bk.PLAN_SIZE, dtype=np.int64), out, 0)  # fmt: skip
     theta = bk.acceptance_level_m(s, zones.mu_range_m, zones.reach_m, 0, 1.0, 0.02)
@@ -502,7 +502,7 @@ def best_value(
     theta = bk.acceptance_level_m(s, zones.mu_range_m, zones.reach_m, 0, speed, dt)
     certs = np.full(bk.N_POLICIES, -math.inf)
     n, e, h, a = start
-    bk.backup_certificates(s, *z, n, e, h, a, a, speed, dt, math.inf, certs)
+    bk.backup_certificates(s, *z, n, e, h, a, a, speed, dt, math.inf, -math.inf, certs)
     single = float(certs[: bk.BACKUP_RUNG0].max())
     if single < theta:
         bk.rung_certificates(s, *z, n, e, h, a, a, speed, dt, theta,
@@ -593,7 +593,7 @@ def test_each_rung_is_valued_as_its_turn_flown_alone() -> None:
         z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
         theta = bk.acceptance_level_m(s, zones.mu_range_m, zones.reach_m, 0, 1.0, dt)
         certs = np.full(bk.N_POLICIES, -math.inf)
-        bk.backup_certificates(s, *z, n, e, h, a, av, 1.0, dt, math.inf, certs)
+        bk.backup_certificates(s, *z, n, e, h, a, av, 1.0, dt, math.inf, -math.inf, certs)
         single = float(certs[: bk.BACKUP_RUNG0].max())
         if single >= theta:
             continue
@@ -674,7 +674,7 @@ def test_along_its_own_flow_a_backup_certificate_never_drops_by_more_than_theta(
     for _ in range(60):
         n, e, h = rng.uniform(-6, 6), rng.uniform(-6, 6), rng.uniform(-3, 3)
         a = av = 0.0
-        bk.backup_certificates(s, *z, n, e, h, a, av, 1.0, dt, math.inf, certs)
+        bk.backup_certificates(s, *z, n, e, h, a, av, 1.0, dt, math.inf, -math.inf, certs)
         policy = int(rng.integers(0, 3))
         if certs[policy] < theta:
             continue
@@ -689,7 +689,7 @@ def test_along_its_own_flow_a_backup_certificate_never_drops_by_more_than_theta(
             a0 = a
             _, n, e, h, a, av = bk._fly_step(s, *z, policy, 0.0, n, e, h, a, av, 1.0, dt)
             least = min(least, vehicle.fly(a0, a, dt, zones))
-            bk.backup_certificates(s, *z, n, e, h, a, av, 1.0, dt, math.inf, certs)
+            bk.backup_certificates(s, *z, n, e, h, a, av, 1.0, dt, math.inf, -math.inf, certs)
             floor = start if policy == bk.BACKUP_STRAIGHT else min(start, theta)
             assert certs[policy] >= floor - theta - 0.01
         assert least >= PARAMS.shield_margin_m - 1e-6
@@ -825,10 +825,11 @@ def test_the_running_screen_refuses_only_exits_whose_certificate_is_below_the_le
     dt = 0.02
     fired = screened = 0
     for s, z, n, e, h, a, av in _random_states(400, 61):
-        full = bk.straight_certificate(s, *z, n, e, h, a, av, 1.0, dt, -math.inf, math.inf)
+        full = bk.straight_certificate(s, *z, n, e, h, a, av, 1.0, dt, -math.inf, math.inf,
+                                       False)
         theta = bk.acceptance_level_m(s, z[2], z[3], 0, 1.0, dt)
         for level in (theta, full + 0.05, full - 0.05, full + 1e-9, full - 1e-9):
-            value = bk.straight_certificate(s, *z, n, e, h, a, av, 1.0, dt, level, level)
+            value = bk.straight_certificate(s, *z, n, e, h, a, av, 1.0, dt, level, level, True)
             assert value >= level or full < level, (value, full, level)
             if value == -math.inf:
                 fired += 1
@@ -840,6 +841,43 @@ def test_the_running_screen_refuses_only_exits_whose_certificate_is_below_the_le
                 screened += 1
                 assert full < level, (full, level, upper)
     assert fired > 50 and screened > 50
+
+
+def test_certificates_asked_from_a_level_up_are_exact_there_and_below_it_below() -> None:
+    """The nominal's look ahead only asks whether a backup's certificate reaches the
+    acceptance level (the shield flies nothing short of it, whatever by), so its
+    certificates stop once they are known to fall short (``backup_certificates``'
+    ``below``): each value is the one computed with no such level (exact up to the same
+    ``enough``) wherever either reaches the level, and below the level wherever one does
+    not; STRAIGHT's from theta up (where the turns leave decides their certificates), so
+    which backup holds the state, and by how much, is unchanged wherever one reaches the
+    level. Also STRAIGHT's certificate alone, stopped at a level, where an earlier
+    closed-form tail already reached the level though the samples have since fallen below
+    it: the tail's value, not the samples' (the flown rule leaves there)."""
+    dt = 0.02
+    stopped = 0
+    for s, z, n, e, h, a, av in _random_states(600, 67):
+        theta = bk.acceptance_level_m(s, z[2], z[3], 0, 1.0, dt)
+        for below, enough in ((theta + 0.03, theta + 0.03), (theta + 0.03, theta + 0.08),
+                              (theta, math.inf)):  # fmt: skip
+            full = np.empty(3)
+            part = np.empty(3)
+            bk.backup_certificates(s, *z, n, e, h, a, av, 1.0, dt, enough, -math.inf, full)
+            bk.backup_certificates(s, *z, n, e, h, a, av, 1.0, dt, enough, below, part)
+            levels = (below, below, min(below, theta))  # LEFT, RIGHT, STRAIGHT
+            for value, exact, level in zip(part, full, levels, strict=True):
+                if exact >= level or value >= level:
+                    assert value == exact, (value, exact, level)
+                else:
+                    stopped += value != exact
+            if full.max() >= below:
+                assert int(np.argmax(part)) == int(np.argmax(full))
+        exact = bk.straight_certificate(s, *z, n, e, h, a, av, 1.0, dt, -math.inf, 1.0, False)
+        for level in (theta, theta + 0.03, exact - 1e-9, exact - 0.01):
+            value = bk.straight_certificate(s, *z, n, e, h, a, av, 1.0, dt, level, 1.0, False)
+            assert value == exact if max(value, exact) >= level else value < level, (
+                value, exact, level)  # fmt: skip
+    assert stopped > 100
 
 
 # 5. the law at scale -------------------------------------------------------------------

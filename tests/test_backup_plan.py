@@ -117,7 +117,7 @@ def certified_at_start(runs: ScenarioBatch, k: int) -> bool:
     certs = np.empty(3)
     bk.backup_certificates(s, zn, ze, zmur, zreach, 0, float(runs.north_m[k]),
                            float(runs.east_m[k]), float(runs.course_rad[k]), 0.0, 0.0, speed,
-                           dt, math.inf, certs)  # fmt: skip
+                           dt, math.inf, -math.inf, certs)  # fmt: skip
     return bool(certs.max() >= bk.acceptance_level_m(s, zmur, zreach, 0, speed, dt))
 
 
@@ -204,7 +204,7 @@ def test_a_search_that_spends_its_budget_in_vain_waits_a_segment_before_the_next
     s = settings_for(PARAMS)
     z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
     certs = np.empty(3)
-    bk.backup_certificates(s, *z, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.02, math.inf, certs)
+    bk.backup_certificates(s, *z, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.02, math.inf, -math.inf, certs)
     assert certs.max() < bk.acceptance_level_m(s, zones.mu_range_m, zones.reach_m, 0, 1.0, 0.02)
     assert bk.plan_search(s, *z, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.02, -0.1,
                           np.zeros(bk.PLAN_SIZE, dtype=np.int64))[1] >= bk.PLAN_BUDGET_STEPS

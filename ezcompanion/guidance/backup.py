@@ -185,12 +185,13 @@ _SCREEN_SLACK = 1e-6
 # costliest 300 of 120,000 campaign steps, 95% did by the 4th sample; a long flight paid
 # for one at every sample (bench/bench_shield.py, docs/service.md, "Cost").
 _SCREEN_EVERY = 4
-# turn_certificate's every_step, read from here so that it is a bool at run time: numba
-# compiles a kernel once more for each literal value of a bool or int argument, and a cold
-# compile of this one took 6.7 s (twice, with True and False, before). (True is the lower
-# rungs' turn flown alone: ``_rung_turn`` flies all of them at once, and the tests hold it
-# to that.)
-_EVERY_STEP = np.array([False, True])
+# The kernels' bool arguments (turn_certificate's every_step, straight_certificate's
+# exit_search), read from here so that they are bools at run time: numba compiles a kernel
+# once more for each literal value of a bool or int argument, and a cold compile of
+# turn_certificate took 6.7 s (twice, with True and False, before). (every_step True is
+# the lower rungs' turn flown alone: ``_rung_turn`` flies all of them at once, and the
+# tests hold it to that.)
+_FLAGS = np.array([False, True])
 
 
 def pack_shield(params: GuidanceParams, **abandon: float) -> FloatArray:
@@ -590,7 +591,7 @@ def _straight_tail(
 def straight_certificate(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
-    stop_below: float, enough: float,
+    stop_below: float, enough: float, exit_search: bool,
 ) -> float:
     """Certificate of STRAIGHT from this state: the turn dies out under a_c = -(C / a_max) a,
     then a straight line for ever. Flown control step by control step (``dt``, the actuator
@@ -599,8 +600,12 @@ def straight_certificate(
     min(the samples before j, the tail at j) is a certificate for every j, and the largest
     is returned. Sampling ends once the heading change still to come is below
     ``_RESIDUAL_RAD``, once the samples alone fall below the best so far (no later j can
-    beat it), once a certificate reaches ``enough`` (the caller needs no more), or, returning
-    the running least gap, once that is below ``stop_below``; and, returning -inf, once an
+    beat it), once a certificate reaches ``enough`` (the caller needs no more), or once the
+    running least gap is below ``stop_below``, returning the certificate if an earlier tail
+    took it to ``stop_below`` (no later j can beat it), else a value below ``stop_below``
+    (with ``exit_search``, a turn's exit, the running least gap either way: the search then
+    passes over an exit whose samples dip below its level after a tail reached it, which
+    the turn, flown, takes, certified on its own); and, returning -inf, once an
     upper bound on the least gap of the flight still to come (``_rest_upper``, from the
     second sample on) is below ``stop_below`` (less round-off): every lower bound of the
     whole flight's gap, the certificate included, is below it too, so a caller that only
@@ -629,7 +634,7 @@ def straight_certificate(
                                step, best)  # fmt: skip
         best = _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, best)
         if best < stop_below:
-            return best
+            return best if exit_search else max(best, certified)
         if best <= certified:
             return certified
         delta, mid, w, drift = _straight_to_come(s, a, av, speed, trapezoid)
@@ -681,7 +686,7 @@ def _exit_here(
     if upper < screen_level:
         return -math.inf, blocker
     leave = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
-                                 exit_level, max(exit_level, enough))  # fmt: skip
+                                 exit_level, max(exit_level, enough), _FLAGS[1])  # fmt: skip
     return leave, blocker
 
 
@@ -815,16 +820,19 @@ def _circle_tail(
 def backup_certificates(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
-    enough: float, out: FloatArray,
+    enough: float, below: float, out: FloatArray,
 ) -> None:
-    """The certificates of LEFT, RIGHT and STRAIGHT at this state into ``out[0:3]``.
+    """The certificates of LEFT, RIGHT and STRAIGHT at this state into ``out[0:3]``,
+    exact from ``below`` up to ``enough``.
 
     Once one reaches ``enough`` the others are not needed: they are set to -inf. A
-    certificate that cannot beat the best so far stops early, below it (a value only known
-    to be lower)."""
+    certificate that cannot beat the best so far, or that falls below ``below`` (-inf:
+    exact however low), stops early, below it (a value only known to be lower). STRAIGHT's
+    is exact from theta up whatever ``below`` is: whether it reaches theta decides where
+    the turns leave (at once where it does)."""
     theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
     straight = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
-                                    -math.inf, enough)  # fmt: skip
+                                    min(below, theta), enough, _FLAGS[0])  # fmt: skip
     out[BACKUP_STRAIGHT] = straight
     if straight >= theta:  # both turns leave at once: they are STRAIGHT
         out[BACKUP_LEFT] = out[BACKUP_RIGHT] = straight
@@ -835,8 +843,8 @@ def backup_certificates(
             out[policy] = -math.inf
             continue
         out[policy] = turn_certificate(s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av,
-                                       speed, dt, straight, theta, best, enough,
-                                       _EVERY_STEP[0])  # fmt: skip
+                                       speed, dt, straight, theta, max(best, below), enough,
+                                       _FLAGS[0])  # fmt: skip
         best = max(best, out[policy])
 
 
@@ -1049,16 +1057,18 @@ def _fly_step(
 def _ahead(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, command: float, n: float, e: float, h: float, a: float, av: float, speed: float,
-    dt: float, fly_s: float, enough: float, certs: FloatArray,
+    dt: float, fly_s: float, accept: float, enough: float, certs: FloatArray,
 ) -> tuple[float, int, float, float]:
     """Fly ``command`` held for ``fly_s``: the best certificate after it (with the flight's
-    own least gap; exact up to ``enough``), which backup holds it, and the actuator and
-    model a_v at the end. ``dt`` is the control step the certificates align with."""
+    own least gap; exact from ``accept`` up to ``enough``, below ``accept`` only known to
+    be below it: the shield flies nothing that falls short of ``accept``, whatever by),
+    which backup holds it, and the actuator and model a_v at the end. ``dt`` is the control
+    step the certificates align with."""
     held = int(np.int64(-1))  # the command held (not the literal -1: one compile of _fly_step)
     gap, n1, e1, h1, a1, av1 = _fly_step(s, zn, ze, zmur, zreach, kz, held, command, n, e, h, a,
                                          av, speed, fly_s)  # fmt: skip
     backup_certificates(s, zn, ze, zmur, zreach, kz, n1, e1, h1, a1, av1, speed, dt, enough,
-                        certs)  # fmt: skip
+                        accept, certs)  # fmt: skip
     which = int(np.argmax(certs[:_N_BACKUPS]))
     return min(certs[which], gap), which, a1, av1
 
@@ -1132,7 +1142,7 @@ def plan_value(
                                               int(plan[PLAN_POLICIES + j]), left, n, e, h, a,
                                               av, speed, dt, floor, -math.inf)  # fmt: skip
     straight = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
-                                    -math.inf, math.inf)  # fmt: skip
+                                    -math.inf, math.inf, _FLAGS[0])  # fmt: skip
     return min(floor, straight)
 
 
@@ -1176,7 +1186,7 @@ def plan_search(
         n0, e0, h0 = nodes[level, c, 0], nodes[level, c, 1], nodes[level, c, 2]
         a0, av0, floor = nodes[level, c, 3], nodes[level, c, 4], nodes[level, c, 5]
         terminal = straight_certificate(s, zn, ze, zmur, zreach, kz, n0, e0, h0, a0, av0,
-                                        speed, dt, need, need)  # fmt: skip
+                                        speed, dt, need, need, _FLAGS[0])  # fmt: skip
         if min(floor, terminal) >= need:
             plan[PLAN_COUNT], plan[PLAN_SEGMENT], plan[PLAN_DONE] = level, 0, 0
             for j in range(level):
@@ -1272,12 +1282,12 @@ def shield_one(
     # where it does, the nominal held for the preview sets its weight (where it does not,
     # the weight is 0 whatever the preview says, so the preview is not flown)
     ahead, which, a_next, av_next = _ahead(s, zn, ze, zmur, zreach, kz, nominal, n, e, h, a, av,
-                                           speed, dt, dt, accept, certs)  # fmt: skip
+                                           speed, dt, dt, accept, accept, certs)  # fmt: skip
     weight = 0.0
     if ahead >= accept:
         preview_s = max(dt, _PREVIEW_SAMPLES * sample_ticks(s, speed, dt) * dt)
         preview, _, _, _ = _ahead(s, zn, ze, zmur, zreach, kz, nominal, n, e, h, a, av, speed,
-                                  dt, preview_s, accept + band, certs)  # fmt: skip
+                                  dt, preview_s, accept, accept + band, certs)  # fmt: skip
         x = min(max((preview - accept) / band, 0.0), 1.0)
         weight = x * x * (3.0 - 2.0 * x)
     fall = s[S_FALL]
@@ -1292,7 +1302,7 @@ def shield_one(
         # widening of where it started, >= theta), to any better by 2 theta, certified or
         # not: the least predicted entry
         backup_certificates(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, math.inf,
-                            certs)  # fmt: skip
+                            -math.inf, certs)  # fmt: skip
         single = max(certs[BACKUP_LEFT], certs[BACKUP_RIGHT], certs[BACKUP_STRAIGHT])
         planned = False
         if single < theta:
@@ -1321,7 +1331,8 @@ def shield_one(
             # blend with the held backup's command, held over the step, and verify the blend
             blended = weight * nominal + (1.0 - weight) * backup_command(s, flies, a)
             check, which_b, a_b, av_b = _ahead(s, zn, ze, zmur, zreach, kz, blended, n, e, h, a,
-                                               av, speed, dt, dt, accept, certs)  # fmt: skip
+                                               av, speed, dt, dt, accept, accept,
+                                               certs)  # fmt: skip
             if check >= accept:
                 accepted = True
                 which, a_next, av_next = which_b, a_b, av_b

@@ -116,7 +116,9 @@ class GuidanceStep:
     ``certificate_m`` (the executed backup's certificate at the step's start, a lower
     rung's value: >= 0 means a bounded manoeuvre keeps the vehicle out of every zone for
     ever, under the model) and
-    ``certificate_ahead_m`` (the best one step ahead on the nominal); NaN for other laws.
+    ``certificate_ahead_m`` (the best one step ahead on the nominal: exact where it
+    reaches the acceptance level, theta and with a lag the reserve; below it, a value
+    below it, since nothing short of it is flown); NaN for other laws.
     """
 
     law: LawOutput

@@ -1269,8 +1269,8 @@ def shield_one(
     """One shielded step for vehicle ``k``: writes ``out[k, :]`` = (a after the step, the
     model's a_v after it, the backup held after the step, the nominal's weight, the
     certificate of the held backup at the start, the certificate one step ahead on the
-    nominal, exact from the acceptance level up). ``plan``: the vehicle's plan row (``PLAN_SIZE``), read and updated where the
-    held backup is (or becomes) BACKUP_PLAN."""
+    nominal, exact from the acceptance level up). ``plan``: the vehicle's plan row
+    (``PLAN_SIZE``), read and updated where the held backup is (or becomes) BACKUP_PLAN."""
     theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
     # what the nominal (or a blend) must leave to be flown: theta, and with a lag a reserve
     # above it, so that a state whose measured a_v is a little off keeps the exits its

@@ -7,7 +7,9 @@ and prints the CPU time an engagement. Then flies them again recording the shiel
 at every ``--every``-th step (each vehicle's state, actuator, nominal command, held backup
 and weight, as ``GuidanceController`` hands them to ``backup.shield_batch``), and times
 ``backup.shield_one`` on each state alone: median, p90, p99, the share of the time in the
-slowest 10% and 1% of the steps, and the mean step and share of the time per response lag.
+slowest 10% and 1% of the steps, each part of the step timed alone where the step runs it
+(``part_times_us``) next to their sum, and the mean step and share of the time per
+response lag.
 
 ``--abandon PROFILE`` gives the law an autopilot's abandon path to check every setpoint
 against (``abandon.ABANDON_PROFILES``: what the service does with
@@ -24,6 +26,7 @@ re-timed:
 from __future__ import annotations
 
 import argparse
+import math
 import time
 from dataclasses import replace
 from typing import Any
@@ -89,6 +92,63 @@ def step_times_us(states: list[tuple[Any, ...]]) -> np.ndarray:
     return times * 1e6
 
 
+def part_times_us(states: list[tuple[Any, ...]]) -> dict[str, float]:
+    """The mean time a step (us) of each part of ``shield_one`` on these states, each part
+    timed alone on its own inputs where the step runs it: the nominal held one step and
+    its certificates (``_ahead``), the preview where that passes, the certificates at the
+    state where the nominal's weight is below 1, the lower rungs and the plan where no
+    backup is certified there, the blend's check where the weight is strictly between 0
+    and 1 (the branches as ``shield_one`` takes them; the blend with the backup held
+    before the step, which the step may have changed)."""
+    clock = time.perf_counter
+    parts = dict.fromkeys(("one step ahead", "preview", "certificates here", "lower rungs",
+                           "plan", "blend check"), 0.0)  # fmt: skip
+    for state in states:
+        s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, nominal, dt, current, before, plan = (
+            state)  # fmt: skip
+        z = (zn, ze, zmur, zreach, kz)
+        theta = bk.acceptance_level_m(s, zmur, zreach, kz, speed, dt)
+        accept = theta + (s[bk.S_ROBUST] if s[bk.S_TAU] > 0.0 else 0.0)
+        certs = np.full(bk.N_POLICIES, -math.inf)
+        start = clock()
+        ahead = bk._ahead(s, *z, nominal, n, e, h, a, av, speed, dt, dt, accept, accept, certs)[0]
+        parts["one step ahead"] += clock() - start
+        weight = 0.0
+        if ahead >= accept:
+            preview_s = max(dt, bk._PREVIEW_SAMPLES * bk.sample_ticks(s, speed, dt) * dt)
+            start = clock()
+            preview = bk._ahead(s, *z, nominal, n, e, h, a, av, speed, dt, preview_s, accept,
+                                accept + s[bk.S_BAND], certs)[0]  # fmt: skip
+            parts["preview"] += clock() - start
+            x = min(max((preview - accept) / s[bk.S_BAND], 0.0), 1.0)
+            weight = x * x * (3.0 - 2.0 * x)
+            if s[bk.S_FALL] > 0.0 and before >= 0.0:
+                weight = max(weight, min(before - s[bk.S_FALL] * dt, 1.0))
+        if weight >= 1.0:
+            continue
+        start = clock()
+        bk.backup_certificates(s, *z, n, e, h, a, av, speed, dt, math.inf, -math.inf, certs)
+        parts["certificates here"] += clock() - start
+        single = max(certs[: bk.BACKUP_STRAIGHT + 1])
+        if single < theta:
+            start = clock()
+            bk.rung_certificates(s, *z, n, e, h, a, av, speed, dt, theta,
+                                 certs[bk.BACKUP_STRAIGHT], single, certs)  # fmt: skip
+            parts["lower rungs"] += clock() - start
+            if s[bk.S_PLAN] > 0.0:
+                start = clock()
+                bk._plan_step(s, *z, n, e, h, a, av, speed, dt, theta, current, certs,
+                              plan.copy())  # fmt: skip
+                parts["plan"] += clock() - start
+        if weight > 0.0:
+            flies = bk.plan_policy(plan) if current == bk.BACKUP_PLAN else current
+            blended = weight * nominal + (1.0 - weight) * bk.backup_command(s, flies, a)
+            start = clock()
+            bk._ahead(s, *z, blended, n, e, h, a, av, speed, dt, dt, accept, accept, certs)
+            parts["blend check"] += clock() - start
+    return {name: 1e6 * spent / len(states) for name, spent in parts.items()}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=1000)
@@ -134,6 +194,11 @@ def main() -> None:
           f"{np.percentile(times, 99):.1f} us, mean {times.mean():.1f} us; the slowest 10% "
           f"{slowest[: len(times) // 10].sum() / total:.0%} of the time, the slowest 1% "
           f"{slowest[: len(times) // 100].sum() / total:.0%}")  # fmt: skip
+    parts = part_times_us(states)
+    print("  its parts, each timed alone where the step runs it (mean a step): "
+          + ", ".join(f"{name} {spent:.1f} us" for name, spent in parts.items())
+          + f"; their sum {sum(parts.values()):.1f} us against the step's "
+          f"{times.mean():.1f} us")  # fmt: skip
     lags = np.array([state[0][bk.S_TAU] for state in states])
     for lag in np.unique(lags):
         mask = lags == lag

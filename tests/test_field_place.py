@@ -202,3 +202,34 @@ def test_a_placed_start_inside_a_zone_is_named() -> None:
         scenario.start, north_m=d.north_m, east_m=d.east_m - 1.0))  # fmt: skip
     (problem,) = placement_warnings(near, course_rad=math.pi / 2)  # 1 m off, straight at D1
     assert "starts inside the engagement zone of D1" in problem
+
+
+def test_a_px4_streamed_ahead_of_offboard_flies_the_placed_scenario_and_its_miss(
+    tmp_path: Path,
+) -> None:
+    """PX4 flies what is streamed to it as soon as it takes OFFBOARD, a heartbeat before the
+    companion hears of it, so a scenario relative to the vehicle is placed before the first
+    setpoint streams, where the vehicle waits. Measured on PX4 SITL before: placed at
+    engage, the setpoints before it were the law's against the file's unplaced geometry,
+    and the miss distance counted those ticks too (78 m said, 86 to 95 m flown). Here the
+    vehicle waits 0.3 m from the file's target, and 3 s of guidance leave it metres from
+    the placed one: the miss said is what it flew. (Before, this run ended at once,
+    "intercepted; miss distance 0.081 m after 0.00 s of guidance": the unplaced target
+    captured from the first ticks streamed, the vehicle still in LOITER.)"""
+    ours = paper()
+    ours["frame"] = "vehicle_course"
+    theirs = paper()
+    theirs["vehicle"] = {"north_m": 2.3, "east_m": 0.0, "course_deg": 180.0,
+                         "speed_m_s": 1.0, "accel_max_m_s2": 1.0}  # fmt: skip
+    config = write(tmp_path, "relative.yaml", ours)
+    vehicle = write(tmp_path, "vehicle.yaml", theirs)
+    flight = fly(config, tmp_path, profile="px4", start_mode="AUTO.LOITER", max_time_s=3.0,
+                 stub_config=vehicle, lockstep=True)  # fmt: skip
+    assert not flight.outcome.intercepted
+    assert flight.outcome.guiding_time_s > 2.0
+    placed_at = flight.events.of_kind(EventKind.SCENARIO)[0].time_s
+    engaged_at = flight.events.of_kind(EventKind.ENGAGED)[0].time_s
+    assert placed_at < engaged_at
+    _, _, miss, clearance, _ = judge_truth(flight.service.scenario, flight.truth)
+    assert miss > 1.0 and min(clearance) > 0.0
+    assert flight.outcome.miss_distance_m == pytest.approx(miss, abs=0.05)

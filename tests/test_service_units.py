@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
 import pytest
 
-from ezcompanion.config import GeoOrigin, load_scenario
+from ezcompanion.config import GeoOrigin, Target, load_scenario
 from ezcompanion.errors import ConfigError
 from ezcompanion.service.loop import GuidanceLoop, Hold, TickCommand
 from ezcompanion.service.setpoints import make_setpoints
@@ -208,6 +209,22 @@ def test_a_scenario_update_is_checked_and_keeps_the_turn() -> None:
     assert float(loop.controller.accel_m_s2) == accel  # mid-turn: the actuator state stays
     after = _command(loop, 7.98, -3.99, -0.832, 0.555, 1.02)
     assert before.step.law.margin_m.shape == (3,) and after.step.law.margin_m.shape == (1,)
+
+
+def test_the_miss_distance_starts_afresh_when_the_target_moves_only() -> None:
+    """The closest approach is to the target flown to: a scenario whose target moved (a
+    placement, an update) starts it afresh; one that only gives the law what was found of
+    the vehicle (its lag) keeps it."""
+    scenario = load_scenario(CONFIG)
+    loop = GuidanceLoop(scenario, loop_rate_hz=50.0, stale_after_s=0.25)
+    _command(loop, 2.5, 0.0, -1.0, 0.0, 1.0)  # 0.5 m from the target
+    assert loop.miss_distance_m == pytest.approx(0.5, abs=1e-6)
+    loop.assume_measured_lag(0.4)  # the same target: the approach stands
+    assert loop.miss_distance_m == pytest.approx(0.5, abs=1e-6)
+    loop.update_scenario(dataclasses.replace(scenario, target=Target(north_m=-20.0, east_m=0.0)))
+    assert loop.miss_distance_m == math.inf
+    _command(loop, 2.48, 0.0, -1.0, 0.0, 1.02)
+    assert loop.miss_distance_m == pytest.approx(22.48, abs=1e-6)
 
 
 def test_a_serial_device_link_reads_and_writes_mavlink() -> None:

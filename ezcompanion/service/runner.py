@@ -161,6 +161,9 @@ class CompanionService:
         # the plane's heading loop judged (GUIDED_P read or given up on): only then is the
         # guided mode asked for, or guidance started
         self._heading_loop_checked = False
+        # (PX4) setpoints may be streamed ahead of OFFBOARD: the scenario placed and the
+        # frame latched, as at engage (the vehicle flies them once PX4 takes OFFBOARD)
+        self._stream_ready = False
         self.exit_report: ExitReport | None = None  # where the vehicle was left (on_exit)
         self.placement: VehiclePlacement | None = None  # frame: vehicle, latched at engage
 
@@ -472,6 +475,20 @@ class CompanionService:
             if not self._check_heading_loop(now, session.profile):
                 return
         if (
+            self._streams_ahead()
+            and not self._stream_ready
+            and self._heading_loop_checked
+            and session.frame_settled
+            and self._placed(now)
+        ):
+            # PX4 flies what is streamed as soon as it takes OFFBOARD, a heartbeat (up to a
+            # second) before the companion hears of it: so what is streamed is the
+            # engagement's, flown against the scenario placed where the vehicle waits
+            # (placed at engage instead, the setpoints before it were the law's against the
+            # file's unplaced geometry: SITL flew them 0.3 to 2 m before the placement)
+            session.telemetry.latch_origin()
+            self._stream_ready = True
+        if (
             self.phase is Phase.WAITING
             and self._heading_loop_checked
             and session.in_guided
@@ -676,9 +693,15 @@ class CompanionService:
         """Guiding, or (PX4 only) streaming ahead of OFFBOARD, which PX4 refuses to enter
         until setpoints arrive; it ignores them until then. Only before guidance first
         starts, as the mode is asked for: a vehicle taken out of OFFBOARD after that is not
-        streamed to either."""
+        streamed to either. Streamed only once what guidance needs to start is there
+        (``_stream_ready``)."""
         if self.phase is Phase.GUIDING:
             return True
+        return self._stream_ready and self._streams_ahead()
+
+    def _streams_ahead(self) -> bool:
+        """Waiting for a PX4 to take OFFBOARD before guidance first started, asking for
+        it: the setpoints are streamed ahead."""
         session = self._session
         mode = session.guided_mode if session is not None else None
         return (

@@ -64,16 +64,22 @@ def test_latitude_longitude_loads_onto_the_paper_geometry() -> None:
     assert placed.start.course_rad == pytest.approx(ned.start.course_rad, abs=1e-6)
 
 
-def test_a_scenario_relative_to_the_vehicle_is_placed_where_it_engages(tmp_path: Path) -> None:
-    # the companion's file: the paper's geometry, placed and turned onto the vehicle at engage
+def relative_files(tmp_path: Path, north: float, east: float, course_deg: float
+                   ) -> tuple[Path, Path]:  # fmt: skip
+    """The companion's file (the paper's geometry, placed and turned onto the vehicle at
+    engage) and the loopback vehicle's (its own start at ``north``, ``east`` on
+    ``course_deg``)."""
     ours = paper()
     ours["frame"] = "vehicle_course"
-    # the vehicle's own start: far from the paper's, on another course
     theirs = paper()
-    theirs["vehicle"] = {"north_m": 40.0, "east_m": 25.0, "course_deg": 100.0,
+    theirs["vehicle"] = {"north_m": north, "east_m": east, "course_deg": course_deg,
                          "speed_m_s": 1.0, "accel_max_m_s2": 1.0}  # fmt: skip
-    config = write(tmp_path, "relative.yaml", ours)
-    vehicle = write(tmp_path, "vehicle.yaml", theirs)
+    return write(tmp_path, "relative.yaml", ours), write(tmp_path, "vehicle.yaml", theirs)
+
+
+def test_a_scenario_relative_to_the_vehicle_is_placed_where_it_engages(tmp_path: Path) -> None:
+    # the vehicle's own start: far from the paper's, on another course
+    config, vehicle = relative_files(tmp_path, 40.0, 25.0, 100.0)
     flight = fly(config, tmp_path, stub_config=vehicle, max_time_s=60.0, lockstep=True)
     placement = flight.service.placement
     assert placement is not None
@@ -216,13 +222,7 @@ def test_a_px4_streamed_ahead_of_offboard_flies_the_placed_scenario_and_its_miss
     the placed one: the miss said is what it flew. (Before, this run ended at once,
     "intercepted; miss distance 0.081 m after 0.00 s of guidance": the unplaced target
     captured from the first ticks streamed, the vehicle still in LOITER.)"""
-    ours = paper()
-    ours["frame"] = "vehicle_course"
-    theirs = paper()
-    theirs["vehicle"] = {"north_m": 2.3, "east_m": 0.0, "course_deg": 180.0,
-                         "speed_m_s": 1.0, "accel_max_m_s2": 1.0}  # fmt: skip
-    config = write(tmp_path, "relative.yaml", ours)
-    vehicle = write(tmp_path, "vehicle.yaml", theirs)
+    config, vehicle = relative_files(tmp_path, 2.3, 0.0, 180.0)
     flight = fly(config, tmp_path, profile="px4", start_mode="AUTO.LOITER", max_time_s=3.0,
                  stub_config=vehicle, lockstep=True)  # fmt: skip
     assert not flight.outcome.intercepted

@@ -35,12 +35,14 @@ from ezcompanion.records import EventKind, VehicleState
 from ezcompanion.service.autopilots import AutopilotProfile
 from ezcompanion.service.events import EventLog
 from ezcompanion.service.identify import (
+    SETTLED_DRIFT,
     LagFit,
     ResponseSample,
     ResponseWindow,
     SpeedFit,
     fit_course_lag,
     fit_speed_factor,
+    speed_drift,
     warm_up,
 )
 from ezcompanion.service.loop import GuidanceLoop
@@ -193,7 +195,7 @@ class ResponseMonitor:
             )  # fmt: skip
         if self.acting:
             self._act_on_lag(now_s, lag, found)
-            self._act_on_speed(now_s, speed, found)
+            self._act_on_speed(now_s, speed, found, speed_drift(window))
         return found
 
     def _act_on_lag(self, now_s: float, lag: LagFit | None, found: Identified) -> bool:
@@ -252,7 +254,8 @@ class ResponseMonitor:
             turn_bound_m_s2=bound, accel_max_m_s2=accel_max, **self._data(found),
         )  # fmt: skip
 
-    def _act_on_speed(self, now_s: float, speed: SpeedFit | None, found: Identified) -> bool:
+    def _act_on_speed(self, now_s: float, speed: SpeedFit | None, found: Identified,
+                      drift: float) -> bool:
         if speed is None or speed.stderr > _MAX_SPEED_STDERR:
             return False
         assumed = self.loop.speed_factor
@@ -267,6 +270,13 @@ class ResponseMonitor:
             return False
         self._lower_speed = None
         factor = max(previous, speed.speed_factor)
+        if drift > SETTLED_DRIFT and factor >= MIN_SPEED_FACTOR:
+            # a speed still changing (from a hover: PX4 closes on it in two stages, which a
+            # fit takes as settled and reads low) lowers nothing: the factor is a floor the
+            # law plans a vehicle speeding up with, and a low one plans its turns tighter
+            # (v^2 / a) than the vehicle will fly them
+            self._lower_speed = speed.speed_factor
+            return False
         if factor < MIN_SPEED_FACTOR:
             if not self._said_not_following:
                 self._said_not_following = True

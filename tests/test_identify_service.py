@@ -294,3 +294,28 @@ def test_a_speed_closed_on_in_two_stages_lowers_the_factor_only_once_settled() -
         floors.append(loop.speed_factor)
     assert min(floors) >= 0.88, min(floors)
     assert loop.speed_factor == pytest.approx(0.9, abs=0.02)
+
+
+def test_a_review_of_too_few_samples_says_so_and_raises_nothing() -> None:
+    """A window long enough in time but with too few samples (frames held back and let go,
+    or lost) is refused by the fits, and the review around them raises nothing: the
+    speed's drift (whether it had settled) is asked only of a window the speed's fit took.
+    (A first version asked it of every window and raised out of the service's tick: a
+    relay holding frames in tests/test_stamp_age.py stopped the companion.)"""
+    scenario = load_scenario(SCENARIO)
+    loop = GuidanceLoop(scenario, loop_rate_hz=20.0, stale_after_s=0.25)
+    monitor = identify_monitor.ResponseMonitor(loop, EventLog())
+    monitor.sent(mavlink.MAVLink_set_position_target_local_ned_message(
+        0, 1, 1, mavlink.MAV_FRAME_LOCAL_NED, 0b0000_1111_1110_0111, 0.0, 0.0, 0.0, 1.0, 0.0,
+        0.0, 0.0, 0.0, 0.0, 0.0, 0.0))  # fmt: skip
+    for k in range(10):  # 10 samples over 2.7 s
+        t = 0.3 * k
+        monitor.observe(VehicleState(
+            north_m=0.3 * k, east_m=0.0, down_m=-20.0, velocity_north_m_s=1.0,
+            velocity_east_m_s=0.0, yaw_rad=0.0, position_time_s=t, attitude_time_s=t,
+            position_source="local",
+        ), t)  # fmt: skip
+    found = monitor.review(2.7)
+    assert found.speed is None and found.speed_refused is not None
+    assert "samples" in found.speed_refused
+    assert loop.speed_factor == 1.0

@@ -350,8 +350,10 @@ def fit_speed_factor(window: ResponseWindow) -> SpeedFit:
 
 def speed_drift(window: ResponseWindow) -> float:
     """How much the flown ground speed still changed over the window's last half, as a
-    fraction of its mean there: |least-squares slope| times the half's duration."""
-    window.check()
+    fraction of its mean there: |least-squares slope| times the half's duration (0 where
+    that half has fewer than two samples or no speed)."""
+    if len(window) < 2:
+        return 0.0
     half = window.time_s >= window.time_s[0] + 0.5 * window.duration_s
     time, speed = window.time_s[half], window.ground_speed_m_s[half]
     mean = float(speed.mean())

@@ -195,7 +195,10 @@ class ResponseMonitor:
             )  # fmt: skip
         if self.acting:
             self._act_on_lag(now_s, lag, found)
-            self._act_on_speed(now_s, speed, found, speed_drift(window))
+            # the window's drift only where the speed was fitted (a window the fits refuse,
+            # too few samples say, has none to speak of)
+            drift = speed_drift(window) if speed is not None else 0.0
+            self._act_on_speed(now_s, speed, found, drift)
         return found
 
     def _act_on_lag(self, now_s: float, lag: LagFit | None, found: Identified) -> bool:

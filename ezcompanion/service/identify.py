@@ -67,8 +67,9 @@ _SETTLED_SPREAD = 0.02
 # window's last half by at most this fraction of itself (``speed_drift``). PX4 main SITL
 # (SIH quadrotor), from a hover, closed on its speed in two stages, fast and then slowly
 # (its velocity integrator against the drag): its first 2 s fitted k 0.738-0.762, the lags'
-# k within 0.001 of it, while its speed still rose 9% over the window's last half and the
-# vehicle went on to fly 0.87-0.94 of the command (docs/field.md)
+# k within 0.001 of it, while its speed still rose 5.7-9.4% over the window's last half
+# (10-12 s in: 0.1-1.1%) and the vehicle went on to fly 0.87-0.94 of the command
+# (docs/field.md)
 SETTLED_DRIFT = 0.02
 _MAX_GAP_S = 0.5  # a longer gap between samples restarts the simulation
 

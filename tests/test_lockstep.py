@@ -25,10 +25,11 @@ from ezcompanion.errors import ConfigError
 from ezcompanion.service.clock import LockstepClock
 from ezcompanion.service.demo import free_udp_port, run_loopback
 from ezcompanion.service.events import EventKind, EventLog
-from ezcompanion.service.lockstep import check_loopback_url
+from ezcompanion.service.lockstep import Lockstep, check_loopback_url
 from ezcompanion.service.runner import CompanionService
 from ezcompanion.service.settings import companion_settings
 from ezcompanion.service.ticks import TickSchedule
+from ezcompanion.wire import mavlink
 from sitl_stub import SitlStub
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
@@ -56,6 +57,31 @@ def test_a_sample_ticks_once_and_a_late_deadline_does_not_tick_it_again() -> Non
     schedule.ticked(0.0840)
     assert schedule.sample(0.085) and not schedule.is_due(0.085)  # within half a period
     assert schedule.is_due(0.0940)
+
+
+def test_guidance_starts_with_one_tick_on_the_newest_sample_not_two() -> None:
+    """Guidance starting on a position's first frame ticked at once (reset: due at once),
+    and the sample's second frame (GLOBAL_POSITION_INT of the same instant) ticked it
+    again: the lockstep demo's companion.csv had two rows at 1.0 s."""
+    schedule = TickSchedule(0.02)
+    schedule.start(1.0)  # the newest sample, at the mode's heartbeat or on its first frame
+    assert schedule.is_due(1.0)
+    schedule.ticked(1.0)
+    assert not schedule.sample(1.0) and not schedule.is_due(1.0)  # its second frame
+    assert schedule.sample(1.02) and schedule.is_due(1.02)
+    # ticks streamed ahead of the mode (PX4) used the newest sample already: they go on
+    schedule.ticked(1.02)
+    schedule.start(1.02)
+    assert not schedule.is_due(1.025) and not schedule.sample(1.02)
+    assert schedule.sample(1.04) and schedule.is_due(1.04)
+    # restarted on a newer sample than the last ticked (a pause): at once, on it
+    schedule.ticked(1.04)
+    schedule.start(1.06)
+    assert schedule.is_due(1.06)
+    schedule.ticked(1.06)
+    assert not schedule.sample(1.06)
+    schedule.start(None)  # no position yet: a deadline at once
+    assert schedule.is_due(1.06)
 
 
 def test_a_sample_just_after_a_deadline_ticks_at_once() -> None:
@@ -218,6 +244,34 @@ def test_a_lockstep_companion_refuses_a_vehicle_that_runs_its_own_clock() -> Non
     refused = events.of_kind(EventKind.VEHICLE_REFUSED)
     assert refused and "not a lockstep vehicle" in refused[0].message
     assert service.setpoints_sent == 0 and outcome
+
+
+def test_a_vehicle_is_trusted_in_lockstep_once_it_stopped_within_a_grant_and_asked_again() -> None:
+    """A lockstep companion asks nothing of the vehicle (mode, setpoints) before the vehicle
+    has shown that it waits for its grants; one on its own clock is refused first. (With
+    the mode heard a round trip after its ack, a companion facing a stub without
+    --lockstep guided it for 0.4 s, 24 setpoints, before its time ran 0.5 s past the
+    first grant.)"""
+    mav = mavlink.MAVLink(None)
+    free = Lockstep(LockstepClock())
+    for boot_ms in (0, 100, 300):  # a stream and no request: not trusted, then refused
+        free.observe(mav.attitude_encode(boot_ms, 0, 0, 0, 0, 0, 0))
+        assert not free.trusted
+    free.observe(mav.attitude_encode(600, 0, 0, 0, 0, 0, 0))
+    assert free.overrun is not None and not free.trusted
+    kept = Lockstep(LockstepClock())
+    kept.observe(mav.timesync_encode(0, 0))  # stopped at 0, asking
+    assert not kept.trusted  # nothing granted yet: it may run on its own
+    answer = kept.answer(mav, 0.02)
+    assert answer is not None and answer.tc1 == round(0.02 * NS)
+    kept.observe(mav.attitude_encode(20, 0, 0, 0, 0, 0, 0))
+    kept.observe(mav.timesync_encode(0, round(0.02 * NS) + 1))  # stopped at the grant
+    assert kept.trusted
+    ahead = Lockstep(LockstepClock())  # asks, but from beyond the grant: not trusted
+    ahead.observe(mav.timesync_encode(0, 0))
+    ahead.answer(mav, 0.02)
+    ahead.observe(mav.timesync_encode(0, round(0.3 * NS)))
+    assert not ahead.trusted
 
 
 def test_a_lockstep_companion_refuses_a_non_loopback_address() -> None:

@@ -28,6 +28,7 @@ from ezcompanion.service.demo import free_udp_port, judge_truth, run_loopback
 from ezcompanion.service.events import EventKind, EventLog
 from ezcompanion.service.runner import CompanionService, EngagementOutcome
 from ezcompanion.service.settings import companion_settings
+from ezcompanion.wire import mavlink
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
 SPEEDUP = 5.0  # fast, with room for a loaded machine: budgets are in vehicle time
@@ -260,6 +261,61 @@ def test_each_setpoint_profile_flies_the_stub(
     assert flight.outcome.intercepted and flight.outcome.setpoints_sent > 20
     intercepted, _, _, clearance, accel = judge_truth(load_scenario(config), flight.truth)
     assert intercepted and min(clearance) > 0.0 and accel <= 1.0
+
+
+def commands_and_modes(tlog: Path) -> list[tuple[str, float, int]]:
+    """In a tlog's order: ("command", command, param1) for every COMMAND_LONG the companion
+    sent, ("ack", command, result) for every COMMAND_ACK and ("mode", 0, custom_mode) for
+    every heartbeat the vehicle (system 1, component 1) sent."""
+    from pymavlink import mavutil
+
+    log = mavutil.mavlink_connection(str(tlog))
+    seen: list[tuple[str, float, int]] = []
+    while (msg := log.recv_match(type=["COMMAND_LONG", "COMMAND_ACK", "HEARTBEAT"])) is not None:
+        vehicle = (msg.get_srcSystem(), msg.get_srcComponent()) == (1, 1)
+        if msg.get_type() == "COMMAND_LONG" and not vehicle:
+            seen.append(("command", msg.command, int(msg.param1)))
+        elif msg.get_type() == "COMMAND_ACK" and vehicle:
+            seen.append(("ack", msg.command, int(msg.result)))
+        elif msg.get_type() == "HEARTBEAT" and vehicle:
+            seen.append(("mode", 0, int(msg.custom_mode)))
+    return seen
+
+
+@pytest.mark.parametrize(
+    ("profile", "start_mode", "guided"),
+    [("copter", "LOITER", "GUIDED"), ("px4", "AUTO.LOITER", "OFFBOARD")],
+)
+def test_the_mode_taken_is_heard_a_round_trip_after_its_ack_and_asked_for_once(
+    profile: str, start_mode: str, guided: str, tmp_path: Path
+) -> None:
+    """The vehicle says its mode in its heartbeat, once a second: guidance started up to a
+    second after the autopilot had taken the mode (on PX4 SITL 0.97-1.01 s after OFFBOARD
+    was taken, flying what was streamed meanwhile), and the mode was asked for again
+    meanwhile. Once the mode is acknowledged the companion asks for a heartbeat
+    (MAV_CMD_REQUEST_MESSAGE 0), once (PX4 acknowledges every command twice); the stub's
+    heartbeats stay 1 s apart. In lockstep: the times are the vehicle's."""
+    flight = fly(CONFIG / "paper_scenario1.yaml", tmp_path, profile=profile,
+                 start_mode=start_mode, max_time_s=6.0, lockstep=True)  # fmt: skip
+    asked = [e.time_s for e in flight.events.of_kind(EventKind.MODE) if "requested" in e.data]
+    engaged = flight.events.of_kind(EventKind.ENGAGED)
+    assert len(asked) == 1 and engaged and guided in engaged[0].message
+    assert engaged[0].time_s - asked[0] < 0.3
+    # each mode asked for (the guided one, then on_exit's hold): acknowledged, then one
+    # heartbeat asked for, and the next heartbeat says the new mode
+    seen = commands_and_modes(tmp_path / "companion.tlog")
+    set_mode, request = mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_CMD_REQUEST_MESSAGE
+    starts = [i for i, x in enumerate(seen) if x[:2] == ("command", set_mode)]
+    assert len(starts) == 2
+    for start, end in zip(starts, [*starts[1:], len(seen)], strict=True):
+        part = seen[start:end]
+        ack = part.index(("ack", set_mode, mavlink.MAV_RESULT_ACCEPTED))
+        asked_for = [i for i, x in enumerate(part) if x == ("command", request, 0)]
+        assert len(asked_for) == 1 and asked_for[0] > ack
+        before = [x[2] for x in seen[:start] if x[0] == "mode"][-1]
+        heard = next(x[2] for x in part[asked_for[0]:] if x[0] == "mode")
+        assert heard != before
+    assert flight.service.exit_report is not None and flight.service.exit_report.confirmed
 
 
 @pytest.mark.parametrize("profile", ["copter", "px4"])

@@ -46,6 +46,8 @@ _MAX_GRANT_S = 0.1
 # a lockstep vehicle stops at what was granted (plus one physics step); more is a vehicle
 # running its own clock
 _OVERRUN_S = 0.5
+# a request stamped within this of the grant before it is a vehicle that stopped there
+_STOPPED_SLACK_S = 0.05
 
 
 def check_loopback_url(url: str) -> None:
@@ -79,6 +81,15 @@ class Lockstep:
         self.answers = 0
         self._request_ns: int | None = None  # the vehicle's unanswered request
         self.overrun: str | None = None  # why the vehicle is not in lockstep, once seen
+        self._stopped = False  # a request came from where a grant had stopped the vehicle
+
+    @property
+    def trusted(self) -> bool:
+        """The vehicle has shown it keeps lockstep: after an answer, it stopped within the
+        grant and asked again (a vehicle on its own clock asks nothing, or from further on,
+        and runs past the first grant, 0, by ``_OVERRUN_S``: refused). Nothing is asked of
+        the vehicle before (the mode, setpoints): the refusal comes first."""
+        return self.overrun is None and self._stopped
 
     def observe(self, msg: Message) -> float:
         """Take one message from the vehicle (its stamp moves the clock); the clock time."""
@@ -89,6 +100,8 @@ class Lockstep:
                 self._request_ns = int(msg.ts1)
                 # T in ns plus the request's count (< 1000): the time is T
                 stamp_s = (int(msg.ts1) // 1000 * 1000) / _NS
+                if self.answers > 0 and stamp_s <= self.granted_s + _STOPPED_SLACK_S:
+                    self._stopped = True
         elif hasattr(msg, "time_boot_ms"):
             stamp_s = int(msg.time_boot_ms) / 1000.0
         if stamp_s is not None:

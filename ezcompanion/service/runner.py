@@ -164,6 +164,7 @@ class CompanionService:
         # (PX4) setpoints may be streamed ahead of OFFBOARD: the scenario placed and the
         # frame latched, as at engage (the vehicle flies them once PX4 takes OFFBOARD)
         self._stream_ready = False
+        self._position_stamp_s: float | None = None  # the newest position sample's stamp
         self.exit_report: ExitReport | None = None  # where the vehicle was left (on_exit)
         self.placement: VehiclePlacement | None = None  # frame: vehicle, latched at engage
 
@@ -363,9 +364,14 @@ class CompanionService:
             self._send_heartbeat(now)
         # the guided mode is asked for only until guidance first starts: after that a vehicle
         # out of it was taken by the pilot, a ground station or the autopilot's own failsafe,
-        # whose word is the last (docs/field.md, "You keep the last word")
+        # whose word is the last (docs/field.md, "You keep the last word"); OFFBOARD only
+        # once a setpoint streamed ahead has gone out (PX4 refuses it to a vehicle that has
+        # none: asked for with the first, the loopback PX4 refused it and took it a second
+        # later, at the next request)
         self.session.periodic(now, waiting=self.phase is Phase.WAITING
-                              and self._engaged_at_s is None and self._heading_loop_checked)
+                              and self._engaged_at_s is None and self._heading_loop_checked
+                              and (self.engagement.setpoints_sent > 0
+                                   or not self._streams_ahead()))  # fmt: skip
         self._follow_session(now)
         self._check_distrust(now)
         if self._ticking() and self.schedule.is_due(now):
@@ -419,10 +425,12 @@ class CompanionService:
         used = self.session.on_frame(frame, now)
         self._follow_session(now)
         # A new position drives a tick at once (at most every half period; one per sample).
-        if used in POSITIONS and self._ticking():
-            self.schedule.sample(int(frame.message.time_boot_ms) / 1000.0)
-            if tick and self.schedule.is_due(now):
-                self._tick(now)
+        if used in POSITIONS:
+            self._position_stamp_s = int(frame.message.time_boot_ms) / 1000.0
+            if self._ticking():
+                self.schedule.sample(self._position_stamp_s)
+                if tick and self.schedule.is_due(now):
+                    self._tick(now)
         return now
 
     def _follow_session(self, now: float) -> None:
@@ -455,6 +463,8 @@ class CompanionService:
                 setpoints_sent=self.setpoints_sent,
             )
         if self.phase is Phase.SEARCHING and session.connected:
+            if self._lockstep is not None and not self._lockstep.trusted:
+                return  # nothing asked of a vehicle whose clock may be its own
             if self._engaged_at_s is None and not self._place_fixed(now):
                 return
             if self.engagement.setpoints is None:
@@ -497,7 +507,7 @@ class CompanionService:
             and self._placed(now)
         ):
             self.phase = Phase.GUIDING
-            self.schedule.reset()  # the first tick at once
+            self.schedule.start(self._position_stamp_s)  # the first tick at once
             if self._engaged_at_s is None:
                 self._engaged_at_s = now
             session.telemetry.latch_origin()  # the frame is fixed for the engagement

@@ -140,6 +140,8 @@ class VehicleSession(StreamRequests):
         self.received: dict[str, int] = {}
         self.acks: dict[int, tuple[int, float]] = {}  # command -> (result, time) of its last ack
         self._next_engage_s = 0.0
+        # a mode asked for whose acceptance has not yet asked for a heartbeat
+        self._mode_unconfirmed = False
         self.requested_rate_hz = settings.telemetry_rate_hz
         self.parameters = ParameterReader(link, send)
         self.global_rate_hz = settings.telemetry_rate_hz  # what GLOBAL_POSITION_INT is asked
@@ -227,6 +229,12 @@ class VehicleSession(StreamRequests):
         ):
             return  # another component's command (behind a router: the GCS's)
         self.acks[int(msg.command)] = (int(msg.result), now)
+        if (msg.command == mavlink.MAV_CMD_DO_SET_MODE and msg.result == mavlink.MAV_RESULT_ACCEPTED
+                and self._mode_unconfirmed):  # fmt: skip
+            # the mode is taken: its heartbeat now, not at the next of its 1 Hz (once: PX4
+            # acknowledges every command twice)
+            self._mode_unconfirmed = False
+            self._request_message(mavlink.MAVLINK_MSG_ID_HEARTBEAT)
         if msg.result != mavlink.MAV_RESULT_ACCEPTED:
             self.events.emit(
                 EventKind.COMMAND_ACK,
@@ -448,23 +456,16 @@ class VehicleSession(StreamRequests):
 
     def request_mode(self, param1: float, param2: float, param3: float) -> None:
         """Send MAV_CMD_DO_SET_MODE with these parameters to the vehicle (its ack lands in
-        :attr:`acks`)."""
-        assert self.target is not None
-        self._send(
-            self._link.mav.command_long_encode(
-                self.target[0],
-                self.target[1],
-                mavlink.MAV_CMD_DO_SET_MODE,
-                0,
-                param1,
-                param2,
-                param3,
-                0,
-                0,
-                0,
-                0,
-            )
-        )
+        :attr:`acks`). Once it is acknowledged as accepted, the vehicle is asked for a
+        heartbeat (MAV_CMD_REQUEST_MESSAGE 0, which ArduPilot and PX4 answer at once), so
+        that the mode it took is known a round trip later, not at its next heartbeat (up to
+        1 s: guidance started that late, and the mode was asked for again meanwhile)."""
+        self._mode_unconfirmed = True
+        self._command(mavlink.MAV_CMD_DO_SET_MODE, param1, param2, param3)
+
+    def _request_message(self, message_id: int) -> None:
+        """Ask the vehicle to send one message now (MAV_CMD_REQUEST_MESSAGE)."""
+        self._command(mavlink.MAV_CMD_REQUEST_MESSAGE, float(message_id))
 
     def _request_origin(self, now: float) -> None:
         """Ask for GPS_GLOBAL_ORIGIN: ArduPilot and PX4 send it only when it is set or
@@ -483,21 +484,7 @@ class VehicleSession(StreamRequests):
             return
         self._origin_tries += 1
         self._next_origin_s = now + _ORIGIN_RETRY_S
-        self._send(
-            self._link.mav.command_long_encode(
-                self.target[0],
-                self.target[1],
-                mavlink.MAV_CMD_REQUEST_MESSAGE,
-                0,
-                float(mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN),
-                0,
-                0,
-                0,
-                0,
-                0,
-                0,
-            )
-        )
+        self._request_message(mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN)
 
     def _check_link(self, now: float) -> None:
         if self.connected and now - self.last_heartbeat_s > self.settings.link_lost_after_s:

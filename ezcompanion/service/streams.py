@@ -82,22 +82,15 @@ class StreamRequests:
         )
 
     def _send_interval(self, name: str, rate_hz: float) -> None:
+        self._command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+                      float(getattr(mavlink, f"MAVLINK_MSG_ID_{name}")), 1e6 / rate_hz)
+
+    def _command(self, command: int, *params: float) -> None:
+        """Send COMMAND_LONG ``command`` to the vehicle, its parameters zero after ``params``."""
         assert self.target is not None
-        self._send(
-            self._link.mav.command_long_encode(
-                self.target[0],
-                self.target[1],
-                mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
-                0,
-                float(getattr(mavlink, f"MAVLINK_MSG_ID_{name}")),
-                1e6 / rate_hz,
-                0,
-                0,
-                0,
-                0,
-                0,
-            )
-        )
+        p = [*params, *([0.0] * (7 - len(params)))]
+        self._send(self._link.mav.command_long_encode(self.target[0], self.target[1], command,
+                                                      0, *p))  # fmt: skip
 
     def _pace_global(self, now: float) -> None:
         """GLOBAL_POSITION_INT at the cross-check's rate while local positions are fresh,

@@ -57,6 +57,17 @@ class TickSchedule:
         self._ticked_stamp_s = None
         self._pending_stamp_s = None
 
+    def start(self, stamp_s: float | None) -> None:
+        """Guidance starts with the newest position sample stamped ``stamp_s`` (None: none
+        yet): a tick falls due at once, on that sample, unless a tick has used it already
+        (ticks streamed ahead of the mode): then the schedule goes on as it was. (A reset
+        alone let the first tick and the sample's own, when it came on that sample's
+        second frame, tick twice on it.)"""
+        if stamp_s is not None and stamp_s == self._ticked_stamp_s:
+            return
+        self.reset()
+        self._pending_stamp_s = stamp_s
+
     @property
     def sample_pending(self) -> bool:
         """A new sample waits for its tick."""

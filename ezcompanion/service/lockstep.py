@@ -24,6 +24,8 @@ Never against a real autopilot. The companion is told with ``ezcompanion run --l
 companion accepts the flag only on a loopback address, and refuses a vehicle whose time runs
 ahead of what was granted (a real autopilot, or a stub without ``--lockstep``): it ends the
 engagement with a ``vehicle_refused`` event instead of guiding on a clock that is not its own.
+It asks nothing of the vehicle (its mode, setpoints) before the vehicle has shown that it
+waits (``Lockstep.trusted``), so that refusal comes before any setpoint.
 """
 
 from __future__ import annotations

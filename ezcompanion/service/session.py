@@ -78,6 +78,10 @@ from ezcompanion.wire import (
 __all__ = ["POSITIONS", "VehicleSession"]
 
 _ENGAGE_RETRY_S = 1.0
+# after a mode request's accepted ack, its heartbeat is asked for this much later: PX4
+# acknowledges before its status says the mode (PX4 main SITL: asked for at once, 6 ms
+# after the ack, the heartbeat still said AUTO.LOITER; OFFBOARD came with the next, 0.97 s)
+_MODE_HEARTBEAT_AFTER_S = 0.1
 _DISCOVERY_S = 1.5  # listen this long for other autopilots before locking on one
 _SPOOF_HOLD_S = 3.0  # a heartbeat conflict holds guidance this long after the last one
 _TELEMETRY_HOLD_S = 0.5  # a refused position holds guidance this long after the last one
@@ -140,8 +144,10 @@ class VehicleSession(StreamRequests):
         self.received: dict[str, int] = {}
         self.acks: dict[int, tuple[int, float]] = {}  # command -> (result, time) of its last ack
         self._next_engage_s = 0.0
-        # a mode asked for whose acceptance has not yet asked for a heartbeat
+        # a mode asked for whose acceptance has not yet asked for a heartbeat, and when the
+        # accepted one's heartbeat is to be asked for
         self._mode_unconfirmed = False
+        self._heartbeat_due_s = math.inf
         self.requested_rate_hz = settings.telemetry_rate_hz
         self.parameters = ParameterReader(link, send)
         self.global_rate_hz = settings.telemetry_rate_hz  # what GLOBAL_POSITION_INT is asked
@@ -199,6 +205,7 @@ class VehicleSession(StreamRequests):
             self._refuse_foreign(frame, now)
             return None
         self.last_heard_s = now
+        self._ask_heartbeat_if_due(now)
         used = self.telemetry.update(msg, now, kind)
         if used is not None:
             self.received[used] = self.received.get(used, 0) + 1
@@ -231,10 +238,10 @@ class VehicleSession(StreamRequests):
         self.acks[int(msg.command)] = (int(msg.result), now)
         if (msg.command == mavlink.MAV_CMD_DO_SET_MODE and msg.result == mavlink.MAV_RESULT_ACCEPTED
                 and self._mode_unconfirmed):  # fmt: skip
-            # the mode is taken: its heartbeat now, not at the next of its 1 Hz (once: PX4
+            # the mode is taken: its heartbeat soon, not at the next of its 1 Hz (once: PX4
             # acknowledges every command twice)
             self._mode_unconfirmed = False
-            self._request_message(mavlink.MAVLINK_MSG_ID_HEARTBEAT)
+            self._heartbeat_due_s = now + _MODE_HEARTBEAT_AFTER_S
         if msg.result != mavlink.MAV_RESULT_ACCEPTED:
             self.events.emit(
                 EventKind.COMMAND_ACK,
@@ -436,6 +443,7 @@ class VehicleSession(StreamRequests):
         self._check_link(now)
         if self.heard_disarmed:
             return  # nothing is asked of a vehicle that disarmed
+        self._ask_heartbeat_if_due(now)
         self._check_rates(now)
         self._pace_global(now)
         self._request_origin(now)
@@ -456,12 +464,19 @@ class VehicleSession(StreamRequests):
 
     def request_mode(self, param1: float, param2: float, param3: float) -> None:
         """Send MAV_CMD_DO_SET_MODE with these parameters to the vehicle (its ack lands in
-        :attr:`acks`). Once it is acknowledged as accepted, the vehicle is asked for a
-        heartbeat (MAV_CMD_REQUEST_MESSAGE 0, which ArduPilot and PX4 answer at once), so
-        that the mode it took is known a round trip later, not at its next heartbeat (up to
-        1 s: guidance started that late, and the mode was asked for again meanwhile)."""
+        :attr:`acks`). ``_MODE_HEARTBEAT_AFTER_S`` after it is acknowledged as accepted,
+        the vehicle is asked for a heartbeat (MAV_CMD_REQUEST_MESSAGE 0, which ArduPilot and
+        PX4 answer at once), so that the mode it took is known then, not at its next
+        heartbeat (up to 1 s: guidance started that late, and the mode was asked for again
+        meanwhile)."""
         self._mode_unconfirmed = True
         self._command(mavlink.MAV_CMD_DO_SET_MODE, param1, param2, param3)
+
+    def _ask_heartbeat_if_due(self, now: float) -> None:
+        """The heartbeat of a mode just accepted, once it is due."""
+        if now >= self._heartbeat_due_s and self.target is not None:
+            self._heartbeat_due_s = math.inf
+            self._request_message(mavlink.MAVLINK_MSG_ID_HEARTBEAT)
 
     def _request_message(self, message_id: int) -> None:
         """Ask the vehicle to send one message now (MAV_CMD_REQUEST_MESSAGE)."""

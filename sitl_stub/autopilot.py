@@ -331,11 +331,17 @@ class Autopilot(CommandHandlers):
     def _set_mode(self, name: str) -> None:
         mode = self.spec.mode_by_name(name)
         assert mode is not None
-        if mode != self.mode:
+        changed = mode != self.mode
+        if changed:
             self._guided = None
             self._override = None
             self._descending = False
         self.mode = mode
+        if changed and self.spec.autopilot != mavlink.MAV_AUTOPILOT_PX4:
+            # ArduPilot says a new mode in a heartbeat at once (ArduCopter's Copter::set_mode,
+            # ArduPlane's set_mode: gcs().send_message(MSG_HEARTBEAT); ArduCopter SITL: 6 ms
+            # after the mode's ack); PX4 at its next 1 Hz heartbeat
+            self.outbox.append(self.heartbeat())
 
 
 

@@ -76,3 +76,28 @@ def test_gps_global_origin_once_when_set_and_on_request(gcs: Gcs, profile: str) 
     assert sent[0].altitude == round(origin.alt_m * 1000)
     assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
     assert answered is not None and answered.latitude == sent[0].latitude
+
+
+
+@pytest.mark.parametrize(
+    ("profile", "mode", "custom_mode"),
+    [("copter", (5, 0), 5), ("plane", (12, 0), 12), ("px4", (4, 3), 0x03040000)],
+)
+def test_a_new_mode_is_said_in_a_heartbeat_at_once_by_ardupilot_and_on_request(
+    gcs: Gcs, profile: str, mode: tuple[int, int], custom_mode: int
+) -> None:
+    """ArduPilot sends a heartbeat as it changes mode (ArduCopter 4.5.1 SITL: 6 ms after the
+    mode's ack; Copter::set_mode, ArduPlane's set_mode); PX4 main SITL says it at its next
+    1 Hz heartbeat (0.98 s after the ack). Both answer a heartbeat asked for
+    (MAV_CMD_REQUEST_MESSAGE 0) at once."""
+    with running_stub(gcs, profile=profile, speedup=1.0, record_truth=False):
+        gcs.drain()
+        ack = gcs.set_mode(*mode)
+        assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
+        if profile != "px4":  # the frame after the ack: the heartbeat with the new mode
+            after = gcs.conn.recv_match(blocking=True, timeout=3.0)
+            assert after is not None and after.get_type() == "HEARTBEAT"
+            assert after.custom_mode == custom_mode
+        asked = gcs.command(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_HEARTBEAT)
+        assert asked is not None and asked.result == M.MAV_RESULT_ACCEPTED
+        assert gcs.recv("HEARTBEAT", 0.3, lambda m: m.custom_mode == custom_mode) is not None

@@ -148,6 +148,7 @@ class VehicleSession(StreamRequests):
         # accepted one's heartbeat is to be asked for
         self._mode_unconfirmed = False
         self._heartbeat_due_s = math.inf
+        self._mode_when_asked = ""
         self.requested_rate_hz = settings.telemetry_rate_hz
         self.parameters = ParameterReader(link, send)
         self.global_rate_hz = settings.telemetry_rate_hz  # what GLOBAL_POSITION_INT is asked
@@ -466,17 +467,20 @@ class VehicleSession(StreamRequests):
         """Send MAV_CMD_DO_SET_MODE with these parameters to the vehicle (its ack lands in
         :attr:`acks`). ``_MODE_HEARTBEAT_AFTER_S`` after it is acknowledged as accepted,
         the vehicle is asked for a heartbeat (MAV_CMD_REQUEST_MESSAGE 0, which ArduPilot and
-        PX4 answer at once), so that the mode it took is known then, not at its next
-        heartbeat (up to 1 s: guidance started that late, and the mode was asked for again
-        meanwhile)."""
-        self._mode_unconfirmed = True
+        PX4 answer at once) unless one has said a new mode meanwhile, so that the mode it
+        took is known then, not at its next heartbeat (PX4: up to 1 s; guidance started that
+        late, and the mode was asked for again meanwhile). ArduPilot sends a heartbeat as
+        it changes mode (ArduCopter's mode.cpp, ArduPlane's system.cpp): no need there."""
+        self._mode_unconfirmed, self._mode_when_asked = True, self.mode
         self._command(mavlink.MAV_CMD_DO_SET_MODE, param1, param2, param3)
 
     def _ask_heartbeat_if_due(self, now: float) -> None:
-        """The heartbeat of a mode just accepted, once it is due."""
+        """The heartbeat of a mode just accepted, once it is due, unless one has said a new
+        mode since it was asked for (ArduPilot sends a heartbeat as it changes mode)."""
         if now >= self._heartbeat_due_s and self.target is not None:
             self._heartbeat_due_s = math.inf
-            self._request_message(mavlink.MAVLINK_MSG_ID_HEARTBEAT)
+            if self.mode == self._mode_when_asked:
+                self._request_message(mavlink.MAVLINK_MSG_ID_HEARTBEAT)
 
     def _request_message(self, message_id: int) -> None:
         """Ask the vehicle to send one message now (MAV_CMD_REQUEST_MESSAGE)."""

@@ -1,9 +1,10 @@
 """Is a setpoint safe to keep flying if no other ever follows?
 
 What an autopilot flies when its companion falls silent (measured; see
-``ezcompanion.service.autopilots``): the turn it was asked for goes on for ``turn_s``, then
-straight for ``hold_s``, then it brakes to a stop at ``brake_m_s2`` (0: it flies on; the
-hold is then the horizon a person needs to take over). A vehicle that lags its velocity
+``ezcompanion.service.autopilots``): a copter flies its last velocity setpoint straight for
+``hold_s``, then brakes to a stop at ``brake_m_s2``; a plane turns on to its last course,
+which leads by up to ``turn_s`` of its turn, and flies it on (``turn_s + hold_s`` is then
+the horizon a person needs to take over). A vehicle that lags its velocity
 setpoints is still turning when they stop: the last one leads its course by the lag's
 share of the turn, and it turns on to it first. ``abandon_gap_m`` is the least
 look-ahead gap along that path, the margin subtracted: >= 0 means safe to abandon. The
@@ -20,7 +21,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ezcompanion.guidance._jit import jit, jit_borrow, jit_inline
-from ezcompanion.guidance.lookahead import arc_end, point_gap_below, segment_gap
+from ezcompanion.guidance.lookahead import point_gap_below, segment_gap
 from ezcompanion.guidance.params import GuidanceParams
 from ezcompanion.guidance.zones import ZoneSet
 
@@ -29,14 +30,18 @@ __all__ = ["ABANDON_PROFILES", "AbandonProfile", "abandon_gap", "abandon_gap_bat
 
 FloatArray = npt.NDArray[np.float64]
 
-# The abandon path's turn is checked at this many points.
-_ABANDON_ARC_SAMPLES = 8
 # A lagging vehicle's turn on to its last velocity setpoint is sampled this many times per
 # lag (at most this many samples), for as long as what is left of it could cost more than
 # this in the closed form that follows.
 _LEAD_SAMPLES_PER_LAG = 6
 _LEAD_MAX_SAMPLES = 64
 _LEAD_TOL_M = 1e-3
+# A course setpoint's turn-on (ArduPlane SITL, five kills mid-engagement at 22.9 m/s, leads
+# 7-40 degrees): the course came back against the turn by at most 0.02 degrees in 0.1 s (its
+# ground velocity's centimetre resolution) and went past the course sent by 3.5% of the lead
+# at most (0.26 of 7.3 degrees); the bound allows a degree and 10%.
+_COURSE_SLACK_RAD = math.radians(1.0)
+_COURSE_OVERSHOOT = 0.1
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -54,8 +59,9 @@ ABANDON_PROFILES = {
     "arducopter": AbandonProfile(turn_s=0.0, hold_s=3.6, brake_m_s2=2.5),
     # COM_OF_LOSS_T 1.0 s (measured 1.04-1.15 s), then POSCTL brakes at MPC_ACC_HOR 3 m/s^2
     "px4": AbandonProfile(turn_s=0.0, hold_s=1.15, brake_m_s2=3.0),
-    # the last course for ever: the course up to 6 s of turning ahead (service/setpoints.py,
-    # course_lead_rad), then the rest of a 10 s horizon
+    # the last course for ever: the course sent leads by up to 6 s of turning
+    # (service/setpoints.py, course_lead_rad), turned on to at ArduPlane's own pace; a 10 s
+    # horizon
     "arduplane": AbandonProfile(turn_s=6.0, hold_s=4.0, brake_m_s2=0.0),
 }
 
@@ -78,10 +84,8 @@ def abandon_gap_m(
     acceleration (the turn a course setpoint goes on with), ``flown_accel_m_s2`` the flown
     one, whose lag a velocity setpoint leads (``lag_s`` per vehicle, or
     ``response_lag_s``)."""
-    packed = np.array(
-        [profile.turn_s, profile.hold_s, profile.brake_m_s2, params.shield_margin_m,
-         params.accel_max_m_s2]
-    )  # fmt: skip
+    packed = np.array([profile.turn_s, profile.hold_s, profile.brake_m_s2,
+                       params.shield_margin_m])  # fmt: skip
     shape = np.shape(north_m)
 
     def flat(value: FloatArray | float) -> FloatArray:
@@ -101,16 +105,16 @@ def abandon_gap(
     zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
     n: float, e: float, heading: float, accel: float, flown_accel: float, speed: float,
     lag_s: float, turn_s: float, hold_s: float, brake_m_s2: float, margin_m: float,
-    accel_max: float, below: float,
+    below: float,
 ) -> float:
     """The least of ``below`` (inf: none) and the gap of the path the autopilot flies if no
     setpoint follows this state (a caller that takes the least with a gap of its own passes
     it: at the sampled points the zones that cannot come below it are skipped, on one
-    compare each): the turn
-    goes on for ``turn_s`` (sampled at ``_ABANDON_ARC_SAMPLES`` points, each less
-    its first-order dip), then straight for ``hold_s``, then braking at
-    ``brake_m_s2`` to a stop (or, without braking, the hold's end is the horizon):
-    the straight part's look-ahead points from min(mu R, v hold) to v hold + v^2 / (2 b) +
+    compare each). A course setpoint (``turn_s`` > 0, a plane): the turn on to the course
+    sent, which leads by up to ``turn_s`` of the turn, at no set pace, over ``turn_s +
+    hold_s`` (``_course_turn_on``). A velocity setpoint: straight for ``hold_s``, then
+    braking at ``brake_m_s2`` to a stop (or, without braking, the hold's end is the
+    horizon): the look-ahead points from min(mu R, v hold) to v hold + v^2 / (2 b) +
     mu R ahead, in closed form (a braking vehicle's look-ahead shrinks to its reach disc).
     A velocity setpoint (``turn_s`` 0) flown with a lag ``lag_s`` leads the course by
     tau a_v / v (``flown_accel`` a_v): the vehicle turns on to it as its lag lets the turn
@@ -118,28 +122,48 @@ def abandon_gap(
     hold = hold_s
     if hold <= 0.0:
         return below
-    turn = turn_s
-    best = below
-    if turn > 0.0:
-        step = turn / _ABANDON_ARC_SAMPLES
-        amax = accel_max
-        for j in range(_ABANDON_ARC_SAMPLES):
-            nj, ej, hj = arc_end(n, e, heading, accel, speed, (j + 0.5) * step)
-            # a midpoint sample: only the first-order dip holds (an infinite rate bound)
-            best = point_gap_below(zn, ze, zmur, zreach, kz, nj, ej, math.cos(hj),
-                                   math.sin(hj), margin_m, speed, amax, math.inf, step,
-                                   best)  # fmt: skip
-    n1, e1, h1 = arc_end(n, e, heading, accel, speed, turn)
+    if turn_s > 0.0:
+        return _course_turn_on(zn, ze, zmur, zreach, kz, n, e, heading, accel, speed, turn_s,
+                               hold, margin_m, below)  # fmt: skip
     brake = brake_m_s2
     stop = speed * hold + (0.5 * speed * speed / brake if brake > 0.0 else 0.0)
-    lead = lag_s * flown_accel / speed if turn <= 0.0 and lag_s > 0.0 else 0.0
+    lead = lag_s * flown_accel / speed if lag_s > 0.0 else 0.0
     if lead != 0.0:
-        return _lagged_straight(zn, ze, zmur, zreach, kz, n1, e1, h1, flown_accel, speed, lag_s,
-                                hold, brake, margin_m, best)  # fmt: skip
-    return min(best, segment_gap(
-        zn, ze, zmur, zreach, kz, n1, e1, math.cos(h1), math.sin(h1), speed * hold, stop,
+        return _lagged_straight(zn, ze, zmur, zreach, kz, n, e, heading, flown_accel, speed,
+                                lag_s, hold, brake, margin_m, below)  # fmt: skip
+    return min(below, segment_gap(
+        zn, ze, zmur, zreach, kz, n, e, math.cos(heading), math.sin(heading), speed * hold, stop,
         True, margin_m, 0.0,
     ))  # fmt: skip
+
+
+@jit_inline
+def _course_turn_on(
+    zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
+    n: float, e: float, h: float, accel: float, speed: float, turn_s: float, hold_s: float,
+    margin_m: float, below: float,
+) -> float:
+    """The least of ``below`` and the gap of a course setpoint's abandon path, from below.
+
+    The course sent leads the course h by L, at most ``turn_s`` of the turn a / v and a
+    quarter turn, the way a turns (``service/setpoints.py``, ``course_lead_rad``), and the
+    vehicle turns on to it at no set rate: ArduPlane, killed mid-turn, came 72-104% of
+    the way in 14 s, its course changing monotonically but for the noise of its velocity
+    (``_COURSE_SLACK_RAD``). So every course of the next ``turn_s + hold_s`` lies within
+    [h - s, h + L + s] (s the slack plus ``_COURSE_OVERSHOOT`` of L), whatever the shape of
+    the turn: ``_lagged_tail``'s closed form from here, over the path flown at v in that
+    time. (Before, the turn was flown as commanded, an arc at a for ``turn_s``: ArduPlane
+    turned 41 degrees of it in 6 s where the arc turned 64, 45 m off the path at 10 s.)"""
+    lead = min(abs(accel) / speed * turn_s, 0.5 * math.pi)
+    slack = _COURSE_SLACK_RAD + _COURSE_OVERSHOOT * lead
+    side = 1.0 if accel >= 0.0 else -1.0
+    mur_max = 0.0
+    for i in range(zmur.shape[1]):
+        mur_max = max(mur_max, zmur[kz, i])
+    tail = _lagged_tail(zn, ze, zmur, zreach, kz, n, e, h - side * slack,
+                        h + side * (lead + slack), speed * (turn_s + hold_s), False, margin_m,
+                        mur_max)  # fmt: skip
+    return min(below, tail)
 
 
 @jit_inline
@@ -255,10 +279,10 @@ def abandon_gap_batch(
     out: FloatArray,
 ) -> None:
     """``abandon_gap`` for every vehicle (zone row k, or 0 if shared) into ``out``;
-    ``profile`` is (turn_s, hold_s, brake_m_s2, margin_m, accel_max_m_s2)."""
+    ``profile`` is (turn_s, hold_s, brake_m_s2, margin_m)."""
     shared = zn.shape[0] == 1
     for k in range(n.shape[0]):
         out[k] = abandon_gap(
             zn, ze, zmur, zreach, 0 if shared else k, n[k], e[k], h[k], a[k], av[k], speed[k],
-            lag[k], profile[0], profile[1], profile[2], profile[3], profile[4], math.inf,
+            lag[k], profile[0], profile[1], profile[2], profile[3], math.inf,
         )

@@ -237,7 +237,7 @@ def _abandon(
         return below
     return abandon_gap(
         zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, s[S_TAU], s[S_AB_TURN], s[S_AB_HOLD],
-        s[S_AB_BRAKE], s[S_EPS], s[S_AMAX], below,
+        s[S_AB_BRAKE], s[S_EPS], below,
     )  # fmt: skip
 
 
@@ -1270,7 +1270,42 @@ def shield_one(
     model's a_v after it, the backup held after the step, the nominal's weight, the
     certificate of the held backup at the start, the certificate one step ahead on the
     nominal, exact from the acceptance level up). ``plan``: the vehicle's plan row
-    (``PLAN_SIZE``), read and updated where the held backup is (or becomes) BACKUP_PLAN."""
+    (``PLAN_SIZE``), read and updated where the held backup is (or becomes) BACKUP_PLAN.
+
+    With an abandon profile every certificate also flies the abandon path of each of its
+    states (``_abandon``); where that leaves the step flying a backup not certified so
+    (nothing safe to abandon is left: the nominal refused and the held backup's
+    certificate below theta), the step is taken again without the profile, from the same
+    plan: the plain certificates, whose argument (stay out) does not need the abandon
+    path. A certificate with the abandon path is never above the plain one (a least taken
+    with one more gap), so a step that kept one certified with it kept it certified
+    plainly: the plain argument holds across the steps of either kind."""
+    if s[S_AB_HOLD] <= 0.0:
+        _shield_step(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, nominal, dt, current,
+                     weight_before, plan, out, k)  # fmt: skip
+        return
+    kept = plan.copy()
+    _shield_step(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, nominal, dt, current,
+                 weight_before, plan, out, k)  # fmt: skip
+    if out[k, 3] > 0.0 or out[k, 4] >= acceptance_level_m(s, zmur, zreach, kz, speed, dt):
+        return
+    plain = s.copy()
+    plain[S_AB_HOLD] = 0.0
+    for j in range(plan.shape[0]):
+        plan[j] = kept[j]
+    _shield_step(plain, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, nominal, dt, current,
+                 weight_before, plan, out, k)  # fmt: skip
+
+
+@jit
+def _shield_step(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float,
+    nominal: float, dt: float, current: int, weight_before: float, plan: IntArray,
+    out: FloatArray, k: int,
+) -> None:
+    """``shield_one``'s step with the certificates of ``s`` (with its abandon profile, if
+    any)."""
     theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
     # what the nominal (or a blend) must leave to be flown: theta, and with a lag a reserve
     # above it, so that a state whose measured a_v is a little off keeps the exits its

@@ -177,8 +177,10 @@ class GuidanceParams:
     # (v^2 / a_max) beyond one of the target, so that it arrives (0: no fade)
     safety_fade_turn_radii: float = 4.0
     prediction_step_ratio: float = 0.05
-    # what the autopilot flies if the companion falls silent (0 s: not checked): the turn goes
-    # on for abandon_turn_s, then straight for abandon_hold_s, then braking (0: none)
+    # what the autopilot flies if the companion falls silent (0 s: not checked): straight
+    # for abandon_hold_s, then braking (0: none); with abandon_turn_s > 0 (a course setpoint,
+    # leading by up to that much of the turn) the turn on to it, then on to the horizon
+    # abandon_turn_s + abandon_hold_s (ezcompanion.guidance.abandon)
     abandon_turn_s: float = 0.0
     abandon_hold_s: float = 0.0
     abandon_brake_m_s2: float = 0.0

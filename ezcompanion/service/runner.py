@@ -647,7 +647,8 @@ class CompanionService:
             EventKind.ABANDON, now,
             f"every setpoint checked against {where} abandon path: turn "
             f"{guidance.abandon_turn_s:g} s, hold {guidance.abandon_hold_s:g} s, brake "
-            f"{guidance.abandon_brake_m_s2:g} m/s^2",
+            f"{guidance.abandon_brake_m_s2:g} m/s^2 (where nothing safe to abandon is left, "
+            f"the law keeps out of the zones without it)",
             turn_s=guidance.abandon_turn_s, hold_s=guidance.abandon_hold_s,
             brake_m_s2=guidance.abandon_brake_m_s2,
         )  # fmt: skip

@@ -1081,13 +1081,22 @@ def flown_abandon_gap(
     with np.errstate(over="ignore"):  # a lag of a few ulps: t / tau is inf, the turn instant
         heading = course + (lead * (1.0 - np.exp(-t / lag_s)) if lag_s > 0.0 else 0.0 * t)
     v = np.where(t <= hold_s, speed, np.maximum(speed - brake_m_s2 * (t - hold_s), 0.0))
+    return path_gap(zones, north, east, t, heading, v / speed, speed)
+
+
+def path_gap(zones: ZoneSet, north: float, east: float, t: np.ndarray, heading: np.ndarray,
+             share: np.ndarray, speed: float) -> float:
+    """The least look-ahead gap (mu R ``share``, the speed's share of ``speed``, ahead) of
+    the path from (north, east) flown at ``speed * share`` along ``heading`` at times
+    ``t``, positions by the trapezoid."""
+    v = speed * share
     vn, ve = v * np.cos(heading), v * np.sin(heading)
     dt = np.diff(t)
     pn = north + np.concatenate([[0.0], np.cumsum(0.5 * (vn[1:] + vn[:-1]) * dt)])
     pe = east + np.concatenate([[0.0], np.cumsum(0.5 * (ve[1:] + ve[:-1]) * dt)])
     best = math.inf
     for i in range(len(zones)):
-        ahead = float(zones.mu_range_m[0, i]) * v / speed
+        ahead = float(zones.mu_range_m[0, i]) * share
         qn = pn + ahead * np.cos(heading) - zones.north_m[0, i]
         qe = pe + ahead * np.sin(heading) - zones.east_m[0, i]
         best = min(best, float((np.hypot(qn, qe) - zones.reach_m[0, i]).min()))
@@ -1154,24 +1163,6 @@ def test_the_abandon_gap_bounds_a_lagging_vehicle_that_turns_on_to_the_setpoint(
     assert close <= best + 1e-5
 
 
-def flown_course_gap(zones: ZoneSet, north: float, east: float, heading: np.ndarray,
-                     speed: float, horizon_s: float) -> float:
-    """The least look-ahead gap of a flight at ``speed`` whose course over ``horizon_s`` is
-    ``heading`` (evenly in time), positions by the trapezoid."""
-    t = np.linspace(0.0, horizon_s, len(heading))
-    vn, ve = speed * np.cos(heading), speed * np.sin(heading)
-    dt = np.diff(t)
-    pn = north + np.concatenate([[0.0], np.cumsum(0.5 * (vn[1:] + vn[:-1]) * dt)])
-    pe = east + np.concatenate([[0.0], np.cumsum(0.5 * (ve[1:] + ve[:-1]) * dt)])
-    best = math.inf
-    for i in range(len(zones)):
-        ahead = float(zones.mu_range_m[0, i])
-        qn = pn + ahead * np.cos(heading) - zones.north_m[0, i]
-        qe = pe + ahead * np.sin(heading) - zones.east_m[0, i]
-        best = min(best, float((np.hypot(qn, qe) - zones.reach_m[0, i]).min()))
-    return best
-
-
 @settings(max_examples=150, deadline=None)
 @given(
     zones=layouts(),
@@ -1226,7 +1217,7 @@ def test_the_abandon_gap_bounds_a_plane_that_turns_on_to_its_course_at_any_pace(
         course_rad=np.array(course), accel_lat_m_s2=np.array(accel),
         flown_accel_m_s2=np.array(0.0), speed_m_s=np.array(speed),
     ))  # fmt: skip
-    assert got <= flown_course_gap(zones, north, east, heading, speed, horizon) + 1e-6
+    assert got <= path_gap(zones, north, east, t, heading, np.ones_like(t), speed) + 1e-6
 
 
 def test_an_abandon_check_that_leaves_nothing_certified_falls_back_to_staying_out() -> None:

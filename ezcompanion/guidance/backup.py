@@ -1280,19 +1280,16 @@ def shield_one(
     path. A certificate with the abandon path is never above the plain one (a least taken
     with one more gap), so a step that kept one certified with it kept it certified
     plainly: the plain argument holds across the steps of either kind."""
-    if s[S_AB_HOLD] <= 0.0:
-        _shield_step(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, nominal, dt, current,
-                     weight_before, plan, out, k)  # fmt: skip
-        return
-    kept = plan.copy()
+    checked = s[S_AB_HOLD] > 0.0
+    kept = plan.copy() if checked else plan
     _shield_step(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, nominal, dt, current,
                  weight_before, plan, out, k)  # fmt: skip
-    if out[k, 3] > 0.0 or out[k, 4] >= acceptance_level_m(s, zmur, zreach, kz, speed, dt):
+    if not checked or out[k, 3] > 0.0 or out[k, 4] >= acceptance_level_m(s, zmur, zreach, kz,
+                                                                         speed, dt):
         return
     plain = s.copy()
     plain[S_AB_HOLD] = 0.0
-    for j in range(plan.shape[0]):
-        plan[j] = kept[j]
+    plan[:] = kept
     _shield_step(plain, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, nominal, dt, current,
                  weight_before, plan, out, k)  # fmt: skip
 

@@ -186,6 +186,9 @@ def main() -> None:
               f"{'identical' if not differ else 'DIFFERENT in ' + ', '.join(differ)}")  # fmt: skip
 
     states = recorded_states(runs, params, args.every)
+    if not states:
+        print(f"no shield call recorded (every {args.every}-th): no step timed")
+        return
     times = step_times_us(states)
     slowest = np.sort(times)[::-1]
     total = times.sum()

@@ -1275,20 +1275,31 @@ def shield_one(
     With an abandon profile every certificate also flies the abandon path of each of its
     states (``_abandon``); where that leaves the step flying a backup not certified so
     (nothing safe to abandon is left: the nominal refused and the held backup's
-    certificate below theta), the step is taken again without the profile, from the same
-    plan: the plain certificates, whose argument (stay out) does not need the abandon
-    path. A certificate with the abandon path is never above the plain one (a least taken
-    with one more gap), so a step that kept one certified with it kept it certified
-    plainly: the plain argument holds across the steps of either kind."""
+    certificate below theta), the backup flown is kept if it is a single one certified
+    plainly (its least shortfall of the abandon path is then flown within the plain
+    argument), else the step is taken again without the profile, from the same plan: the
+    plain certificates, whose argument (stay out) does not need the abandon path. A
+    certificate with the abandon path is never above the plain one (a least taken with one
+    more gap), so a step that kept one certified with it kept it certified plainly: the
+    plain argument holds across the steps of every kind."""
     checked = s[S_AB_HOLD] > 0.0
     kept = plan.copy() if checked else plan
     _shield_step(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, nominal, dt, current,
                  weight_before, plan, out, k)  # fmt: skip
-    if not checked or out[k, 3] > 0.0 or out[k, 4] >= acceptance_level_m(s, zmur, zreach, kz,
-                                                                         speed, dt):
+    theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
+    if not checked or out[k, 3] > 0.0 or out[k, 4] >= theta:
         return
     plain = s.copy()
     plain[S_AB_HOLD] = 0.0
+    held = int(out[k, 2])
+    if held < _N_BACKUPS:
+        # the backup flown, a single one, certified plainly: kept (the nearest to safe to
+        # abandon of those the plain argument allows)
+        certs = np.full(N_POLICIES, -math.inf)
+        backup_certificates(plain, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
+                            math.inf, -math.inf, certs)  # fmt: skip
+        if certs[held] >= theta:
+            return
     plan[:] = kept
     _shield_step(plain, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, nominal, dt, current,
                  weight_before, plan, out, k)  # fmt: skip

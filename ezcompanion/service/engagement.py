@@ -52,6 +52,8 @@ class EngagementOutcome:
     setpoints_sent: int
     failsafes: int
     brakes_sent: int = 0  # zero-velocity stops sent at failsafes
+    # setpoints sent that were not safe to abandon, with an abandon path in force
+    abandon_unsafe_setpoints: int = 0
 
 
 class Engagement:
@@ -78,6 +80,8 @@ class Engagement:
         self.setpoint_write_failures = 0
         self.failsafes = 0
         self.brakes_sent = 0  # zero-velocity stops at failsafes (not counted as setpoints)
+        self.abandon_unsafe_setpoints = 0
+        self._abandon_unsafe_since_s: float | None = None
         self.last_command: TickCommand | None = None
         self.outcome: EngagementOutcome | None = None
         self.failsafe_active = False
@@ -189,10 +193,35 @@ class Engagement:
         if message is not None:
             if self._send(message):
                 self.setpoints_sent += 1
+                self._abandon_said(now, result.abandon_safe)
             else:  # counted as what it is (issue 13: a failed write was counted as sent)
                 self.setpoint_write_failures += 1
         if self.publisher is not None:  # after the setpoint has left
             self.publisher.publish_tick(result)
+
+    def _abandon_said(self, now: float, safe: bool | None) -> None:
+        """Count a setpoint sent that is not safe to abandon, and say when they start and
+        stop (an ``abandon`` event each way)."""
+        if safe is None:
+            return
+        since = self._abandon_unsafe_since_s
+        if not safe:
+            self.abandon_unsafe_setpoints += 1
+            if since is None:
+                self._abandon_unsafe_since_s = now
+                self.events.emit(
+                    EventKind.ABANDON, now, "setpoint not safe to abandon: flown on alone from "
+                    "the measured state it would come within the margin of a zone (the law "
+                    "keeps out of the zones all the same)",
+                    safe=False, unsafe_setpoints=self.abandon_unsafe_setpoints,
+                )  # fmt: skip
+        elif since is not None:
+            self._abandon_unsafe_since_s = None
+            self.events.emit(
+                EventKind.ABANDON, now, f"setpoints safe to abandon again after {now - since:.2f} "
+                f"s ({self.abandon_unsafe_setpoints} not so far)", safe=True,
+                unsafe_setpoints=self.abandon_unsafe_setpoints,
+            )  # fmt: skip
 
     def pause(self, now: float, *, brake: bool = False) -> None:
         """Guidance stops (mode change, lost link): forget the actuator state and timing.
@@ -226,6 +255,7 @@ class Engagement:
             setpoints_sent=self.setpoints_sent,
             failsafes=self.failsafes,
             brakes_sent=self.brakes_sent,
+            abandon_unsafe_setpoints=self.abandon_unsafe_setpoints,
         )
         verdict = "intercepted" if intercepted else "not intercepted"
         if math.isinf(self.loop.miss_distance_m):  # the law never ran: no miss to speak of

@@ -12,6 +12,7 @@ import math
 
 from ezcompanion.config import Scenario
 from ezcompanion.guidance import GuidanceController, KinematicState, LawName
+from ezcompanion.guidance.abandon import abandon_gap
 from ezcompanion.records import Hold, TickCommand, VehicleState
 
 __all__ = ["GuidanceLoop", "Hold", "TickCommand"]
@@ -64,6 +65,10 @@ class GuidanceLoop:
             self.period_s,
         )
         self.controller.reset()
+        zones = self.controller.zones  # and the abandon check of the setpoints sent (1.2 s cold)
+        abandon_gap(zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0, start.north_m,
+                    start.east_m, start.course_rad, 0.0, 0.0, start.speed_m_s, 0.0, 0.0, 1.0,
+                    0.0, 0.0, math.inf)  # fmt: skip
 
     def assume_response_lag(self, lag_s: float) -> None:
         """Give the law the vehicle's response lag ``lag_s`` (its autopilot's measured
@@ -224,6 +229,7 @@ class GuidanceLoop:
         )  # fmt: skip
         self.miss_distance_m = min(self.miss_distance_m, float(step.law.range_to_target_m))
         self.captured = bool(step.captured)
+        accel = float(step.accel_lat_cmd_m_s2)
         return TickCommand(
             time_s=now_s,
             dt_s=dt,
@@ -231,6 +237,28 @@ class GuidanceLoop:
             course_rad=course,
             speed_m_s=speed,
             nominal_speed_m_s=self.nominal_speed_m_s,
-            accel_lat_m_s2=float(step.accel_lat_cmd_m_s2),
+            accel_lat_m_s2=accel,
             step=step,
+            abandon_safe=self._abandon_safe(state, course, speed, rate, accel),
         )
+
+    def _abandon_safe(self, state: VehicleState, course: float, speed: float,
+                      rate: float | None, accel: float) -> bool | None:
+        """Whether the setpoint of ``accel`` is safe to keep flying if no other follows, by
+        the abandon path in force (None: none): the shield keeps it so wherever it can, and
+        falls back to the plain certificates where nothing safe to abandon is left
+        (docs/guidance.md, "Safe to abandon"); this says which, at the setpoint, as the
+        campaigns' check does (``validation.abandon``)."""
+        params = self.controller.params
+        if params.abandon_hold_s <= 0.0:
+            return None
+        bound = params.accel_max_m_s2
+        flown = accel if rate is None else min(max(rate * speed, -bound), bound)
+        zones = self.controller.zones
+        gap = abandon_gap(
+            zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0, state.north_m,
+            state.east_m, course, accel, flown, speed, params.response_lag_s,
+            params.abandon_turn_s, params.abandon_hold_s, params.abandon_brake_m_s2,
+            params.shield_margin_m, math.inf,
+        )  # fmt: skip
+        return bool(gap >= 0.0)

@@ -1286,8 +1286,10 @@ def shield_one(
     kept = plan.copy() if checked else plan
     _shield_step(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, nominal, dt, current,
                  weight_before, plan, out, k)  # fmt: skip
+    if not checked or out[k, 3] > 0.0:
+        return  # no profile, or the nominal (or a blend) flown: certified with the path
     theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
-    if not checked or out[k, 3] > 0.0 or out[k, 4] >= theta:
+    if out[k, 4] >= theta:
         return
     plain = s.copy()
     plain[S_AB_HOLD] = 0.0

@@ -85,7 +85,7 @@ def test_a_scenario_relative_to_the_vehicle_is_placed_where_it_engages(tmp_path:
     placement = flight.service.placement
     assert placement is not None
     # where the vehicle was when placed (it left (40, 25) at 1 m/s, braking into its hold,
-    # and a lockstep companion guides nothing before the vehicle's time is 1 s)
+    # and a lockstep companion asks nothing of it before it has kept lockstep a while)
     placed_at = flight.events.of_kind(EventKind.SCENARIO)[0].time_s
     with flight.truth.open() as rows:
         there = min(csv.DictReader(rows), key=lambda r: abs(float(r["t_s"]) - placed_at))

@@ -123,8 +123,8 @@ def abandon_gap(
     if hold <= 0.0:
         return below
     if turn_s > 0.0:
-        return _course_turn_on(zn, ze, zmur, zreach, kz, n, e, heading, accel, speed, turn_s,
-                               hold, margin_m, below)  # fmt: skip
+        return _course_turn_on(zn, ze, zmur, zreach, kz, n, e, heading, accel, flown_accel,
+                               speed, lag_s, turn_s, hold, margin_m, below)  # fmt: skip
     brake = brake_m_s2
     stop = speed * hold + (0.5 * speed * speed / brake if brake > 0.0 else 0.0)
     lead = lag_s * flown_accel / speed if lag_s > 0.0 else 0.0
@@ -140,8 +140,8 @@ def abandon_gap(
 @jit_inline
 def _course_turn_on(
     zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
-    n: float, e: float, h: float, accel: float, speed: float, turn_s: float, hold_s: float,
-    margin_m: float, below: float,
+    n: float, e: float, h: float, accel: float, flown_accel: float, speed: float,
+    lag_s: float, turn_s: float, hold_s: float, margin_m: float, below: float,
 ) -> float:
     """The least of ``below`` and the gap of a course setpoint's abandon path, from below.
 
@@ -149,20 +149,23 @@ def _course_turn_on(
     quarter turn, the way a turns (``service/setpoints.py``, ``course_lead_rad``), and the
     vehicle turns on to it at no set rate: ArduPlane, killed mid-turn, came 72-104% of
     the way in 14 s, its course changing monotonically but for the noise of its velocity
-    (``_COURSE_SLACK_RAD``). So every course of the next ``turn_s + hold_s`` lies within
-    [h - s, h + L + s] (s the slack plus ``_COURSE_OVERSHOOT`` of L), whatever the shape of
-    the turn: ``_lagged_tail``'s closed form from here, over the path flown at v in that
-    time. (Before, the turn was flown as commanded, an arc at a for ``turn_s``: ArduPlane
-    turned 41 degrees of it in 6 s where the arc turned 64, 45 m off the path at 10 s.)"""
-    lead = min(abs(accel) / speed * turn_s, 0.5 * math.pi)
-    slack = _COURSE_SLACK_RAD + _COURSE_OVERSHOOT * lead
-    side = 1.0 if accel >= 0.0 else -1.0
+    (``_COURSE_SLACK_RAD``). A vehicle still turning the other way (its flown a_v against
+    a, or rolling out where a is 0) first carries on by up to its lag's share, tau a_v / v.
+    So every course of the next ``turn_s + hold_s`` lies within the span of h, h + L and
+    h + tau a_v / v, widened by s (the slack plus ``_COURSE_OVERSHOOT`` of L), whatever the
+    shape of the turn: ``_lagged_tail``'s closed form from here, over the path flown at v
+    in that time. (Before, the turn was flown as commanded, an arc at a for ``turn_s``:
+    ArduPlane turned 41 degrees of it in 6 s where the arc turned 64, 45 m off the path at
+    10 s.)"""
+    lead = math.copysign(min(abs(accel) / speed * turn_s, 0.5 * math.pi), accel)
+    carry = lag_s * flown_accel / speed
+    slack = _COURSE_SLACK_RAD + _COURSE_OVERSHOOT * abs(lead)
     mur_max = 0.0
     for i in range(zmur.shape[1]):
         mur_max = max(mur_max, zmur[kz, i])
-    tail = _lagged_tail(zn, ze, zmur, zreach, kz, n, e, h - side * slack,
-                        h + side * (lead + slack), speed * (turn_s + hold_s), False, margin_m,
-                        mur_max)  # fmt: skip
+    tail = _lagged_tail(zn, ze, zmur, zreach, kz, n, e, h + min(0.0, lead, carry) - slack,
+                        h + max(0.0, lead, carry) + slack, speed * (turn_s + hold_s), False,
+                        margin_m, mur_max)  # fmt: skip
     return min(below, tail)
 
 

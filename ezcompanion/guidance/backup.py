@@ -1275,13 +1275,15 @@ def shield_one(
     With an abandon profile every certificate also flies the abandon path of each of its
     states (``_abandon``); where that leaves the step flying a backup not certified so
     (nothing safe to abandon is left: the nominal refused and the held backup's
-    certificate below theta), the backup flown is kept if it is a single one certified
-    plainly (its least shortfall of the abandon path is then flown within the plain
-    argument), else the step is taken again without the profile, from the same plan: the
-    plain certificates, whose argument (stay out) does not need the abandon path. A
-    certificate with the abandon path is never above the plain one (a least taken with one
-    more gap), so a step that kept one certified with it kept it certified plainly: the
-    plain argument holds across the steps of every kind."""
+    certificate below theta), the step is taken again without the profile, from the same
+    plan: the plain certificates, whose argument (stay out) does not need the abandon
+    path. A state certified with the path is certified plainly: every exit is taken at a
+    STRAIGHT certificate >= theta with the path, so >= theta without it, and every sample
+    is a least taken with one gap more. (Keeping a backup flown with the path where its
+    plain certificate, as ``backup_certificates`` gives it, reached theta was tried and is
+    not sound: that value is an early stop's, above the exact one, and a turn the plain
+    rule would leave at once is not the one it certifies; a reviewer's closed loop entered
+    a zone by 0.45 m with it.)"""
     checked = s[S_AB_HOLD] > 0.0
     kept = plan.copy() if checked else plan
     _shield_step(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, nominal, dt, current,
@@ -1293,15 +1295,6 @@ def shield_one(
         return
     plain = s.copy()
     plain[S_AB_HOLD] = 0.0
-    held = int(out[k, 2])
-    if held < _N_BACKUPS:
-        # the backup flown, a single one, certified plainly: kept (the nearest to safe to
-        # abandon of those the plain argument allows)
-        certs = np.full(N_POLICIES, -math.inf)
-        backup_certificates(plain, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
-                            math.inf, -math.inf, certs)  # fmt: skip
-        if certs[held] >= theta:
-            return
     plan[:] = kept
     _shield_step(plain, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, nominal, dt, current,
                  weight_before, plan, out, k)  # fmt: skip

@@ -80,9 +80,9 @@ class TickCommand:
     nominal_speed_m_s: float  # the speed to fly (the scenario's constant speed)
     accel_lat_m_s2: float  # lateral acceleration to fly (the actuator state at the step's end)
     step: GuidanceStep
-    # safe to keep flying if no other setpoint follows, by the abandon path in force (None:
-    # none in force)
-    abandon_safe: bool | None = None
+    # the measured course rate the law was given (None: none, or a start from rest, where
+    # the law's model turns on its own)
+    course_rate_rad_s: float | None = None
 
     @property
     def captured(self) -> bool:

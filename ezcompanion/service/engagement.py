@@ -193,7 +193,7 @@ class Engagement:
         if message is not None:
             if self._send(message):
                 self.setpoints_sent += 1
-                self._abandon_said(now, result.abandon_safe)
+                self._abandon_said(now, self.loop.abandon_safe(result))
             else:  # counted as what it is (issue 13: a failed write was counted as sent)
                 self.setpoint_write_failures += 1
         if self.publisher is not None:  # after the setpoint has left

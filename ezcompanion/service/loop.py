@@ -229,7 +229,6 @@ class GuidanceLoop:
         )  # fmt: skip
         self.miss_distance_m = min(self.miss_distance_m, float(step.law.range_to_target_m))
         self.captured = bool(step.captured)
-        accel = float(step.accel_lat_cmd_m_s2)
         return TickCommand(
             time_s=now_s,
             dt_s=dt,
@@ -237,28 +236,29 @@ class GuidanceLoop:
             course_rad=course,
             speed_m_s=speed,
             nominal_speed_m_s=self.nominal_speed_m_s,
-            accel_lat_m_s2=accel,
+            accel_lat_m_s2=float(step.accel_lat_cmd_m_s2),
             step=step,
-            abandon_safe=self._abandon_safe(state, course, speed, rate, accel),
+            course_rate_rad_s=rate,
         )
 
-    def _abandon_safe(self, state: VehicleState, course: float, speed: float,
-                      rate: float | None, accel: float) -> bool | None:
-        """Whether the setpoint of ``accel`` is safe to keep flying if no other follows, by
-        the abandon path in force (None: none): the shield keeps it so wherever it can, and
+    def abandon_safe(self, command: TickCommand) -> bool | None:
+        """Whether ``command``'s setpoint is safe to keep flying if no other follows, by the
+        abandon path in force (None: none): the shield keeps it so wherever it can, and
         falls back to the plain certificates where nothing safe to abandon is left
-        (docs/guidance.md, "Safe to abandon"); this says which, at the setpoint, as the
-        campaigns' check does (``validation.abandon``)."""
+        (docs/guidance.md, "Safe to abandon"); this says which, from the measured state, as
+        the campaigns' check does (``validation.abandon``). Asked of the setpoints sent only
+        (a plane's course goes out at most 10 times a second), not in the tick."""
         params = self.controller.params
         if params.abandon_hold_s <= 0.0:
             return None
+        accel, speed, rate = command.accel_lat_m_s2, command.speed_m_s, command.course_rate_rad_s
         bound = params.accel_max_m_s2
         flown = accel if rate is None else min(max(rate * speed, -bound), bound)
         zones = self.controller.zones
         gap = abandon_gap(
-            zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0, state.north_m,
-            state.east_m, course, accel, flown, speed, params.response_lag_s,
-            params.abandon_turn_s, params.abandon_hold_s, params.abandon_brake_m_s2,
-            params.shield_margin_m, math.inf,
+            zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0,
+            command.state.north_m, command.state.east_m, command.course_rad, accel, flown,
+            speed, params.response_lag_s, params.abandon_turn_s, params.abandon_hold_s,
+            params.abandon_brake_m_s2, params.shield_margin_m, math.inf,
         )  # fmt: skip
         return bool(gap >= 0.0)

@@ -491,8 +491,8 @@ class CompanionService:
             and session.frame_settled
             and self._placed(now)
         ):
-            # PX4 flies what is streamed as soon as it takes OFFBOARD, a heartbeat (up to a
-            # second) before the companion hears of it: so what is streamed is the
+            # PX4 flies what is streamed as soon as it takes OFFBOARD, before the companion
+            # hears of it (0.1 s, its heartbeat asked for): so what is streamed is the
             # engagement's, flown against the scenario placed where the vehicle waits
             # (placed at engage instead, the setpoints before it were the law's against the
             # file's unplaced geometry: SITL flew them 0.3 to 2 m before the placement)

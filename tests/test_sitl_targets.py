@@ -174,6 +174,32 @@ def test_a_plane_whose_roll_limit_stops_the_laws_turn_is_refused_before_guided(
     assert not asked and flight.outcome.setpoints_sent == 0
 
 
+@pytest.mark.parametrize(("turn_s", "outcome"), [(3.0, "refused"), (6.0, "flown")])
+def test_a_planes_abandon_path_shorter_than_its_course_lead_is_refused_before_guided(
+    turn_s: float, outcome: str, tmp_path: Path
+) -> None:
+    """A plane abandoned turns on to the course last sent, which leads by up to 6 s of the
+    law's turn (``setpoints.COURSE_LEAD_MAX_S``): a scenario's own abandon path with a
+    shorter ``abandon_turn_s`` would check every setpoint against a turn-on the plane may
+    overfly, so the companion refuses to guide, naming the field and its value; with 6 s,
+    the check holds and the plane is guided."""
+    data = yaml.safe_load((CONFIG / "paper_scenario1_plane22.yaml").read_text())
+    data["guidance"].update(abandon_turn_s=turn_s, abandon_hold_s=4.0)
+    config = tmp_path / "plane.yaml"
+    config.write_text(yaml.safe_dump(data))
+    flight = fly_service(config, tmp_path, profile="plane", start_mode="LOITER",
+                         max_time_s=4.0, lockstep=True)  # fmt: skip
+    refused = [e for e in flight.events.of_kind(EventKind.ABORTED)
+               if e.data.get("cause") == "abandon_turn"]  # fmt: skip
+    asked = [e for e in flight.events.of_kind(EventKind.MODE) if "requested" in e.data]
+    if outcome == "flown":
+        assert not refused and asked and flight.outcome.setpoints_sent > 0
+        return
+    (event,) = refused
+    assert "abandon_turn_s 3 s" in event.message and event.data["abandon_turn_s"] == 3.0
+    assert not asked and flight.outcome.setpoints_sent == 0
+
+
 @pytest.mark.parametrize(
     ("guided_p", "accept", "outcome"),
     [(1500.0, False, "refused"), (1500.0, True, "warned"), (5000.0, False, "flown")],

@@ -51,6 +51,7 @@ from ezcompanion.service.lockstep import Lockstep, check_loopback_url
 from ezcompanion.service.loop import GuidanceLoop
 from ezcompanion.service.session import POSITIONS, VehicleSession
 from ezcompanion.service.setpoints import (
+    COURSE_LEAD_MAX_S,
     Setpoints,
     course_turn_share,
     guided_p_needed,
@@ -482,7 +483,9 @@ class CompanionService:
             and session.profile is not None
         ):
             self._heading_loop_checked = True
-            if not self._check_heading_loop(now, session.profile):
+            if not self._check_heading_loop(now, session.profile) or not (
+                self._check_course_lead(now)
+            ):
                 return
         if (
             self._streams_ahead()
@@ -613,6 +616,34 @@ class CompanionService:
                          f"the turn it asks is flown: not guided ({fix}, or set "
                          "companion.accept_soft_heading_loop to fly it without the argument)",
                          cause="heading_loop", turn_share=share, **data)  # fmt: skip
+        self.engagement.done = True
+        self.phase = Phase.DONE
+        return False
+
+    def _check_course_lead(self, now: float) -> bool:
+        """A scenario's own abandon path on a plane must allow the turn a course setpoint
+        may lead by (``setpoints.COURSE_LEAD_MAX_S`` of the law's turn): abandoned, the plane
+        turns on to the course last sent, and a path with a shorter ``abandon_turn_s``
+        understates where that takes it, so every setpoint's check would be made against a
+        path the plane may not fly. Refused before the guided mode is asked for. False if
+        refused."""
+        setpoints = self.engagement.setpoints
+        guidance = self.loop.scenario.guidance
+        if (
+            setpoints is None
+            or setpoints.kind is not SetpointKind.COURSE
+            or guidance.abandon_hold_s <= 0.0
+            or guidance.abandon_turn_s >= COURSE_LEAD_MAX_S
+        ):
+            return True
+        self.events.emit(
+            EventKind.ABORTED, now, f"guidance.abandon_turn_s {guidance.abandon_turn_s:g} s "
+            f"is shorter than the turn a course setpoint may lead by ({COURSE_LEAD_MAX_S:g} s "
+            "of the law's turn): the abandon check would understate where the plane turns "
+            f"to if the companion fell silent; not guided (set abandon_turn_s >= "
+            f"{COURSE_LEAD_MAX_S:g})",
+            cause="abandon_turn", abandon_turn_s=guidance.abandon_turn_s,
+        )  # fmt: skip
         self.engagement.done = True
         self.phase = Phase.DONE
         return False

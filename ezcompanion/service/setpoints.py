@@ -64,6 +64,7 @@ from ezcompanion.service.settings import SetpointKind
 from ezcompanion.wire import Link, Message, course_command, s_to_ms, velocity_setpoint
 
 __all__ = [
+    "COURSE_LEAD_MAX_S",
     "MAX_LEAD_DEG",
     "CourseSetpoints",
     "Setpoints",
@@ -86,6 +87,7 @@ _COURSE_HORIZON_S = 2.0
 # but never more of turning ahead than the abandon path's turn (ArduPlane's profile)
 _CLIP_MARGIN = 1.5
 _COURSE_HORIZON_MAX_S = ARDUPLANE.abandon_turn_s
+COURSE_LEAD_MAX_S = _COURSE_HORIZON_MAX_S  # the most turning a course setpoint leads by
 _COURSE_MIN_INTERVAL_S = 0.1
 _MIN_ACCEL_LIMIT_RATIO = 0.02  # of a_max: the smallest limit we hand the autopilot
 _MAX_COURSE_LEAD_RAD = 0.5 * math.pi  # a course command never more than 90 degrees ahead

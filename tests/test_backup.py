@@ -880,6 +880,42 @@ def test_certificates_asked_from_a_level_up_are_exact_there_and_below_it_below()
     assert stopped > 100
 
 
+def test_a_backup_counts_as_plainly_certified_only_by_its_exact_certificate() -> None:
+    """The abandon check keeps a step that flies a single backup where that backup is
+    certified plainly (``backup._plain_certificate`` >= theta): its certificate computed
+    with no early stop is >= theta, and for a turn plain STRAIGHT is below theta (otherwise
+    the plain rule leaves the turn at once, and the turn's value is not its flight's); the
+    value it gives there is a certificate (at most the exact one). The values
+    ``backup_certificates`` gives do not decide it: where STRAIGHT is certified it writes
+    STRAIGHT's value into the turns' slots, and a turn asked above theta may return an
+    early stop's value, above the exact one (a closed loop that trusted them entered a zone
+    by 0.45 m)."""
+    dt = 0.02
+    differs = [0, 0]
+    for s, z, n, e, h, a, av in _random_states(500, 71):
+        theta = bk.acceptance_level_m(s, z[2], z[3], 0, 1.0, dt)
+        straight = bk.straight_certificate(s, *z, n, e, h, a, av, 1.0, dt, -math.inf, math.inf,
+                                           False)  # fmt: skip
+        given = np.empty(3)
+        bk.backup_certificates(s, *z, n, e, h, a, av, 1.0, dt, math.inf, -math.inf, given)
+        for policy in (bk.BACKUP_LEFT, bk.BACKUP_RIGHT, bk.BACKUP_STRAIGHT, bk.BACKUP_RUNG0,
+                       bk.BACKUP_PLAN):  # fmt: skip
+            exact = -math.inf  # a rung or a plan: not a single backup
+            if policy == bk.BACKUP_STRAIGHT:
+                exact = straight
+            elif policy in (bk.BACKUP_LEFT, bk.BACKUP_RIGHT) and straight < theta:
+                exact = bk.turn_certificate(s, *z, policy, n, e, h, a, av, 1.0, dt, straight,
+                                            theta, -math.inf, math.inf, False)  # fmt: skip
+            if policy in (bk.BACKUP_LEFT, bk.BACKUP_RIGHT) and (exact >= theta) != (
+                given[policy] >= theta
+            ):
+                differs[straight < theta] += 1  # STRAIGHT's value, or an early stop's
+            got = bk._plain_certificate(s, *z, policy, n, e, h, a, av, 1.0, dt, theta)
+            assert (got >= theta) == (exact >= theta), (policy, got, exact, theta)
+            assert got < theta or got <= exact + 1e-12, (policy, got, exact)  # a certificate
+    assert min(differs) > 0  # both ways of trusting backup_certificates' values go wrong here
+
+
 # 5. the law at scale -------------------------------------------------------------------
 
 
@@ -1244,6 +1280,80 @@ def test_an_abandon_check_that_leaves_nothing_certified_falls_back_to_staying_ou
     )  # fmt: skip
     run = simulate(scenario, LawName.BACKUP)
     assert run.clearance_m.min() > 0.0
+
+
+# two starts of a reviewer's closed loop (seed 11, draws 2405 and 2566 of 3,000): defenders
+# (north, east, range, capture radius, speed ratio), start (north, east, course, a = a_v), lag
+_KEEP_CASES = [
+    ([(-1.1569521359880657, -2.3215210477106685, 1.2026443404716998, 0.8734208001111451,
+       0.813552812642631),
+      (5.043141046190023, -3.3994843639101764, 0.9689969256138662, 0.9102398566796077,
+       0.4425180139146332),
+      (3.397577442309359, -5.6969923709076875, 2.4964058941693974, 0.9551419630449087,
+       0.8482410182428568)],
+     (-4.653985143686526, -5.950851594039255, -0.3590878326982052, 0.713598033255867), 1.2),
+    ([(5.967730344950901, -4.805559290423375, 2.3070702050211667, 0.26843323027999144,
+       0.7264011157177117),
+      (-5.1067545968951595, -2.809196691388471, 1.8409219277405076, 0.7357161493411446,
+       0.8062056996202174),
+      (2.620091701631223, -2.4508023934649774, 0.6316601821225969, 0.7264161086418818,
+       0.7970358210645756)],
+     (0.5866387078768742, -5.0255308383063095, 0.45514442970997493, -0.11142130836486919),
+     0.3),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("defenders", "start", "tau"), _KEEP_CASES)
+def test_an_abandon_check_keeps_a_backup_only_where_its_plain_certificate_holds(
+    defenders: list[tuple[float, ...]], start: tuple[float, float, float, float], tau: float
+) -> None:
+    """With ArduCopter's abandon path, from a plainly certified start, a nominal steering at
+    the nearest zone's centre at the command limit, 10 s at 20 ms: the shield keeps the
+    backup a step flew where nothing safe to abandon is left only where its plain
+    certificate holds, so the flight stays out by the margin (+0.21 and +0.23 m). Kept where
+    ``backup_certificates``' plain value reached theta instead (an early stop's value, or
+    STRAIGHT's in a turn's slot), the same flights entered a zone (-0.04 and -0.07 m)."""
+    zones = ZoneSet.from_defenders([
+        Defender(north_m=n, east_m=e, range_m=r, capture_radius_m=c, speed_ratio=mu)
+        for n, e, r, c, mu in defenders
+    ])  # fmt: skip
+    params = dataclasses.replace(PARAMS, response_lag_s=tau)
+    dt = 0.02
+    theta = bk.acceptance_level_m(settings_for(params), zones.mu_range_m, zones.reach_m, 0,
+                                  1.0, dt)  # fmt: skip
+    assert start_certificate(zones, params, start, dt) >= theta  # plainly certified
+    profile = ABANDON_PROFILES["arducopter"]
+    s = bk.pack_shield(params, abandon_turn_s=profile.turn_s, abandon_hold_s=profile.hold_s,
+                       abandon_brake_m_s2=profile.brake_m_s2)  # fmt: skip
+    plain = settings_for(params)
+    z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
+    north, east, course, a = start
+    vehicle = Vehicle(north, east, course, a, 1.0, tau)
+    out = np.empty((1, 6))
+    current, weight = bk.BACKUP_NONE, math.nan
+    plan = np.zeros(bk.PLAN_SIZE, dtype=np.int64)
+    least = true_gap(zones, north, east, course)
+    kept = 0
+    for _ in range(500):
+        n, e, h, av = (float(x) for x in vehicle.x)
+        gaps = np.hypot(zones.north_m[0] - n, zones.east_m[0] - e) - zones.reach_m[0]
+        i = int(np.argmin(gaps))
+        bearing = math.atan2(zones.east_m[0, i] - e, zones.north_m[0, i] - n)
+        error = (bearing - h + math.pi) % (2.0 * math.pi) - math.pi
+        nominal = math.copysign(params.command_limit_m_s3, error)
+        # the step with the path alone: where it flies a backup not certified so, the keep
+        # rule is whether that backup's plain certificate holds
+        alone = np.empty((1, 6))
+        bk._shield_step(s, *z, n, e, h, a, av, 1.0, nominal, dt, current, weight, plan.copy(),
+                        alone, 0)  # fmt: skip
+        kept += alone[0, 3] == 0.0 and alone[0, 4] < theta and bk._plain_certificate(
+            plain, *z, int(alone[0, 2]), n, e, h, a, av, 1.0, dt, theta) >= theta
+        bk.shield_one(s, *z, n, e, h, a, av, 1.0, nominal, dt, current, weight, plan, out, 0)
+        a_next, current, weight = float(out[0, 0]), int(out[0, 2]), float(out[0, 3])
+        least = min(least, vehicle.fly(a, a_next, dt, zones))
+        a = a_next
+    assert least >= params.shield_margin_m - 1e-6
+    assert kept > 0  # steps these flights keep by the rule (the rule under test applies)
 
 
 def test_the_abandon_gap_bounds_a_slow_vehicle_whose_courses_spread_over_a_half_turn() -> None:

@@ -285,10 +285,6 @@ def _own_track(scenario: Scenario, law: LawName) -> list[VehicleState]:
     inside = np.flatnonzero(run.range_to_target_m <= scenario.guidance.intercept_radius_m)
     end = int(inside[0]) if inside.size else len(run.t_s)
     speed = scenario.start.speed_m_s
-    # the course rate flown: a / v, or with a lag the heading's own rate (a_v / v)
-    rate = run.accel_lat_m_s2 / speed
-    if scenario.guidance.response_lag_s > 0.0:
-        rate = np.gradient(np.unwrap(run.heading_rad), run.t_s)
     return [
         VehicleState(
             north_m=float(run.north_m[i]), east_m=float(run.east_m[i]), down_m=-20.0,
@@ -296,7 +292,7 @@ def _own_track(scenario: Scenario, law: LawName) -> list[VehicleState]:
             velocity_east_m_s=speed * math.sin(run.heading_rad[i]),
             yaw_rad=float(run.heading_rad[i]), position_time_s=0.02 * k,
             attitude_time_s=0.02 * k, position_source="local",
-            course_rate_rad_s=float(rate[i]),
+            course_rate_rad_s=float(run.accel_lat_m_s2[i]) / speed,
         )
         for k, i in enumerate(range(0, end, stride))
     ]  # fmt: skip

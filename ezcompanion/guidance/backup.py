@@ -1276,7 +1276,7 @@ def shield_one(
     states (``_abandon``); where that leaves the step flying a backup not certified so
     (nothing safe to abandon is left: the nominal refused and the held backup's
     certificate below theta), the step stands if the single backup it flies is certified
-    by the plain certificates (``_plain_certificate`` >= theta, reported as the held
+    by the plain certificates (``_floor_certificate`` >= theta, reported as the held
     backup's certificate: its plain argument, stay out, holds for it); otherwise the step
     is taken again without the profile, from the same plan. Either way the plain claim
     holds, which does not need the abandon path. A state
@@ -1285,9 +1285,11 @@ def shield_one(
     taken with one gap more. (Keeping the backup where its plain certificate *as
     ``backup_certificates`` gives it* reached theta was tried and is not sound: that value
     may be an early stop's, above the exact one, and a turn the plain rule would leave at
-    once is not the one it certifies; a reviewer's closed loop entered a zone by 0.45 m
-    with it. ``_plain_certificate`` asks each certificate with theta as its floor and
-    counts a turn only where plain STRAIGHT is below theta.)"""
+    once is not the one it certifies; reviewers' closed loops entered zones with it, by
+    up to 0.45 m. ``_floor_certificate`` asks each certificate with theta as its floor and
+    counts a turn only where STRAIGHT is below theta. For the same reason a step whose
+    held single backup ``backup_certificates`` puts at theta or above with the path is
+    taken as it is only where ``_floor_certificate`` agrees.)"""
     checked = s[S_AB_HOLD] > 0.0
     kept = plan.copy() if checked else plan
     _shield_step(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, nominal, dt, current,
@@ -1295,12 +1297,16 @@ def shield_one(
     if not checked or out[k, 3] > 0.0:
         return  # no profile, or the nominal (or a blend) flown: certified with the path
     theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
-    if out[k, 4] >= theta:
+    flown = int(out[k, 2])
+    # the held backup's value from backup_certificates may be an early stop's (a turn asked
+    # above another's value): a single backup is asked again with theta as its floor
+    if out[k, 4] >= theta and (not 0 <= flown < _N_BACKUPS or _floor_certificate(
+            s, zn, ze, zmur, zreach, kz, flown, n, e, h, a, av, speed, dt, theta) >= theta):
         return
     plain = s.copy()
     plain[S_AB_HOLD] = 0.0
-    held = _plain_certificate(plain, zn, ze, zmur, zreach, kz, int(out[k, 2]), n, e, h, a, av,
-                              speed, dt, theta)  # fmt: skip
+    held = _floor_certificate(plain, zn, ze, zmur, zreach, kz, flown, n, e, h, a, av, speed, dt,
+                              theta)  # fmt: skip
     if held >= theta:
         out[k, 4] = held  # the backup flown keeps the plain claim: the step stands
         return
@@ -1310,28 +1316,28 @@ def shield_one(
 
 
 @jit_borrow
-def _plain_certificate(
-    plain: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+def _floor_certificate(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, policy: int, n: float, e: float, h: float, a: float, av: float, speed: float,
     dt: float, theta: float,
 ) -> float:
-    """The plain certificate (``plain``: the settings without an abandon profile) of
-    single backup ``policy`` (LEFT, RIGHT or STRAIGHT) flown by its rule from this state,
+    """The certificate with the settings ``s`` (with an abandon profile or, plain, without)
+    of single backup ``policy`` (LEFT, RIGHT or STRAIGHT) flown by its rule from this state,
     where it reaches ``theta``; below theta, a value below it (-inf for any other policy).
     Each certificate is asked with ``theta`` as its floor, so a value at or above it is a
     certificate, never an early stop's (``backup_certificates`` asks the turns with a
-    higher floor: a value it returns above theta may be one). A turn is -inf where plain
-    STRAIGHT reaches theta: there the plain rule leaves the turn at once, and the turn's
-    own value is not the flight's."""
+    higher floor: a value it returns above theta may be one). A turn is -inf where STRAIGHT
+    reaches theta: there its rule leaves the turn at once, and the turn's own value is not
+    the flight's."""
     if not 0 <= policy < _N_BACKUPS:  # a rung or a plan
         return -math.inf
-    straight = straight_certificate(plain, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
+    straight = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
                                     theta, theta, _FLAGS[0])  # fmt: skip
     if policy == BACKUP_STRAIGHT:
         return straight
     if straight >= theta:
         return -math.inf
-    return turn_certificate(plain, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av, speed, dt,
+    return turn_certificate(s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av, speed, dt,
                             straight, theta, theta, theta, _FLAGS[0])  # fmt: skip
 
 

@@ -86,8 +86,7 @@ _COURSE_HORIZON_S = 2.0
 # far enough ahead that the demand passes the clip by this factor, so that p3 sets the turn,
 # but never more of turning ahead than the abandon path's turn (ArduPlane's profile)
 _CLIP_MARGIN = 1.5
-_COURSE_HORIZON_MAX_S = ARDUPLANE.abandon_turn_s
-COURSE_LEAD_MAX_S = _COURSE_HORIZON_MAX_S  # the most turning a course setpoint leads by
+COURSE_LEAD_MAX_S = ARDUPLANE.abandon_turn_s  # the most turning a course setpoint leads by
 _COURSE_MIN_INTERVAL_S = 0.1
 _MIN_ACCEL_LIMIT_RATIO = 0.02  # of a_max: the smallest limit we hand the autopilot
 _MAX_COURSE_LEAD_RAD = 0.5 * math.pi  # a course command never more than 90 degrees ahead
@@ -299,7 +298,7 @@ def course_lead_rad(turn_rate_rad_s: float, limit_m_s2: float,
     ``_COURSE_HORIZON_S`` of turning ahead, or more where that leaves the roll its heading
     loop demands (GUIDED_P, ``roll_gain`` rad/rad, times the error) below the clip of the
     limit ``p3`` (atan(p3 / g)), so that the clip, not the error, sets the turn; at most
-    ``_COURSE_HORIZON_MAX_S`` of turning and 90 degrees ahead (so that the wrapped course
+    ``COURSE_LEAD_MAX_S`` of turning and 90 degrees ahead (so that the wrapped course
     never turns the plane the wrong way). Measured on ArduPlane 4.5.1 SITL: with the course
     2 s ahead the roll stayed below the clip and the plane turned at 0.51 to 0.54 of the
     commanded a whatever p3 was; with the clip binding, at 0.72 to 0.73 of p3."""
@@ -307,7 +306,7 @@ def course_lead_rad(turn_rate_rad_s: float, limit_m_s2: float,
     if rate == 0.0:
         return 0.0
     clip = _CLIP_MARGIN * math.atan(limit_m_s2 / GRAVITY_M_S2) / roll_gain
-    lead = min(max(rate * _COURSE_HORIZON_S, clip), rate * _COURSE_HORIZON_MAX_S,
+    lead = min(max(rate * _COURSE_HORIZON_S, clip), rate * COURSE_LEAD_MAX_S,
                _MAX_COURSE_LEAD_RAD)  # fmt: skip
     return math.copysign(lead, turn_rate_rad_s)
 
@@ -320,7 +319,7 @@ def course_turn_share(roll_gain: float, accel_m_s2: float, speed_m_s: float,
     ``turn_ratio`` g tan(roll), over ``accel_m_s2``, at most 1 (the clip of p3 then sets the
     turn). Below 1 the plane cannot be made to turn as the law asks (a GUIDED_P softer than
     about 3,000 cd/rad at 22 m/s and 4.5 m/s^2, or a roll limit below 32 degrees there)."""
-    lead = min(accel_m_s2 / speed_m_s * _COURSE_HORIZON_MAX_S, _MAX_COURSE_LEAD_RAD)
+    lead = min(accel_m_s2 / speed_m_s * COURSE_LEAD_MAX_S, _MAX_COURSE_LEAD_RAD)
     roll = min(roll_gain * lead, roll_limit_rad, 0.5 * math.pi - 1e-9)
     return min(1.0, turn_ratio * GRAVITY_M_S2 * math.tan(roll) / accel_m_s2)
 
@@ -329,7 +328,7 @@ def guided_p_needed(accel_m_s2: float, speed_m_s: float, turn_ratio: float) -> f
     """The least ``roll_gain`` (rad/rad) for which :func:`course_turn_share` is 1: the roll
     of a steady turn at ``accel_m_s2`` flown as ``turn_ratio`` g tan(roll), over the course
     lead's cap at ``speed_m_s``. ArduPlane's GUIDED_P in cd/rad is 100 degrees of it."""
-    lead = min(accel_m_s2 / speed_m_s * _COURSE_HORIZON_MAX_S, _MAX_COURSE_LEAD_RAD)
+    lead = min(accel_m_s2 / speed_m_s * COURSE_LEAD_MAX_S, _MAX_COURSE_LEAD_RAD)
     return math.atan(accel_m_s2 / (turn_ratio * GRAVITY_M_S2)) / lead
 
 

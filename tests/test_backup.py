@@ -880,6 +880,45 @@ def test_certificates_asked_from_a_level_up_are_exact_there_and_below_it_below()
     assert stopped > 100
 
 
+def test_a_certificate_that_reaches_what_was_asked_is_one_the_flown_rule_finds_too() -> None:
+    """The nominal's one-step check and the abandon check ask the certificates with a finite
+    ``enough`` (they need only know that theta, or the acceptance level, is reached); the
+    shield's own rule at the next step asks them with none (``backup_certificates(...,
+    inf, -inf)``) and leaves a turn, or holds the state certified, on those values. So a
+    value that reaches what was asked must be one the rule finds too: never above the
+    rule's. It was not so while the closed-form tail was tried every 4 samples with a
+    finite ``enough`` and every 16 without: on the recorded state below (a closed loop of
+    a reviewer's, a plane's settings with no lag) STRAIGHT reached theta, 0.00339 m
+    against 0.00258, where the rule found 0.00240 and turned a step longer."""
+    dt = 0.02
+    recorded = (
+        settings_for(PARAMS),
+        ZoneSet.from_defenders([Defender(
+            north_m=2.0993065066954326, east_m=-5.611575159104159, range_m=1.2633126800614576,
+            capture_radius_m=0.8925341973115979, speed_ratio=0.40508066010405397)]),
+        0.6742562532689123, -3.7008104102745483, 0.33503673112607724, -0.35947414164942226,
+    )
+    s, zones, n, e, h, a = recorded
+    z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
+    states = [(s, z, n, e, h, a, a), *_random_states(400, 73)]
+    reached = 0
+    for s, z, n, e, h, a, av in states:
+        theta = bk.acceptance_level_m(s, z[2], z[3], 0, 1.0, dt)
+        rule = np.empty(3)
+        bk.backup_certificates(s, *z, n, e, h, a, av, 1.0, dt, math.inf, -math.inf, rule)
+        for level in (theta, theta + 0.03):
+            asked = bk.straight_certificate(s, *z, n, e, h, a, av, 1.0, dt, level, level, False)
+            if asked >= level:
+                reached += 1
+                assert rule[bk.BACKUP_STRAIGHT] >= asked, (rule, asked, level)
+            ahead = np.empty(3)
+            bk.backup_certificates(s, *z, n, e, h, a, av, 1.0, dt, level, level, ahead)
+            for policy in (bk.BACKUP_LEFT, bk.BACKUP_RIGHT, bk.BACKUP_STRAIGHT):
+                if ahead[policy] >= level:
+                    assert rule[policy] >= ahead[policy], (policy, rule, ahead, level)
+    assert reached > 100
+
+
 def test_a_backup_counts_as_plainly_certified_only_by_its_exact_certificate() -> None:
     """The abandon check keeps a step that flies a single backup where that backup is
     certified plainly (``backup._floor_certificate`` >= theta): its certificate computed

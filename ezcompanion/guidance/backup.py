@@ -173,8 +173,11 @@ _EXIT_SEARCH_RAD = math.pi
 _PREVIEW_SAMPLES = 4
 # A hovering vehicle's course is tried this many ways round (5 degrees apart).
 _REST_COURSES = 72
-# STRAIGHT's certificate tries its closed-form tail every this many samples (four times
-# as seldom where the caller wants it exact).
+# STRAIGHT's certificate tries its closed-form tail every this many samples, whatever the
+# caller asks: a check that asks up to a level (``enough``) must find no more than the
+# shield's rule, which asks with none, finds at the next step. (Four times as seldom
+# without a level, as it was, is no cheaper, and a check then counted on an exit the rule
+# took a step later; tests/test_backup.py has the state.)
 _TAIL_EVERY = 4
 # A turn's exit is screened out where an upper bound on its certificate is below the exit
 # level by this much (in units of v^2 / a_max: round-off in the bound, nothing more).
@@ -619,13 +622,12 @@ def straight_certificate(
     early = s[S_AB_HOLD] <= 0.0
     best = math.inf
     certified = -math.inf
-    every = _TAIL_EVERY if enough < math.inf else 4 * _TAIL_EVERY
     screen = stop_below - _SCREEN_SLACK * speed * speed / amax  # -inf: no screen
     blocker = 0
     ch, sh = math.cos(h), math.sin(h)
     trapezoid = _trapezoid_excess(s, dt)
     for j in range(_MAX_SAMPLES):
-        if early and j % every == 0:
+        if early and j % _TAIL_EVERY == 0:
             tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, trapezoid)
             certified = max(certified, min(best, tail))
             if certified >= enough:
@@ -1310,7 +1312,8 @@ def shield_one(
     if held >= theta:
         out[k, 4] = held  # the backup flown keeps the plain claim: the step stands
         return
-    plan[:] = kept
+    for i in range(PLAN_SIZE):  # (not plan[:] = kept: its shape check's message took
+        plan[i] = kept[i]  # numba 1.5 s of the first run's compile)
     _shield_step(plain, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, nominal, dt, current,
                  weight_before, plan, out, k)  # fmt: skip
 

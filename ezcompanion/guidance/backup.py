@@ -188,9 +188,9 @@ _SCREEN_SLACK = 1e-6
 # costliest 300 of 120,000 campaign steps, 95% did by the 4th sample; a long flight paid
 # for one at every sample (bench/bench_shield.py, docs/service.md, "Cost").
 _SCREEN_EVERY = 4
-# The kernels' bool arguments (turn_certificate's every_step, straight_certificate's
-# exit_search), read from here so that they are bools at run time: numba compiles a kernel
-# once more for each literal value of a bool or int argument, and a cold compile of
+# turn_certificate's bool argument every_step, read from here so that it is a bool at run
+# time: numba compiles a kernel once more for each literal value of a bool or int
+# argument, and a cold compile of
 # turn_certificate took 6.7 s (twice, with True and False, before). (every_step True is
 # the lower rungs' turn flown alone: ``_rung_turn`` flies all of them at once, and the
 # tests hold it to that.)
@@ -594,7 +594,7 @@ def _straight_tail(
 def straight_certificate(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
-    stop_below: float, enough: float, exit_search: bool,
+    stop_below: float, enough: float,
 ) -> float:
     """Certificate of STRAIGHT from this state: the turn dies out under a_c = -(C / a_max) a,
     then a straight line for ever. Flown control step by control step (``dt``, the actuator
@@ -606,9 +606,9 @@ def straight_certificate(
     beat it), once a certificate reaches ``enough`` (the caller needs no more), or once the
     running least gap is below ``stop_below``, returning the certificate if an earlier tail
     took it to ``stop_below`` (no later j can beat it), else a value below ``stop_below``
-    (with ``exit_search``, a turn's exit, the running least gap either way: the search then
-    passes over an exit whose samples dip below its level after a tail reached it, which
-    the turn, flown, takes, certified on its own); and, returning -inf, once an
+    (a turn's exit too: its search takes an exit where a tail reached the exit level though
+    the samples then dip below it, as the turn, flown, does, its rule asking STRAIGHT with
+    no level); and, returning -inf, once an
     upper bound on the least gap of the flight still to come (``_rest_upper``, from the
     second sample on) is below ``stop_below`` (less round-off): every lower bound of the
     whole flight's gap, the certificate included, is below it too, so a caller that only
@@ -636,7 +636,7 @@ def straight_certificate(
                                step, best)  # fmt: skip
         best = _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, best)
         if best < stop_below:
-            return best if exit_search else max(best, certified)
+            return max(best, certified)
         if best <= certified:
             return certified
         delta, mid, w, drift = _straight_to_come(s, a, av, speed, trapezoid)
@@ -688,7 +688,7 @@ def _exit_here(
     if upper < screen_level:
         return -math.inf, blocker
     leave = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
-                                 exit_level, max(exit_level, enough), _FLAGS[1])  # fmt: skip
+                                 exit_level, max(exit_level, enough))  # fmt: skip
     return leave, blocker
 
 
@@ -834,7 +834,7 @@ def backup_certificates(
     the turns leave (at once where it does)."""
     theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
     straight = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
-                                    min(below, theta), enough, _FLAGS[0])  # fmt: skip
+                                    min(below, theta), enough)  # fmt: skip
     out[BACKUP_STRAIGHT] = straight
     if straight >= theta:  # both turns leave at once: they are STRAIGHT
         out[BACKUP_LEFT] = out[BACKUP_RIGHT] = straight
@@ -1144,7 +1144,7 @@ def plan_value(
                                               int(plan[PLAN_POLICIES + j]), left, n, e, h, a,
                                               av, speed, dt, floor, -math.inf)  # fmt: skip
     straight = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
-                                    -math.inf, math.inf, _FLAGS[0])  # fmt: skip
+                                    -math.inf, math.inf)  # fmt: skip
     return min(floor, straight)
 
 
@@ -1188,7 +1188,7 @@ def plan_search(
         n0, e0, h0 = nodes[level, c, 0], nodes[level, c, 1], nodes[level, c, 2]
         a0, av0, floor = nodes[level, c, 3], nodes[level, c, 4], nodes[level, c, 5]
         terminal = straight_certificate(s, zn, ze, zmur, zreach, kz, n0, e0, h0, a0, av0,
-                                        speed, dt, need, need, _FLAGS[0])  # fmt: skip
+                                        speed, dt, need, need)  # fmt: skip
         if min(floor, terminal) >= need:
             plan[PLAN_COUNT], plan[PLAN_SEGMENT], plan[PLAN_DONE] = level, 0, 0
             for j in range(level):
@@ -1335,7 +1335,7 @@ def _floor_certificate(
     if not 0 <= policy < _N_BACKUPS:  # a rung or a plan
         return -math.inf
     straight = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
-                                    theta, theta, _FLAGS[0])  # fmt: skip
+                                    theta, theta)  # fmt: skip
     if policy == BACKUP_STRAIGHT:
         return straight
     if straight >= theta:

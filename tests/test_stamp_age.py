@@ -227,16 +227,18 @@ def test_heartbeats_that_waited_through_a_stall_are_not_a_burst(tmp_path: Path) 
     # continued, the heartbeats that had waited in its socket one after another, took "4
     # heartbeats within 1 s" for a second sender of the vehicle's id, and ended guidance on
     # a spoof. Here over TCP too (the companion listening, the stub connecting): stopped for
-    # 8 s of vehicle time, eight heartbeats queued behind the telemetry. 30 s of guidance at
+    # 8 s of vehicle time, eight heartbeats queued behind the telemetry. 60 s of guidance at
     # most: the stall counts, and guided afresh from its hover the copter's first approach
-    # may miss (docs/field.md, "A stall at this scale"). Quiet, it
+    # may miss and come round again (docs/field.md, "A stall at this scale"). Quiet, it
     # intercepts 4.6 s after the stall (13.2 s of guidance); under two CPU burners one run
-    # was still 2.8 m off 7.3 s after it, when a 16 s limit ended it.
+    # was still 2.8 m off 7.3 s after it, when a 16 s limit ended it, and in `make test`
+    # beside a 2-worker campaign one passed 0.405 m from the target and was circling for
+    # another pass when a 30 s limit ended it.
     port = free_udp_port()
     companion = subprocess.Popen(
         [sys.executable, "-m", "ezcompanion", "run", "--config", str(SCENARIO), "--connect",
          f"tcpin:127.0.0.1:{port}", "--engage", "--speedup", f"{SPEEDUP:g}",
-         "--no-telemetry", "--max-time", "30"],
+         "--no-telemetry", "--max-time", "60"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     assert companion.stdout is not None
@@ -245,7 +247,7 @@ def test_heartbeats_that_waited_through_a_stall_are_not_a_burst(tmp_path: Path) 
         wait_for_line(companion.stdout, "listening:")
         stub = subprocess.Popen(
             [sys.executable, "-m", "sitl_stub", "--config", str(SCENARIO), "--connect",
-             f"tcp:127.0.0.1:{port}", "--speedup", f"{SPEEDUP:g}", "--duration", "40",
+             f"tcp:127.0.0.1:{port}", "--speedup", f"{SPEEDUP:g}", "--duration", "80",
              "--initial-mode", "GUIDED"],
             stdout=subprocess.DEVNULL,
         )  # fmt: skip

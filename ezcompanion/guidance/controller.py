@@ -115,7 +115,9 @@ class GuidanceStep:
     ``shield_weight`` (the nominal command's share: 1 unshielded, 0 the backup alone),
     ``certificate_m`` (the executed backup's certificate at the step's start, a lower
     rung's value: >= 0 means a bounded manoeuvre keeps the vehicle out of every zone for
-    ever, under the model; with an abandon profile, its certificate with the abandon path,
+    ever, under the model: this backup, or, where its value is an early stop's (a backup
+    that is not the best stops once below the best's certificate, with a value that may be
+    above its own), the best one; with an abandon profile, its certificate with the abandon path,
     or where that leaves nothing safe to abandon its plain one) and
     ``certificate_ahead_m`` (the best one step ahead on the nominal: exact where it
     reaches the acceptance level, theta and with a lag the reserve; below it, a value

@@ -75,7 +75,7 @@ def run_compile() -> int:
     """Compile the service's kernels (the one-vehicle step, with the law, the shield and the
     abandon check; the response fits' scan) into numba's cache, or say they are there
     already; 0 either way. Run once after an install or an update, so that the first
-    ``ezcompanion run`` starts at once instead of compiling for about 10 s before its link
+    ``ezcompanion run`` starts at once instead of compiling for about 25 s before its link
     opens."""
     import time
 

@@ -71,8 +71,8 @@ def cache_dir(base: str) -> str:
 def kernels_cached(kernel: str = "single.step_one", directory: str | None = None) -> bool:
     """Whether numba's cache (``directory``, by default this process's) holds ``kernel``
     (module.function, by default the service's one-vehicle step) compiled from these
-    sources: False on the first run after an install or an edit, which compiles it (9 s on
-    an idle 2-core machine, longer on a busy one). True when nothing is compiled."""
+    sources: False on the first run after an install or an edit, which compiles it (about
+    25 s on an idle 2-core machine, longer on a busy one). True when nothing is compiled."""
     if not JIT_ENABLED:
         return True
     where = Path(directory if directory is not None else _numba_config.CACHE_DIR)  # type: ignore[attr-defined]

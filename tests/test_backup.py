@@ -907,7 +907,7 @@ def test_a_certificate_that_reaches_what_was_asked_is_one_the_flown_rule_finds_t
     z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
     states = [(s, z, n, e, h, a, a), *_random_states(400, 73), *_random_states(1000, 2440),
               *_random_states(1000, 2761)]
-    reached = 0
+    reached = turned = 0
     for s, z, n, e, h, a, av in states:
         theta = bk.acceptance_level_m(s, z[2], z[3], 0, 1.0, dt)
         rule = np.empty(3)
@@ -922,7 +922,9 @@ def test_a_certificate_that_reaches_what_was_asked_is_one_the_flown_rule_finds_t
             for policy in (bk.BACKUP_LEFT, bk.BACKUP_RIGHT, bk.BACKUP_STRAIGHT):
                 if ahead[policy] >= level:
                     assert rule[policy] >= ahead[policy], (policy, rule, ahead, level)
-    assert reached > 100
+                    # a turn that reaches the level where STRAIGHT does not: its exits
+                    turned += policy != bk.BACKUP_STRAIGHT and ahead[bk.BACKUP_STRAIGHT] < level
+    assert reached > 100 and turned > 50
 
 
 def test_a_backup_counts_as_plainly_certified_only_by_its_exact_certificate() -> None:

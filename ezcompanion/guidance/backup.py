@@ -190,10 +190,9 @@ _SCREEN_SLACK = 1e-6
 _SCREEN_EVERY = 4
 # turn_certificate's bool argument every_step, read from here so that it is a bool at run
 # time: numba compiles a kernel once more for each literal value of a bool or int
-# argument, and a cold compile of
-# turn_certificate took 6.7 s (twice, with True and False, before). (every_step True is
-# the lower rungs' turn flown alone: ``_rung_turn`` flies all of them at once, and the
-# tests hold it to that.)
+# argument, and a cold compile of turn_certificate took 6.7 s (twice, with True and False,
+# before). (every_step True is the lower rungs' turn flown alone: ``_rung_turn`` flies all
+# of them at once, and the tests hold it to that.)
 _FLAGS = np.array([False, True])
 
 

@@ -175,7 +175,7 @@ _PREVIEW_SAMPLES = 4
 _REST_COURSES = 72
 # STRAIGHT's certificate tries its closed-form tail every this many samples, whatever the
 # caller asks: a check that asks up to a level (``enough``) must find no more than the
-# shield's rule, which asks with none, finds at the next step. (Four times as seldom
+# shield's rule, which asks with none, finds from the same state. (Four times as seldom
 # without a level, as it was, is no cheaper, and a check then counted on an exit the rule
 # took a step later; tests/test_backup.py has the state.)
 _TAIL_EVERY = 4

@@ -927,6 +927,56 @@ def test_a_certificate_that_reaches_what_was_asked_is_one_the_flown_rule_finds_t
     assert reached > 100 and turned > 50
 
 
+def test_a_backup_the_check_certified_is_held_or_left_only_for_a_certified_one() -> None:
+    """The induction's step (docs/guidance.md, step 5): the held backup is always one whose
+    flight is safe for ever, because it was certified when taken (by the nominal's one-step
+    check, at the acceptance level, theta at the least) and each step flies it or moves to
+    another certified one. So where the check certifies a backup (>= theta) and the shield
+    then holds it, with the nominal refused (not a number: refused, never flown), the
+    backup it flies must be certified by the rule, >= theta: the same one, STRAIGHT where a
+    turn leaves, or another certified and better. Never one that is not: the give-way rule
+    (a held backup whose flight now enters a zone gives way to the least entry) acts on the
+    rule's value, and is sound only while that value is never below what the check took.
+    On the tree before the exit-search fix (79f660d) the two states of seeds 2440 and 2761
+    held LEFT, certified at 0.00274 and 0.00520 m (theta 0.00222 and 0.00503), and gave it
+    up for a plan worth -0.039 m and a rung worth -0.05 m."""
+    dt = 0.02
+    out = np.empty((1, 6))
+    held = 0
+    for s, z, n, e, h, a, av in [*_random_states(400, 73), *_random_states(1000, 2440),
+                                 *_random_states(1000, 2761)]:  # fmt: skip
+        theta = bk.acceptance_level_m(s, z[2], z[3], 0, 1.0, dt)
+        checked = np.empty(3)
+        bk.backup_certificates(s, *z, n, e, h, a, av, 1.0, dt, theta, theta, checked)
+        for policy in np.flatnonzero(checked >= theta):
+            plan = np.zeros(bk.PLAN_SIZE, dtype=np.int64)
+            bk.shield_one(s, *z, n, e, h, a, av, 1.0, math.nan, dt, int(policy), math.nan, plan,
+                          out, 0)  # fmt: skip
+            assert out[0, 3] == 0.0 and out[0, 5] == -math.inf  # the nominal refused
+            assert out[0, 4] >= theta, (policy, int(out[0, 2]), out[0, 4], checked, theta)
+            held += 1
+    assert held > 5000
+
+
+def test_a_nominal_that_is_not_a_number_is_refused_and_the_backup_flies() -> None:
+    """A NaN or infinite nominal (a law fed what it cannot compute) is refused: its flight's
+    gaps are NaN, which a running least passes over, so before this it came out certified
+    (+inf one step ahead), flown with weight 1, and the command after the step was NaN.
+    Now the held backup flies, its command within the bound."""
+    zones = ZoneSet.from_defenders([Defender(north_m=0.0, east_m=3.0, range_m=1.5,
+                                             capture_radius_m=0.5, speed_ratio=0.7)])  # fmt: skip
+    s = settings_for(PARAMS)
+    out = np.empty((1, 6))
+    z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
+    for nominal in (math.nan, math.inf, -math.inf):
+        plan = np.zeros(bk.PLAN_SIZE, dtype=np.int64)
+        bk.shield_one(s, *z, 0.0, 0.0, 0.0, 0.3, 0.3, 1.0, nominal, 0.02, bk.BACKUP_STRAIGHT,
+                      1.0, plan, out, 0)  # fmt: skip
+        assert out[0, 3] == 0.0 and out[0, 5] == -math.inf, out[0]
+        assert abs(out[0, 0]) < PARAMS.accel_max_m_s2 and out[0, 4] >= 0.0, out[0]
+        assert int(out[0, 2]) in (bk.BACKUP_LEFT, bk.BACKUP_RIGHT, bk.BACKUP_STRAIGHT)
+
+
 def test_a_backup_counts_as_plainly_certified_only_by_its_exact_certificate() -> None:
     """The abandon check keeps a step that flies a single backup where that backup is
     certified plainly (``backup._floor_certificate`` >= theta): its certificate computed

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -13,9 +14,11 @@ from ezcompanion.guidance import (
     GuidanceController,
     GuidanceMode,
     KinematicState,
+    LawName,
     Target,
     ZoneSet,
 )
+from ezcompanion.guidance.single import STATE_LIMIT
 
 D1 = Defender(north_m=2.0, east_m=3.0, range_m=1.5, capture_radius_m=0.5, speed_ratio=0.7)
 D2 = Defender(north_m=4.4, east_m=-2.0, range_m=1.5, capture_radius_m=0.5, speed_ratio=0.7)
@@ -48,6 +51,61 @@ def test_bad_speed_step_and_reset_are_refused() -> None:
         c.step(KinematicState(8.0, -4.0, 2.5, 1.0), -0.02)
     with pytest.raises(StateError, match="accel_m_s2"):
         c.reset(1.0)  # |a| must start strictly inside the bound
+
+
+@pytest.mark.parametrize("batch", [False, True])
+@pytest.mark.parametrize("field", ["north_m", "east_m", "course_rad", "speed_m_s"])
+def test_a_state_beyond_the_limit_is_refused_naming_the_field(field: str, batch: bool) -> None:
+    """Finite is not enough: a north of 1e155 m or a speed of 1e200 m/s overflowed the law
+    into a NaN command. Beyond ``STATE_LIMIT`` (1e9) each field is refused, on one vehicle
+    and in a batch (the first vehicle that is not within it named), and nothing advances."""
+    values = {"north_m": 8.0, "east_m": -4.0, "course_rad": 2.5, "speed_m_s": 1.0}
+    c = controller()
+    if batch:
+        c.reset(np.zeros(3))
+        state = KinematicState(**{k: np.full(3, v) for k, v in values.items()})
+        getattr(state, field)[1] = 2.0 * STATE_LIMIT
+    else:
+        state = KinematicState(**{**values, field: -2.0 * STATE_LIMIT})
+    before = c.accel_m_s2
+    with pytest.raises(StateError, match="within") as caught:
+        c.step(state, 0.02)
+    assert caught.value.field == field and abs(caught.value.value) == 2.0 * STATE_LIMIT
+    np.testing.assert_array_equal(c.accel_m_s2, before)
+
+
+@pytest.mark.parametrize("law", list(LawName))
+def test_every_law_is_finite_across_the_limit(law: LawName) -> None:
+    """The limit is below the law's overflow: at every corner of +-``STATE_LIMIT`` in
+    position and speed (the course at the limit too), each law's command is finite."""
+    c = controller(law=law)
+    corners = np.array(list(itertools.product((-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0)))).T
+    north, east, course = STATE_LIMIT * corners
+    for speed in (1.0, STATE_LIMIT):
+        c.reset(np.zeros(north.size))
+        step = c.step(KinematicState(north, east, course, np.full(north.size, speed)), 0.02)
+        assert np.isfinite(step.accel_lat_cmd_m_s2).all(), (speed, step.accel_lat_cmd_m_s2)
+        assert np.isfinite(step.law.accel_command_m_s2).all()
+
+
+@pytest.mark.parametrize("batch", [False, True])
+def test_a_speed_that_turns_a_revolution_a_step_is_refused(batch: bool) -> None:
+    """Below a_max dt / (2 pi) the vehicle turns more than a revolution in one step at its
+    bound, and the shield's prediction substeps (v / a_max / 20 each) grow without bound:
+    1e-12 m/s ran for over a minute in one step. Refused, with the least speed in the
+    message; at the least speed itself the step is taken."""
+    c = controller()
+    dt = 0.05
+    least = c.params.accel_max_m_s2 * dt / (2.0 * math.pi)
+    shape = np.ones(2) if batch else 1.0
+    if batch:
+        c.reset(np.zeros(2))
+    for slow in (1e-12, 0.99 * least):
+        with pytest.raises(StateError, match="revolution") as caught:
+            c.step(KinematicState(8.0 * shape, -4.0 * shape, 2.5 * shape, slow * shape), dt)
+        assert caught.value.field == "speed_m_s" and f"{least:.6g}" in str(caught.value)
+    step = c.step(KinematicState(8.0 * shape, -4.0 * shape, 2.5 * shape, least * shape), dt)
+    assert np.isfinite(step.accel_lat_cmd_m_s2).all()
 
 
 def test_modes_follow_alpha_and_capture() -> None:

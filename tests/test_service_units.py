@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from ezcompanion.config import GeoOrigin, Target, load_scenario
-from ezcompanion.errors import ConfigError
+from ezcompanion.errors import ConfigError, StateError
 from ezcompanion.service.loop import GuidanceLoop, Hold, TickCommand
 from ezcompanion.service.setpoints import make_setpoints
 from ezcompanion.service.settings import SetpointKind, companion_settings
@@ -122,6 +122,33 @@ def test_tick_refuses_stale_or_missing_telemetry_and_ends_at_capture() -> None:
     done = loop.tick(t.snapshot(0.25, 2.0), 2.0)
     assert isinstance(done, TickCommand) and done.captured
     assert loop.tick(t.snapshot(0.25, 2.02), 2.02) is Hold.CAPTURED
+
+
+def test_a_scenario_too_slow_for_the_loop_rate_is_refused_at_start_naming_the_speed() -> None:
+    """The law is fed at least half the nominal speed, over a step of at most five periods;
+    slower than a_max dt / (2 pi) there (a revolution a step) the shield's prediction
+    substeps grow without bound: a scenario at 1e-9 m/s ran its first step for minutes.
+    Refused when the loop is made, the speed and its least value named; a scenario at that
+    least value is taken, and its ticks step."""
+    scenario = load_scenario(CONFIG)
+    rate_hz = 10.0
+    least = scenario.guidance.accel_max_m_s2 * (5.0 / rate_hz) / (2.0 * math.pi) / 0.5
+    for slow in (1e-9, 0.99 * least):
+        start = dataclasses.replace(scenario.start, speed_m_s=slow)
+        with pytest.raises(StateError, match="revolution") as caught:
+            GuidanceLoop(dataclasses.replace(scenario, start=start), loop_rate_hz=rate_hz,
+                         stale_after_s=0.5)  # fmt: skip
+        assert caught.value.field == "speed_m_s"
+    start = dataclasses.replace(scenario.start, speed_m_s=least)
+    loop = GuidanceLoop(dataclasses.replace(scenario, start=start), loop_rate_hz=rate_hz,
+                        stale_after_s=0.5)  # fmt: skip
+    t = known_origin()
+    t.update(local(1000, 8.0, -4.0, 0.0, 0.0), now_s=1.0)
+    first = loop.tick(t.snapshot(0.5, 1.0), 1.0)
+    t.update(local(1600, 8.0, -4.0, 0.0, 0.0), now_s=1.6)
+    late = loop.tick(t.snapshot(0.5, 1.6), 1.6)  # a tick 6 periods late: a step of 5
+    assert isinstance(first, TickCommand) and isinstance(late, TickCommand)
+    assert late.dt_s == pytest.approx(5.0 / rate_hz)
 
 
 def _command(

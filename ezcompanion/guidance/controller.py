@@ -54,8 +54,10 @@ from ezcompanion.guidance.law import (
 from ezcompanion.guidance.params import GuidanceParams, LawName, Target
 from ezcompanion.guidance.single import (
     MODE_PURE,
+    STATE_LIMIT,
     check_state,
     checked_rate,
+    least_speed_m_s,
     pack_single,
     stack_zones,
     step_one,
@@ -229,7 +231,7 @@ class GuidanceController:
     def _step_batch(self, state: KinematicState, dt_s: float) -> GuidanceStep:
         """``step`` through the batch kernels (the law, the actuator, the shield), for any
         shape, one vehicle included."""
-        rows = self._state_rows(state)
+        rows = self._state_rows(state, least_speed_m_s(self.params.accel_max_m_s2, dt_s))
         out, out_zone = self._run_law(rows)
         accel = self._accel
         accel_next = np.empty_like(accel)
@@ -299,13 +301,15 @@ class GuidanceController:
             raise StateError("batch", self._shape, "step_one steps one vehicle: reset() it so")
         if not (math.isfinite(dt_s) and dt_s > 0.0):
             raise StateError("dt_s", dt_s, "must be a finite number > 0")
+        least = least_speed_m_s(self.params.accel_max_m_s2, dt_s)
         if type(north_m) is type(east_m) is type(course_rad) is type(speed_m_s) is float:
-            # a sum of finite numbers is finite, or overflowed: then the field is checked
-            if not (math.isfinite(north_m + east_m + course_rad + speed_m_s) and speed_m_s > 0.0):
-                check_state((north_m, east_m, course_rad, speed_m_s))
+            # within the limit together (NaN: not), each is: else each field is checked
+            total = abs(north_m) + abs(east_m) + abs(course_rad) + speed_m_s
+            if not (total <= STATE_LIMIT and speed_m_s >= least):
+                check_state((north_m, east_m, course_rad, speed_m_s), least)
         else:
             north_m, east_m, course_rad, speed_m_s = _numbers(
-                KinematicState(north_m, east_m, course_rad, speed_m_s)
+                KinematicState(north_m, east_m, course_rad, speed_m_s), least
             )
         rate_1_s = math.nan  # none: the model's own flown acceleration
         if self._shielded and course_rate_rad_s is not None:
@@ -400,14 +404,15 @@ class GuidanceController:
         )  # fmt: skip
 
     def _state_rows(
-        self, state: KinematicState
+        self, state: KinematicState, least_speed: float = 0.0
     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        """The state as four contiguous rows of the batch's size, checked finite."""
+        """The state as four contiguous rows of the batch's size, checked as ``check_state``
+        checks one vehicle's (the speed against ``least_speed``)."""
         if not self._shape:  # one vehicle (the service): four numbers, checked as floats
             values = (state.north_m, state.east_m, state.course_rad, state.speed_m_s)
             if all(type(v) is float for v in values):
-                finite = all(map(math.isfinite, values))  # type: ignore[arg-type]
-                if finite and values[3] > 0.0:  # else the checks below name the field
+                total = sum(map(abs, values))  # type: ignore[arg-type]
+                if total <= STATE_LIMIT and values[3] > least_speed:  # else named below
                     rows = np.array(values).reshape(4, 1)
                     return rows[0], rows[1], rows[2], rows[3]
         rows = np.empty((4, self._accel.shape[0]))
@@ -417,12 +422,10 @@ class GuidanceController:
                 shaped[index] = getattr(state, name)
             except (ValueError, TypeError) as exc:
                 raise StateError(name, getattr(state, name), f"must fit the batch: {exc}") from None
-        if not np.isfinite(rows).all():
-            bad = int(np.flatnonzero(~np.isfinite(rows).all(axis=1))[0])
-            name = _STATE_FIELDS[bad]
-            raise StateError(name, getattr(state, name), "must be finite")
-        if (rows[3] <= 0.0).any():
-            raise StateError("speed_m_s", state.speed_m_s, "must be > 0")
+        ok = (np.abs(rows) <= STATE_LIMIT).all(axis=0) & (rows[3] > 0.0) & (rows[3] >= least_speed)
+        if not ok.all():  # the first vehicle that is not, its first field named
+            n, e, c, v = rows[:, int(np.flatnonzero(~ok)[0])]
+            check_state((float(n), float(e), float(c), float(v)), least_speed)
         return rows[0], rows[1], rows[2], rows[3]
 
 
@@ -430,9 +433,10 @@ _STATE_FIELDS = ("north_m", "east_m", "course_rad", "speed_m_s")
 _new_step = object.__new__
 
 
-def _numbers(state: KinematicState) -> tuple[float, float, float, float]:
-    """One vehicle's state as four checked numbers: each a number (or one-element array),
-    finite, the speed > 0; else a ``StateError`` naming the first field that is not."""
+def _numbers(state: KinematicState, least_speed: float = 0.0) -> tuple[float, float, float, float]:
+    """One vehicle's state as four checked numbers (``check_state``: each a number, or a
+    one-element array, finite and within the limit, the speed > 0 and at least
+    ``least_speed``); else a ``StateError`` naming the first field that is not."""
     values = []
     for name in _STATE_FIELDS:
         value = getattr(state, name)
@@ -443,7 +447,7 @@ def _numbers(state: KinematicState) -> tuple[float, float, float, float]:
                 raise StateError(name, value, f"must fit the batch: {exc}") from None
         values.append(value)
     north, east, course, speed = values
-    check_state((north, east, course, speed))
+    check_state((north, east, course, speed), least_speed)
     return north, east, course, speed
 
 

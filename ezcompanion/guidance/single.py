@@ -39,7 +39,16 @@ from ezcompanion.guidance.law import (
 )
 from ezcompanion.guidance.zones import ZoneSet
 
-__all__ = ["MODE_PURE", "check_state", "checked_rate", "pack_single", "stack_zones", "step_one"]
+__all__ = [
+    "MODE_PURE",
+    "STATE_LIMIT",
+    "check_state",
+    "checked_rate",
+    "least_speed_m_s",
+    "pack_single",
+    "stack_zones",
+    "step_one",
+]
 
 FloatArray = npt.NDArray[np.float64]
 Int8Array = npt.NDArray[np.int8]
@@ -52,6 +61,10 @@ MODE_PURE = 0.01
 _INTERCEPT, _BLEND, _SAFETY, _CAPTURED = 0, 1, 2, 3
 # where the shield's settings end in ``pack_single``'s vector (then the target, the switch)
 _S_END = P_SIZE + S_SIZE
+# The most a state's number may be (m, rad, m/s): far beyond any frame (the service's
+# MAVLink gate holds positions and velocities to 1e7), far below where the law's squares
+# and products overflow (a north of 1e155 m, or a speed of 1e200 m/s, made the nominal NaN).
+STATE_LIMIT = 1e9
 
 
 @jit
@@ -64,14 +77,27 @@ def _mode_of(share: float) -> int:
     return _BLEND
 
 
-def check_state(values: tuple[float, float, float, float]) -> None:
-    """A ``StateError`` for the first of four numbers that is not finite, or the speed if
-    it is not > 0."""
+def least_speed_m_s(accel_max_m_s2: float, dt_s: float) -> float:
+    """The least speed a law steps at: a_max dt / (2 pi). Slower, the vehicle turns more
+    than a revolution in one step at the bound, which no law at that step can steer, and
+    the shield's prediction, in substeps of a twentieth of v / a_max, grows without bound
+    (1e-12 m/s ran for over a minute in one step)."""
+    return accel_max_m_s2 * dt_s / (2.0 * math.pi)
+
+
+def check_state(values: tuple[float, float, float, float], least_speed: float = 0.0) -> None:
+    """A ``StateError`` for the first of four numbers that is not finite or beyond
+    ``STATE_LIMIT``, or the speed if it is not > 0 and at least ``least_speed``."""
     for name, value in zip(("north_m", "east_m", "course_rad", "speed_m_s"), values, strict=True):
         if not math.isfinite(value):
             raise StateError(name, value, "must be finite")
+        if abs(value) > STATE_LIMIT:
+            raise StateError(name, value, f"must be within +-{STATE_LIMIT:g}")
     if not values[3] > 0.0:
         raise StateError("speed_m_s", values[3], "must be > 0")
+    if values[3] < least_speed:
+        raise StateError("speed_m_s", values[3], f"must be >= a_max dt / (2 pi) = "
+                         f"{least_speed:.6g} m/s (slower, a step turns more than a revolution)")
 
 
 def checked_rate(rate: float | FloatArray) -> float:

@@ -26,6 +26,10 @@ _REST_SPEED_FRACTION = 0.1
 # A measured turn restarts the actuator state at most at this fraction of the bound (the
 # actuator model holds |a| < a_max strictly).
 _RESUME_BOUND_FRACTION = 0.98
+# The law is fed at least this fraction of the nominal speed (``assume_speed_factor``)...
+_LEAST_SPEED_FACTOR = 0.5
+# ... and a step at most this many periods long (a late tick's, however late).
+_LONGEST_STEP_PERIODS = 5.0
 
 
 class GuidanceLoop:
@@ -58,12 +62,16 @@ class GuidanceLoop:
         self.speed_factor = 1.0  # flown over commanded speed, as measured (identify_monitor)
         # Run the law once now: compiled, this loads it from numba's disk cache (or compiles
         # it on a first run), which must not happen on the first tick and stall the link.
+        # At the least speed and the longest step a tick can feed it: a scenario too slow
+        # for the loop's rate (a revolution a step: ``single.least_speed_m_s``) is refused
+        # here, the field named, not at a tick.
         start = scenario.start
         self.controller.reset()
         self.controller.step(
-            KinematicState(start.north_m, start.east_m, start.course_rad, start.speed_m_s),
-            self.period_s,
-        )
+            KinematicState(start.north_m, start.east_m, start.course_rad,
+                           _LEAST_SPEED_FACTOR * start.speed_m_s),
+            _LONGEST_STEP_PERIODS * self.period_s,
+        )  # fmt: skip
         self.controller.reset()
         zones = self.controller.zones  # and the abandon check of the setpoints sent (1.2 s cold)
         abandon_gap(zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0, start.north_m,
@@ -88,7 +96,7 @@ class GuidanceLoop:
         speed, at least ``factor`` of the nominal (``flown_speed_m_s``); ``factor`` is held
         to [0.5, 1] (a slower vehicle is not following the setpoints: the law is never fed
         0)."""
-        self.speed_factor = min(max(factor, 0.5), 1.0)
+        self.speed_factor = min(max(factor, _LEAST_SPEED_FACTOR), 1.0)
 
     @property
     def flown_speed_m_s(self) -> float:
@@ -213,7 +221,8 @@ class GuidanceLoop:
         last = self._last_tick_s
         if last is None:
             self._resume_from(state, minimum)
-        dt = self.period_s if last is None else min(max(now_s - last, 1e-4), 5.0 * self.period_s)
+        longest = _LONGEST_STEP_PERIODS * self.period_s
+        dt = self.period_s if last is None else min(max(now_s - last, 1e-4), longest)
         rate = state.course_rate_rad_s
         rest = None
         if state.ground_speed_m_s < minimum:

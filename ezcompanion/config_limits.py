@@ -11,15 +11,22 @@ what                           range                    why
 positions (north_m, east_m)    within +-1e5 m           the local NED frame is a plane tangent at
 of vehicle, target, defenders                           the origin; 100 km out the Earth is 785 m
                                                         below it: move the origin instead
-defender range_m               (0, 1e5] m               inside the frame
+defender range_m               [1e-6, 1e5] m            inside the frame; below a micrometre,
+                                                        with a small speed_ratio, ((R + c) /
+                                                        (mu R))^2 overflowed the zone's boundary
 defender capture_radius_m      [0, 1e5] m               inside the frame
+defender speed_ratio           [1e-6, 1)                below, the same overflow (the dataclass
+                                                        holds it below 1)
 vehicle speed_m_s              (0, 1000] m/s            beyond any vehicle ArduPilot or PX4 flies
 vehicle accel_max_m_s2         (0, 1000] m/s^2          about 100 g
 course_deg, course_from_los    [-360, 360] deg          one turn either way
 gains (k_*, actuator_p1_1_s)   (0, 1000] 1/s ...        faster than any 50 Hz loop can follow
 guidance lengths (margin_m...)  within the frame (1e5 m)
 floors (gradient, range)       (0, 1] m                 numerical guards, never large
-response_lag_s                 [0, 60] s
+response_lag_s                 [0, 10] s                seven times the longest measured (PX4,
+                                                        0.9-1.4 s); at 60 s a backup-law step
+                                                        took 0.11 s at the paper's scale (the
+                                                        paper's 30 s at 2 ms: half an hour)
 actuator_n                     even, [2, 32]            (a/a_max)^n underflows beyond
 shield_rungs                   integer, [0, 12]         the backup law's lower rungs (0: none)
 shield_plan_depth              integer, [0, 16]         the backup law's plans' segments (0: none)
@@ -29,9 +36,9 @@ origin alt_m                   [-1000, 100000] m
 =============================  =======================  =========================================
 
 Ratios (``speed_ratio``, ``reference_limit_ratio``, ``actuator_floor``) are bounded by the
-dataclasses themselves, in (0, 1). Settings sections owned by other components
-(``companion:``, ``sitl_stub:``) state their own ranges; their numbers without one are held
-to ``MAGNITUDE_LIMIT``.
+dataclasses themselves, in (0, 1), ``speed_ratio`` here from below as well. Settings
+sections owned by other components (``companion:``, ``sitl_stub:``) state their own ranges;
+their numbers without one are held to ``MAGNITUDE_LIMIT``.
 """
 
 from __future__ import annotations
@@ -61,6 +68,11 @@ ANGLE_LIMIT_DEG = 360.0
 GAIN_LIMIT = 1000.0
 MAX_SIMULATION_STEPS = 1_000_000
 MAGNITUDE_LIMIT = 1e9  # no setting in SI units needs more
+# a defender's range (m) and speed ratio at least this: their product mu R divides the
+# zone's reach, squared ((R + c) / (mu R))^2, which a range of 1e-300 m or a ratio of 1e-155
+# overflowed (an internal error, not a refusal)
+ZONE_SIZE_MIN = 1e-6
+RESPONSE_LAG_LIMIT_S = 10.0
 
 
 def _text(x: float) -> str:
@@ -102,8 +114,9 @@ GUIDANCE_LIMITS: dict[str, dict[str, Bound]] = {
     "Defender": {
         "north_m": POSITION,
         "east_m": POSITION,
-        "range_m": LENGTH,
+        "range_m": Bound(ZONE_SIZE_MIN, POSITION_LIMIT_M),
         "capture_radius_m": LENGTH_OR_ZERO,
+        "speed_ratio": Bound(ZONE_SIZE_MIN, 1.0, high_open=True),
     },
     "VehicleStart": {
         "north_m": POSITION,
@@ -122,7 +135,7 @@ GUIDANCE_LIMITS: dict[str, dict[str, Bound]] = {
         "intercept_radius_m": LENGTH_OR_ZERO,
         "safety_damping_m": LENGTH,
         "accel_max_m_s2": Bound(0.0, ACCEL_LIMIT_M_S2, low_open=True),
-        "response_lag_s": Bound(0.0, 60.0),
+        "response_lag_s": Bound(0.0, RESPONSE_LAG_LIMIT_S),
         "track_boundary_layer_m_s2": Bound(0.0, ACCEL_LIMIT_M_S2, low_open=True),
         "cbf_blend_width_m_s": Bound(0.0, SPEED_LIMIT_M_S, low_open=True),
         "command_limit_1_s": Bound(1.0, GAIN_LIMIT),

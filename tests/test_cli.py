@@ -61,7 +61,7 @@ def test_bad_config_exits_2_naming_the_field(
     bad = tmp_path / "bad.yaml"
     bad.write_text(text)
     assert main(["simulate", str(bad)]) == 2
-    assert "defenders[0].speed_ratio: must be in (0, 1)" in capsys.readouterr().err
+    assert "defenders[0].speed_ratio: must be within [1e-06, 1)" in capsys.readouterr().err
 
 
 def test_live_track_files_match_simulate_and_read_back(tmp_path: Path) -> None:

@@ -102,6 +102,26 @@ def test_a_start_inside_a_zone_is_refused_naming_the_zone() -> None:
     scenario_from_dict(data)
 
 
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("range_m", 1e-300), ("range_m", 0.99e-6), ("speed_ratio", 1e-155), ("speed_ratio", 1e-7)],
+)
+def test_a_zone_too_small_to_compute_is_refused_naming_the_field(field: str, value: float) -> None:
+    """A defender's range times its speed ratio divides the zone's reach, squared: a range
+    of 1e-300 m or a ratio of 1e-155 overflowed it, an internal error (exit 70) rather than
+    a refusal; denormal ranges made every course's clearance -inf and the refusal say the
+    vehicle started inside a zone 8 m away. Each is at least 1e-6 now, refused with its
+    range named; at 1e-6 each the scenario loads and its zones are finite."""
+    data = paper()
+    data["defenders"][1][field] = value
+    with pytest.raises(ConfigError, match=r"must be within \[1e-06,") as caught:
+        scenario_from_dict(data)
+    assert caught.value.field == f"defenders[1].{field}"
+    data["defenders"][1].update(range_m=1e-6, speed_ratio=1e-6)
+    zones = scenario_from_dict(data).zones()
+    assert np.isfinite(zones.reach_term).all() and np.isfinite(zones.mu_range_m).all()
+
+
 def test_a_start_within_the_margin_is_a_warning() -> None:
     data = paper()
     d2 = Defender(north_m=4.4, east_m=-2.0, range_m=1.5, capture_radius_m=0.5, speed_ratio=0.7)

@@ -93,7 +93,7 @@ def test_yaml_1_2_floats_are_numbers(tmp_path: Path) -> None:
         (("vehicle", "course_from_los_deg"), 720, "vehicle.course_from_los_deg: must be within"),
         (("vehicle", "accel_max_m_s2"), math.inf, "vehicle.accel_max_m_s2: must be a finite"),
         (("vehicle", "accel_max_m_s2"), True, "vehicle.accel_max_m_s2: must be a number"),
-        (("defenders", 0, "range_m"), 2e5, "defenders[0].range_m: must be within (0, 100000]"),
+        (("defenders", 0, "range_m"), 2e5, "defenders[0].range_m: must be within [1e-06, 100000]"),
         (("guidance", "k_track_m_s3"), 1e6, "guidance.k_track_m_s3: must be within (0, 1000]"),
         (("guidance", "actuator_n"), 10**30, "guidance.actuator_n: must be an integer within"),
         (("guidance", "actuator_n"), 2.0, "guidance.actuator_n: must be an integer within"),

@@ -959,22 +959,41 @@ def test_a_backup_the_check_certified_is_held_or_left_only_for_a_certified_one()
 
 
 def test_a_nominal_that_is_not_a_number_is_refused_and_the_backup_flies() -> None:
-    """A NaN or infinite nominal (a law fed what it cannot compute) is refused: its flight's
-    gaps are NaN, which a running least passes over, so before this it came out certified
-    (+inf one step ahead), flown with weight 1, and the command after the step was NaN.
-    Now the held backup flies, its command within the bound."""
+    """A NaN nominal (a law fed what it cannot compute) is refused: its flight's gaps are
+    NaN, which a running least passes over, so before this it came out certified (+inf one
+    step ahead), flown with weight 1, and the command after the step was NaN. Now the held
+    backup flies, certified, its command within the bound. (An infinite nominal the
+    actuator clips, so its flight was verified as any other; it is refused as well, by
+    choice: no law means it.)"""
     zones = ZoneSet.from_defenders([Defender(north_m=0.0, east_m=3.0, range_m=1.5,
                                              capture_radius_m=0.5, speed_ratio=0.7)])  # fmt: skip
     s = settings_for(PARAMS)
     out = np.empty((1, 6))
     z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
+    theta = bk.acceptance_level_m(s, zones.mu_range_m, zones.reach_m, 0, 1.0, 0.02)
     for nominal in (math.nan, math.inf, -math.inf):
         plan = np.zeros(bk.PLAN_SIZE, dtype=np.int64)
         bk.shield_one(s, *z, 0.0, 0.0, 0.0, 0.3, 0.3, 1.0, nominal, 0.02, bk.BACKUP_STRAIGHT,
                       1.0, plan, out, 0)  # fmt: skip
         assert out[0, 3] == 0.0 and out[0, 5] == -math.inf, out[0]
-        assert abs(out[0, 0]) < PARAMS.accel_max_m_s2 and out[0, 4] >= 0.0, out[0]
+        assert abs(out[0, 0]) < PARAMS.accel_max_m_s2 and out[0, 4] >= theta, out[0]
         assert int(out[0, 2]) in (bk.BACKUP_LEFT, bk.BACKUP_RIGHT, bk.BACKUP_STRAIGHT)
+
+
+def test_a_check_whose_certificate_overflows_refuses_the_nominal() -> None:
+    """The kernels' own guard, below the dataclasses' limits (which keep a zone from ever
+    being this large): a zone whose look-ahead distance overflows has gaps of +inf, so it
+    dropped out and the nominal was flown 9 m inside it, the check's certificate +inf
+    (a reviewer's probe, a range of 2.5e154 m). A check that comes out +inf or NaN is an
+    overflow, never a certificate: the nominal is refused."""
+    s = settings_for(PARAMS)
+    out = np.empty((1, 6))
+    mur = np.array([[0.7 * 2.5e154]])
+    z = (np.array([[2.0]]), np.array([[3.0]]), mur, np.array([[2.5e154]]), 0)
+    plan = np.zeros(bk.PLAN_SIZE, dtype=np.int64)
+    bk.shield_one(s, *z, 8.0, -4.0, 2.5, 0.0, 0.0, 1.0, 0.5, 0.02, bk.BACKUP_NONE, math.nan,
+                  plan, out, 0)  # fmt: skip
+    assert out[0, 3] == 0.0 and out[0, 5] == -math.inf, out[0]
 
 
 def test_a_backup_counts_as_plainly_certified_only_by_its_exact_certificate() -> None:

@@ -18,7 +18,7 @@ from ezcompanion.guidance import (
     Target,
     ZoneSet,
 )
-from ezcompanion.guidance.single import STATE_LIMIT
+from ezcompanion.guidance.single import STATE_LIMIT, check_state, least_speed_m_s
 
 D1 = Defender(north_m=2.0, east_m=3.0, range_m=1.5, capture_radius_m=0.5, speed_ratio=0.7)
 D2 = Defender(north_m=4.4, east_m=-2.0, range_m=1.5, capture_radius_m=0.5, speed_ratio=0.7)
@@ -91,21 +91,53 @@ def test_every_law_is_finite_across_the_limit(law: LawName) -> None:
 @pytest.mark.parametrize("batch", [False, True])
 def test_a_speed_that_turns_a_revolution_a_step_is_refused(batch: bool) -> None:
     """Below a_max dt / (2 pi) the vehicle turns more than a revolution in one step at its
-    bound, and the shield's prediction substeps (v / a_max / 20 each) grow without bound:
-    1e-12 m/s ran for over a minute in one step. Refused, with the least speed in the
-    message; at the least speed itself the step is taken."""
+    bound, and the shield's prediction substeps (``prediction_step_ratio`` v / a_max each)
+    grow without bound: at 1e-12 m/s one step did not end in a minute (hours, by the
+    count of substeps). Refused, with the least speed in the message; at the least speed
+    itself the step is taken. (1e-12 is checked by ``check_state`` alone: a step at it
+    would hang, not fail, were the check gone.)"""
     c = controller()
     dt = 0.05
-    least = c.params.accel_max_m_s2 * dt / (2.0 * math.pi)
+    least = least_speed_m_s(c.params.accel_max_m_s2, dt)
+    assert least == pytest.approx(c.params.accel_max_m_s2 * dt / (2.0 * math.pi))
+    with pytest.raises(StateError, match="revolution"):
+        check_state((8.0, -4.0, 2.5, 1e-12), least)
     shape = np.ones(2) if batch else 1.0
     if batch:
         c.reset(np.zeros(2))
-    for slow in (1e-12, 0.99 * least):
-        with pytest.raises(StateError, match="revolution") as caught:
-            c.step(KinematicState(8.0 * shape, -4.0 * shape, 2.5 * shape, slow * shape), dt)
-        assert caught.value.field == "speed_m_s" and f"{least:.6g}" in str(caught.value)
+    before = c.accel_m_s2
+    with pytest.raises(StateError, match="revolution") as caught:
+        c.step(KinematicState(8.0 * shape, -4.0 * shape, 2.5 * shape, 0.99 * least * shape), dt)
+    assert caught.value.field == "speed_m_s" and f"{least:.6g}" in str(caught.value)
+    np.testing.assert_array_equal(c.accel_m_s2, before)
     step = c.step(KinematicState(8.0 * shape, -4.0 * shape, 2.5 * shape, least * shape), dt)
     assert np.isfinite(step.accel_lat_cmd_m_s2).all()
+
+
+PLAIN_ZONE = {"north_m": 2.0, "east_m": 3.0, "range_m": 1.5, "capture_radius_m": 0.0,
+              "speed_ratio": 0.7}  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("range_m", 2.5e154), ("north_m", 2e9), ("speed_ratio", 1e-155), ("range_m", 1e-300)],
+)
+def test_a_zone_or_target_the_law_cannot_compute_is_refused(field: str, value: float) -> None:
+    """A defender whose range is 2.5e154 m made the look-ahead gaps +inf: the zone dropped
+    out, and the nominal was flown 9 m inside it with a certificate of +inf (a reviewer's
+    probe). A range of 1e-300 m or a speed ratio of 1e-155 overflowed the reach's square.
+    Lengths are held within +-1e9 and range and speed ratio at 1e-6 or more, in the
+    dataclass and the arrays alike, the field named; a target too."""
+    with pytest.raises(ConfigError) as caught:
+        Defender(**{**PLAIN_ZONE, field: value})
+    assert caught.value.field == field
+    arrays = {k: np.array([[v]]) for k, v in {**PLAIN_ZONE, field: value}.items()}
+    with pytest.raises(ConfigError) as caught:
+        ZoneSet.from_arrays(**arrays)
+    assert caught.value.field == field
+    with pytest.raises(ConfigError) as caught:
+        Target(north_m=0.0, east_m=-1e10)
+    assert caught.value.field == "east_m"
 
 
 def test_modes_follow_alpha_and_capture() -> None:

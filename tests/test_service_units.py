@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from ezcompanion.config import GeoOrigin, Target, load_scenario
-from ezcompanion.errors import ConfigError, StateError
+from ezcompanion.errors import ConfigError
 from ezcompanion.service.loop import GuidanceLoop, Hold, TickCommand
 from ezcompanion.service.setpoints import make_setpoints
 from ezcompanion.service.settings import SetpointKind, companion_settings
@@ -125,30 +125,34 @@ def test_tick_refuses_stale_or_missing_telemetry_and_ends_at_capture() -> None:
 
 
 def test_a_scenario_too_slow_for_the_loop_rate_is_refused_at_start_naming_the_speed() -> None:
-    """The law is fed at least half the nominal speed, over a step of at most five periods;
-    slower than a_max dt / (2 pi) there (a revolution a step) the shield's prediction
-    substeps grow without bound: a scenario at 1e-9 m/s ran its first step for minutes.
-    Refused when the loop is made, the speed and its least value named; a scenario at that
-    least value is taken, and its ticks step."""
+    """The law is fed at least half the nominal speed; slower than a_max dt / (2 pi) (a
+    revolution a step) the shield's prediction substeps grow without bound: a scenario at
+    1e-9 m/s ran its first step for hours. Refused when the loop is made, the scenario's
+    speed and its least value at the loop's rate named; a scenario at that least value is
+    taken, and a tick late by five periods, at the least speed fed, steps no further than
+    a revolution (a late step is capped, as it was at five periods)."""
     scenario = load_scenario(CONFIG)
-    rate_hz = 10.0
-    least = scenario.guidance.accel_max_m_s2 * (5.0 / rate_hz) / (2.0 * math.pi) / 0.5
+    rate_hz = 2.0
+    least = 2.0 * scenario.guidance.accel_max_m_s2 / rate_hz / (2.0 * math.pi)
     for slow in (1e-9, 0.99 * least):
         start = dataclasses.replace(scenario.start, speed_m_s=slow)
-        with pytest.raises(StateError, match="revolution") as caught:
+        with pytest.raises(ConfigError, match=f"must be >= {least:.6g} m/s at a 2 Hz") as caught:
             GuidanceLoop(dataclasses.replace(scenario, start=start), loop_rate_hz=rate_hz,
-                         stale_after_s=0.5)  # fmt: skip
-        assert caught.value.field == "speed_m_s"
+                         stale_after_s=5.0)  # fmt: skip
+        assert caught.value.field == "vehicle.speed_m_s"
     start = dataclasses.replace(scenario.start, speed_m_s=least)
     loop = GuidanceLoop(dataclasses.replace(scenario, start=start), loop_rate_hz=rate_hz,
-                        stale_after_s=0.5)  # fmt: skip
+                        stale_after_s=5.0)  # fmt: skip
+    loop.assume_speed_factor(0.0)  # the least the law is fed: half the nominal
     t = known_origin()
     t.update(local(1000, 8.0, -4.0, 0.0, 0.0), now_s=1.0)
-    first = loop.tick(t.snapshot(0.5, 1.0), 1.0)
-    t.update(local(1600, 8.0, -4.0, 0.0, 0.0), now_s=1.6)
-    late = loop.tick(t.snapshot(0.5, 1.6), 1.6)  # a tick 6 periods late: a step of 5
+    first = loop.tick(t.snapshot(5.0, 1.0), 1.0)
+    t.update(local(4000, 8.0, -4.0, 0.0, 0.0), now_s=4.0)
+    late = loop.tick(t.snapshot(5.0, 4.0), 4.0)  # six periods late
     assert isinstance(first, TickCommand) and isinstance(late, TickCommand)
-    assert late.dt_s == pytest.approx(5.0 / rate_hz)
+    assert late.speed_m_s == pytest.approx(0.5 * least)
+    revolution = 2.0 * math.pi * late.speed_m_s / scenario.guidance.accel_max_m_s2
+    assert late.dt_s == pytest.approx(revolution, rel=1e-5) and late.dt_s < 5.0 / rate_hz
 
 
 def _command(

@@ -36,15 +36,16 @@ assumptions named; tests/test_backup.py checks each step):
    sample's abandon path is checked as well, so every state of a certified flight is safe
    to abandon.
 5. **The shield step.** The nominal command, held over the next control step, is flown if
-   some backup is certified (>= theta) from where it leads (one that is not a finite
-   number is refused: its flight's gaps are NaN, which a running least passes over); its
-   weight comes from the nominal held for a longer preview (a fixed time, so the behaviour
-   does not depend on the step), smoothstep over ``shield_band_m`` above theta, held up
-   where it falls faster than ``shield_weight_fall_1_s`` (a weight with memory), and a
-   weight below 1 blends in the held backup's command, verified the same way. Otherwise
-   the held backup flies, by its rule. (The weight only chooses among commands that are
-   each verified: it moves smoothness, never safety.) The held backup changes only to one
-   certified (>= theta) and better by 2 theta.
+   some backup is certified (>= theta) from where it leads (a NaN one is refused: its
+   flight's gaps are NaN, which a running least passes over; so are +-inf and a check that
+   comes out +inf or NaN, an overflow); its weight comes from the nominal held for a longer
+   preview (a fixed time, so the behaviour does not depend on the step), smoothstep over
+   ``shield_band_m`` above theta, held up where it falls faster than
+   ``shield_weight_fall_1_s`` (a weight with memory), and a weight below 1 blends in the
+   held backup's command, verified the same way. Otherwise the held backup flies, by its
+   rule. (The weight only chooses among commands that are each verified: it moves
+   smoothness, never safety.) The held backup changes only to one certified (>= theta) and
+   better by 2 theta.
    By induction on the control steps, under the model: *if a backup is certified at the
    start, the flight stays outside every zone by the margin for ever*, whatever the
    nominal command does. (The held backup is always one whose flight, by its rule, is safe
@@ -1072,7 +1073,10 @@ def _ahead(
     backup_certificates(s, zn, ze, zmur, zreach, kz, n1, e1, h1, a1, av1, speed, dt, enough,
                         accept, certs)  # fmt: skip
     which = int(np.argmax(certs[:_N_BACKUPS]))
-    return min(certs[which], gap), which, a1, av1
+    value = min(certs[which], gap)
+    if not value < math.inf:  # +inf or NaN: an overflow, never a certificate (fail closed)
+        value = -math.inf
+    return value, which, a1, av1
 
 
 @jit_borrow
@@ -1368,6 +1372,7 @@ def _shield_step(
                                                av, speed, dt, dt, accept, accept,
                                                certs)  # fmt: skip
     else:  # refused: a flight of NaN keeps no gap, so it would beat every level (fail closed)
+        # (an infinite one the actuator clips, but no law means it)
         ahead, which, a_next, av_next = -math.inf, current, a, av
     weight = 0.0
     if ahead >= accept:

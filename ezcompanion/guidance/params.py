@@ -68,9 +68,21 @@ class BlendMode(StrEnum):
     SIGMOID = "sigmoid"
 
 
+# The most a length (m), speed (m/s) or angle (rad) given to the law may be: far beyond any
+# frame (a scenario file holds positions to 1e5 m, the service's MAVLink gate to 1e7), far
+# below where the law's squares and products overflow (a defender's range of 2.5e154 m made
+# its gaps +inf, which the shield counted as certified; a north of 1e155 m made the law NaN).
+MAGNITUDE_LIMIT = 1e9
+# The least a defender's range (m) and speed ratio may be: their product divides the zone's
+# reach, squared, which a range of 1e-300 m or a ratio of 1e-155 overflowed.
+ZONE_SIZE_MIN = 1e-6
+
+
 def _finite(field: str, value: float) -> None:
     if not isinstance(value, int | float) or isinstance(value, bool) or not math.isfinite(value):
         raise ConfigError(field, value, "must be a finite number")
+    if abs(value) > MAGNITUDE_LIMIT:
+        raise ConfigError(field, value, f"must be within +-{MAGNITUDE_LIMIT:g}")
 
 
 def _positive(field: str, value: float) -> None:
@@ -110,6 +122,9 @@ class Defender:
             raise ConfigError(
                 "speed_ratio", self.speed_ratio, "must be in (0, 1): a defender faster than us"
             )
+        for name in ("range_m", "speed_ratio"):
+            if getattr(self, name) < ZONE_SIZE_MIN:
+                raise ConfigError(name, getattr(self, name), f"must be >= {ZONE_SIZE_MIN:g}")
         # With 0 < mu < 1 and c >= 0, R + c > mu R holds, so the boundary's square root
         # (cos^2 - 1 + (R + c)^2 / (mu R)^2 > 0) is real for every lead angle.
 

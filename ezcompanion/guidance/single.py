@@ -37,6 +37,7 @@ from ezcompanion.guidance.law import (
     P_SIZE,
     _evaluate_one,
 )
+from ezcompanion.guidance.params import MAGNITUDE_LIMIT
 from ezcompanion.guidance.zones import ZoneSet
 
 __all__ = [
@@ -45,6 +46,7 @@ __all__ = [
     "check_state",
     "checked_rate",
     "least_speed_m_s",
+    "longest_step_s",
     "pack_single",
     "stack_zones",
     "step_one",
@@ -61,10 +63,9 @@ MODE_PURE = 0.01
 _INTERCEPT, _BLEND, _SAFETY, _CAPTURED = 0, 1, 2, 3
 # where the shield's settings end in ``pack_single``'s vector (then the target, the switch)
 _S_END = P_SIZE + S_SIZE
-# The most a state's number may be (m, rad, m/s): far beyond any frame (the service's
-# MAVLink gate holds positions and velocities to 1e7), far below where the law's squares
-# and products overflow (a north of 1e155 m, or a speed of 1e200 m/s, made the nominal NaN).
-STATE_LIMIT = 1e9
+# The most a state's number may be (m, rad, m/s): ``params.MAGNITUDE_LIMIT`` (a north of
+# 1e155 m, or a speed of 1e200 m/s, made the nominal NaN).
+STATE_LIMIT = MAGNITUDE_LIMIT
 
 
 @jit
@@ -80,9 +81,18 @@ def _mode_of(share: float) -> int:
 def least_speed_m_s(accel_max_m_s2: float, dt_s: float) -> float:
     """The least speed a law steps at: a_max dt / (2 pi). Slower, the vehicle turns more
     than a revolution in one step at the bound, which no law at that step can steer, and
-    the shield's prediction, in substeps of a twentieth of v / a_max, grows without bound
-    (1e-12 m/s ran for over a minute in one step)."""
+    the shield's prediction, in substeps of ``prediction_step_ratio`` v / a_max (a
+    twentieth by default), grows without bound: at 1e-12 m/s one step did not end in a
+    minute (some 4e11 substeps: hours). At the least speed a step has at most
+    2 pi / ratio of them (126 by default)."""
     return accel_max_m_s2 * dt_s / (2.0 * math.pi)
+
+
+def longest_step_s(accel_max_m_s2: float, speed_m_s: float) -> float:
+    """The longest step a law takes at ``speed_m_s``: a revolution at the bound, the
+    inverse of ``least_speed_m_s``, less a millionth (so that rounding never makes the
+    step's own check refuse it)."""
+    return (1.0 - 1e-6) * 2.0 * math.pi * speed_m_s / accel_max_m_s2
 
 
 def check_state(values: tuple[float, float, float, float], least_speed: float = 0.0) -> None:
@@ -159,9 +169,9 @@ def step_one(
     """One step of one vehicle.
 
     Inputs: ``k`` from ``pack_single`` and ``zones`` from ``stack_zones``; the state
-    ``n, e, course, v`` (checked finite, v > 0); ``rate``, the measured course rate or NaN
-    for none (the model's ``flown`` is then used); ``dt``. State: ``accel[0]`` (a, read),
-    ``flown[0]`` (the model's a_v, updated), ``held[0]`` (the held backup, read) and
+    ``n, e, course, v`` (as ``check_state`` checks them); ``rate``, the measured course
+    rate or NaN for none (the model's ``flown`` is then used); ``dt``. State: ``accel[0]``
+    (a, read), ``flown[0]`` (the model's a_v, updated), ``held[0]`` (the held backup, read) and
     ``weight_before[0]`` (the nominal's weight at the step before, NaN for none; updated)
     and ``plan[0]`` (the shield's plan row, ``backup.PLAN_SIZE``; updated).
     Outputs: the law's ``out[0, O_*]`` and ``out_zone[0, Z_*, i]``; ``result`` = (a after

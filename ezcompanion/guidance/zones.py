@@ -24,7 +24,7 @@ import numpy.typing as npt
 
 from ezcompanion.errors import ConfigError
 from ezcompanion.guidance._jit import jit
-from ezcompanion.guidance.params import Defender
+from ezcompanion.guidance.params import MAGNITUDE_LIMIT, ZONE_SIZE_MIN, Defender
 
 __all__ = ["ZoneSet", "ez_boundary_point"]
 
@@ -97,8 +97,12 @@ class ZoneSet:
                 )
             if not np.isfinite(value).all():
                 raise ConfigError(name, value, "must be finite")
-        if (shaped["range_m"] <= 0.0).any():
-            raise ConfigError("range_m", shaped["range_m"].min(), "must be > 0")
+            if (np.abs(value) > MAGNITUDE_LIMIT).any():
+                raise ConfigError(name, float(np.abs(value).max()),
+                                  f"must be within +-{MAGNITUDE_LIMIT:g}")  # fmt: skip
+        for name in ("range_m", "speed_ratio"):
+            if (shaped[name] < ZONE_SIZE_MIN).any():
+                raise ConfigError(name, float(shaped[name].min()), f"must be >= {ZONE_SIZE_MIN:g}")
         if (shaped["capture_radius_m"] < 0.0).any():
             raise ConfigError("capture_radius_m", shaped["capture_radius_m"].min(), "must be >= 0")
         mu = shaped["speed_ratio"]

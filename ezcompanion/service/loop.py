@@ -11,8 +11,10 @@ import dataclasses
 import math
 
 from ezcompanion.config import Scenario
+from ezcompanion.errors import ConfigError
 from ezcompanion.guidance import GuidanceController, KinematicState, LawName
 from ezcompanion.guidance.abandon import abandon_gap
+from ezcompanion.guidance.single import least_speed_m_s, longest_step_s
 from ezcompanion.records import Hold, TickCommand, VehicleState
 
 __all__ = ["GuidanceLoop", "Hold", "TickCommand"]
@@ -28,7 +30,8 @@ _REST_SPEED_FRACTION = 0.1
 _RESUME_BOUND_FRACTION = 0.98
 # The law is fed at least this fraction of the nominal speed (``assume_speed_factor``)...
 _LEAST_SPEED_FACTOR = 0.5
-# ... and a step at most this many periods long (a late tick's, however late).
+# ... and a step at most this many periods long (a late tick's, however late), nor longer
+# than a revolution at the bound (``single.longest_step_s``).
 _LONGEST_STEP_PERIODS = 5.0
 
 
@@ -60,18 +63,25 @@ class GuidanceLoop:
         self._assumed: dict[str, float] = {}  # guidance fields found from the vehicle
         self._measured: dict[str, float] = {}  # measured in flight: over the scenario's if worse
         self.speed_factor = 1.0  # flown over commanded speed, as measured (identify_monitor)
+        # A tick on time must be a step the law can take at the least speed it is fed
+        # (slower, a step turns more than a revolution: ``single.least_speed_m_s``): a
+        # scenario too slow for the loop's rate is refused here, not at a tick.
+        start = scenario.start
+        least = least_speed_m_s(scenario.guidance.accel_max_m_s2, self.period_s)
+        if _LEAST_SPEED_FACTOR * start.speed_m_s < least:
+            raise ConfigError(
+                "vehicle.speed_m_s", start.speed_m_s,
+                f"must be >= {least / _LEAST_SPEED_FACTOR:.6g} m/s at a {loop_rate_hz:g} Hz "
+                f"loop (the law is fed half of it at the least, and a step of one period "
+                f"must not turn more than a revolution at accel_max_m_s2): raise the rate",
+            )  # fmt: skip
         # Run the law once now: compiled, this loads it from numba's disk cache (or compiles
         # it on a first run), which must not happen on the first tick and stall the link.
-        # At the least speed and the longest step a tick can feed it: a scenario too slow
-        # for the loop's rate (a revolution a step: ``single.least_speed_m_s``) is refused
-        # here, the field named, not at a tick.
-        start = scenario.start
         self.controller.reset()
         self.controller.step(
-            KinematicState(start.north_m, start.east_m, start.course_rad,
-                           _LEAST_SPEED_FACTOR * start.speed_m_s),
-            _LONGEST_STEP_PERIODS * self.period_s,
-        )  # fmt: skip
+            KinematicState(start.north_m, start.east_m, start.course_rad, start.speed_m_s),
+            self.period_s,
+        )
         self.controller.reset()
         zones = self.controller.zones  # and the abandon check of the setpoints sent (1.2 s cold)
         abandon_gap(zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0, start.north_m,
@@ -221,7 +231,8 @@ class GuidanceLoop:
         last = self._last_tick_s
         if last is None:
             self._resume_from(state, minimum)
-        longest = _LONGEST_STEP_PERIODS * self.period_s
+        longest = min(_LONGEST_STEP_PERIODS * self.period_s,
+                      longest_step_s(self.scenario.guidance.accel_max_m_s2, speed))  # fmt: skip
         dt = self.period_s if last is None else min(max(now_s - last, 1e-4), longest)
         rate = state.course_rate_rad_s
         rest = None

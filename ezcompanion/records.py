@@ -73,7 +73,7 @@ class TickCommand:
     """What one tick asks of the vehicle, with what the law saw."""
 
     time_s: float
-    dt_s: float
+    dt_s: float  # clock time since the last tick (the setpoint's reference turns over it)
     state: VehicleState
     course_rad: float  # measured course the law used
     speed_m_s: float  # speed the law used (measured, at least the flown speed)
@@ -83,6 +83,9 @@ class TickCommand:
     # the measured course rate the law was given (None: none, or a start from rest, where
     # the law's model turns on its own)
     course_rate_rad_s: float | None = None
+    # the step the law took and verified its command over: at least a period, the hold
+    # the command gets (``GuidanceLoop.tick``); NaN where not given
+    law_dt_s: float = math.nan
 
     @property
     def captured(self) -> bool:

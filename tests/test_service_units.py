@@ -155,6 +155,28 @@ def test_a_scenario_too_slow_for_the_loop_rate_is_refused_at_start_naming_the_sp
     assert late.dt_s == pytest.approx(revolution, rel=1e-5) and late.dt_s < 5.0 / rate_hz
 
 
+def test_a_tick_soon_after_the_last_takes_a_step_of_a_period() -> None:
+    """A late sample just after a deadline tick ticks at once, 0.1 ms after it; its command
+    is then held until the next tick, about a period. The law verifies its command over the
+    step it is given, so the step is a period, not the 0.1 ms since: the command is the one
+    a tick a period later would send (before, the law verified 0.1 ms of a period's flight,
+    and its shield's step cost as 1 / dt: 11.7 ms at 0.1 ms for this scenario with a lag).
+    The setpoint's reference still turns over the clock time since the last tick."""
+    scenario = load_scenario(CONFIG)
+    commands = []
+    for gap_s in (1e-4, 0.02):
+        loop = GuidanceLoop(scenario, loop_rate_hz=50.0, stale_after_s=0.25)
+        t = known_origin()
+        t.update(local(1000, 8.0, -4.0, -0.83, 0.55), now_s=1.0)
+        assert isinstance(loop.tick(t.snapshot(0.25, 1.0), 1.0), TickCommand)
+        t.update(local(1001, 8.0, -4.0, -0.83, 0.55), now_s=1.0 + gap_s)
+        command = loop.tick(t.snapshot(0.25, 1.0 + gap_s), 1.0 + gap_s)
+        assert isinstance(command, TickCommand)
+        assert command.law_dt_s == pytest.approx(0.02) and command.dt_s == pytest.approx(gap_s)
+        commands.append(command.accel_lat_m_s2)
+    assert commands[0] == pytest.approx(commands[1], rel=1e-9)  # a period and 0.02 s apart
+
+
 def _command(
     loop: GuidanceLoop, north: float, east: float, vn: float, ve: float, now: float
 ) -> TickCommand:

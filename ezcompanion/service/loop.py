@@ -233,7 +233,13 @@ class GuidanceLoop:
             self._resume_from(state, minimum)
         longest = min(_LONGEST_STEP_PERIODS * self.period_s,
                       longest_step_s(self.scenario.guidance.accel_max_m_s2, speed))  # fmt: skip
-        dt = self.period_s if last is None else min(max(now_s - last, 1e-4), longest)
+        elapsed = self.period_s if last is None else min(max(now_s - last, 1e-4), longest)
+        # The law verifies its command over the step it is given, and the command is held
+        # until the next tick: half a period to a period and a tenth away (``ticks``), a
+        # period while the stream flows. So the step is at least a period, even where this
+        # tick comes soon after the last (a late sample just after a deadline tick: 0.1 ms
+        # verified, a period flown, and a shield step that cost as 1 / dt, 12 ms at 0.1 ms).
+        dt = min(max(elapsed, self.period_s), longest)
         rate = state.course_rate_rad_s
         rest = None
         if state.ground_speed_m_s < minimum:
@@ -251,7 +257,8 @@ class GuidanceLoop:
         self.captured = bool(step.captured)
         return TickCommand(
             time_s=now_s,
-            dt_s=dt,
+            dt_s=elapsed,
+            law_dt_s=dt,
             state=state,
             course_rad=course,
             speed_m_s=speed,

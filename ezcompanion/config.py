@@ -321,9 +321,13 @@ def scenario_from_dict(data: object) -> Scenario:
                               "geometry to scale as north_m/east_m")  # fmt: skip
 
         spec = read_scale(top["scale"])
-        scenario = scale_to_vehicle(
-            scenario, speed_m_s=spec.speed_m_s, accel_max_m_s2=spec.accel_max_m_s2
-        )
+        try:
+            scenario = scale_to_vehicle(
+                scenario, speed_m_s=spec.speed_m_s, accel_max_m_s2=spec.accel_max_m_s2
+            )
+        except FieldError as exc:  # a scaled value out of its range: say it came from scale
+            raise ConfigError("scale", top["scale"], f"scales {exc.field} out of its range: "
+                              f"{exc.reason} (got {exc.value!r})") from None  # fmt: skip
     return scenario
 
 

@@ -994,6 +994,16 @@ def test_a_check_whose_certificate_overflows_refuses_the_nominal() -> None:
     bk.shield_one(s, *z, 8.0, -4.0, 2.5, 0.0, 0.0, 1.0, 0.5, 0.02, bk.BACKUP_NONE, math.nan,
                   plan, out, 0)  # fmt: skip
     assert out[0, 3] == 0.0 and out[0, 5] == -math.inf, out[0]
+    theta = bk.acceptance_level_m(s, z[2], z[3], 0, 1.0, 0.02)
+    assert out[0, 4] < theta, out[0]  # nor is the backup flown counted as certified
+    # every certificate the shield holds a backup on: an overflow is -inf, never +inf
+    certs = np.empty(3)
+    bk.backup_certificates(s, *z, 8.0, -4.0, 2.5, 0.0, 0.0, 1.0, 0.02, math.inf, -math.inf,
+                           certs)  # fmt: skip
+    assert (certs == -math.inf).all(), certs
+    for policy in (bk.BACKUP_LEFT, bk.BACKUP_RIGHT, bk.BACKUP_STRAIGHT):
+        floor = bk._floor_certificate(s, *z, policy, 8.0, -4.0, 2.5, 0.0, 0.0, 1.0, 0.02, theta)
+        assert floor == -math.inf, (policy, floor)
 
 
 def test_a_backup_counts_as_plainly_certified_only_by_its_exact_certificate() -> None:

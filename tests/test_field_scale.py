@@ -134,6 +134,9 @@ def test_bad_scale_flags_are_one_line_and_exit_2(
         ({"speed_m_s": 22, "bank": 30}, "scale.bank: unknown key"),
         ({"bank_deg": 30}, "scale.speed_m_s: is required"),
         ([22, 4.5], "scale: must be a mapping"),
+        # a scaled value beyond what the law computes with: named as scale's, not bare
+        ({"speed_m_s": 1000, "accel_max_m_s2": 0.001}, "scale: scales north_m out of its "
+         "range: must be within +-1e+09"),
     ],
 )  # fmt: skip
 def test_a_bad_scale_key_names_the_field(

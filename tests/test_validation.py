@@ -132,6 +132,9 @@ def test_distribution_rejects_bad_values() -> None:
         ScenarioDistribution(start_range_m=(10.0, 6.0))
     with pytest.raises(ConfigError):
         ScenarioDistribution(target_near_probability=1.5)
+    for ratios in ((0.5, 1.5), (0.0, 0.5)):  # (0.5, 1.5) was taken: `not a and b`
+        with pytest.raises(ConfigError, match="speed_ratio"):
+            ScenarioDistribution(speed_ratio=ratios)
 
 
 # --- the QP filter's closed form -----------------------------------------------------

@@ -836,6 +836,8 @@ def backup_certificates(
     theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
     straight = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
                                     min(below, theta), enough)  # fmt: skip
+    if not straight < math.inf:  # +inf or NaN: an overflow, never a certificate
+        straight = -math.inf
     out[BACKUP_STRAIGHT] = straight
     if straight >= theta:  # both turns leave at once: they are STRAIGHT
         out[BACKUP_LEFT] = out[BACKUP_RIGHT] = straight
@@ -845,9 +847,9 @@ def backup_certificates(
         if best >= enough:
             out[policy] = -math.inf
             continue
-        out[policy] = turn_certificate(s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av,
-                                       speed, dt, straight, theta, max(best, below), enough,
-                                       _FLAGS[0])  # fmt: skip
+        value = turn_certificate(s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av, speed, dt,
+                                 straight, theta, max(best, below), enough, _FLAGS[0])  # fmt: skip
+        out[policy] = value if value < math.inf else -math.inf  # (an overflow: fail closed)
         best = max(best, out[policy])
 
 
@@ -1074,8 +1076,8 @@ def _ahead(
                         accept, certs)  # fmt: skip
     which = int(np.argmax(certs[:_N_BACKUPS]))
     value = min(certs[which], gap)
-    if not value < math.inf:  # +inf or NaN: an overflow, never a certificate (fail closed)
-        value = -math.inf
+    if not (certs[which] < math.inf and gap < math.inf):  # an overflow, never a certificate
+        value = -math.inf  # (+inf or NaN, either one: fail closed)
     return value, which, a1, av1
 
 
@@ -1239,8 +1241,8 @@ def _plan_step(
     was found: written into ``plan``, its value into ``certs``. (On its own, not inlined
     into ``shield_one``: inlined, a cold first step took some 3 s more, docs/service.md.)"""
     if current == BACKUP_PLAN:
-        certs[BACKUP_PLAN] = plan_value(s, zn, ze, zmur, zreach, kz, plan, n, e, h, a, av,
-                                        speed, dt)  # fmt: skip
+        held = plan_value(s, zn, ze, zmur, zreach, kz, plan, n, e, h, a, av, speed, dt)
+        certs[BACKUP_PLAN] = held if held < math.inf else -math.inf  # (an overflow)
     floor = theta - s[S_EPS]
     if certs[BACKUP_PLAN] >= floor:
         return False
@@ -1255,7 +1257,7 @@ def _plan_step(
     found = np.zeros(PLAN_SIZE, dtype=np.int64)
     value, spent = plan_search(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, need,
                                found)  # fmt: skip
-    if value >= need:
+    if value >= need and value < math.inf:  # (+inf: an overflow, never a value)
         for j in range(PLAN_SIZE):
             plan[j] = found[j]
         certs[BACKUP_PLAN] = value
@@ -1340,12 +1342,15 @@ def _floor_certificate(
         return -math.inf
     straight = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
                                     theta, theta)  # fmt: skip
+    if not straight < math.inf:  # +inf or NaN: an overflow, never a certificate
+        straight = -math.inf
     if policy == BACKUP_STRAIGHT:
         return straight
     if straight >= theta:
         return -math.inf
-    return turn_certificate(s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av, speed, dt,
-                            straight, theta, theta, theta, _FLAGS[0])  # fmt: skip
+    value = turn_certificate(s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av, speed, dt,
+                             straight, theta, theta, theta, _FLAGS[0])  # fmt: skip
+    return value if value < math.inf else -math.inf
 
 
 @jit

@@ -69,9 +69,10 @@ class GuidanceLoop:
         start = scenario.start
         least = least_speed_m_s(scenario.guidance.accel_max_m_s2, self.period_s)
         if _LEAST_SPEED_FACTOR * start.speed_m_s < least:
+            shown = f"{least / _LEAST_SPEED_FACTOR * (1.0 + 5e-6):.6g}"  # rounded up
             raise ConfigError(
                 "vehicle.speed_m_s", start.speed_m_s,
-                f"must be >= {least / _LEAST_SPEED_FACTOR:.6g} m/s at a {loop_rate_hz:g} Hz "
+                f"must be >= {shown} m/s at a {loop_rate_hz:g} Hz "
                 f"loop (the law is fed half of it at the least, and a step of one period "
                 f"must not turn more than a revolution at accel_max_m_s2): raise the rate",
             )  # fmt: skip

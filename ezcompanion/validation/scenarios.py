@@ -139,7 +139,7 @@ class ScenarioDistribution:
                 raise ConfigError(f.name, value, "must be >= 0")
             if f.name != "layout_weights" and isinstance(value, tuple) and value[0] > value[1]:
                 raise ConfigError(f.name, value, "must be an interval (low, high)")
-        if not self.speed_ratio[0] > 0.0 and self.speed_ratio[1] < 1.0:
+        if not (self.speed_ratio[0] > 0.0 and self.speed_ratio[1] < 1.0):
             raise ConfigError("speed_ratio", self.speed_ratio, "must lie inside (0, 1)")
         if self.range_m[0] <= 0.0 or self.speed_m_s <= 0.0 or self.start_range_m[0] <= 0.0:
             raise ConfigError("range_m/speed_m_s/start_range_m", self, "must be > 0")

@@ -335,7 +335,7 @@ def _record(loop: GuidanceLoop, states: list[VehicleState]) -> list[_Inputs]:
         if k == 0:  # the first tick starts the actuator from the measured turn
             before = (np.array([float(command.step.accel_lat_m_s2)]), *before[1:])
         inputs.append((state.north_m, state.east_m, command.course_rad, command.speed_m_s,
-                       rate, command.dt_s, *before))  # fmt: skip
+                       rate, command.law_dt_s, *before))  # fmt: skip
     return inputs
 
 

@@ -70,7 +70,8 @@ MAX_SIMULATION_STEPS = 1_000_000
 MAGNITUDE_LIMIT = 1e9  # no setting in SI units needs more
 # a defender's range (m) and speed ratio at least this: their product mu R divides the
 # zone's reach, squared ((R + c) / (mu R))^2, which a range of 1e-300 m or a ratio of 1e-155
-# overflowed (an internal error, not a refusal)
+# overflowed (an internal error, not a refusal); the library's Defender holds the same
+# floor (guidance.params.ZONE_SIZE_MIN), this one names the file's path
 ZONE_SIZE_MIN = 1e-6
 RESPONSE_LAG_LIMIT_S = 10.0
 

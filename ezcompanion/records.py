@@ -83,8 +83,9 @@ class TickCommand:
     # the measured course rate the law was given (None: none, or a start from rest, where
     # the law's model turns on its own)
     course_rate_rad_s: float | None = None
-    # the step the law took and verified its command over: at least a period, the hold
-    # the command gets (``GuidanceLoop.tick``); NaN where not given
+    # the step the law took and verified its command over: ``dt_s``, or a period where
+    # this tick came less than half a period after the last (``GuidanceLoop.tick``); NaN
+    # where not given
     law_dt_s: float = math.nan
 
     @property

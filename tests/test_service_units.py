@@ -162,12 +162,14 @@ def test_a_scenario_too_slow_for_the_loop_rate_is_refused_at_start_naming_the_sp
 
 def test_a_tick_soon_after_the_last_takes_a_step_of_a_period() -> None:
     """A late sample just after a deadline tick ticks at once, 0.1 ms after it; its command
-    is then held until the next tick, about a period. The law verifies its command over the
-    step it is given, so the step is a period, not the 0.1 ms since: the command is the one
-    a tick a period later would send (before, the law verified 0.1 ms of a period's flight,
-    and its shield's step cost as 1 / dt: 11.7-15.3 ms at 0.1 ms for this scenario with
-    ArduCopter's lag).
-    The setpoint's reference still turns over the clock time since the last tick."""
+    is then held until the next tick, half a period or more. The law verifies its command
+    over the step it is given, so the step is a period, not the 0.1 ms since: the command
+    is the one a tick a period later would send (before, the law verified 0.1 ms of that
+    flight, and its shield's step cost as 1 / dt: 11.7-15.3 ms at 0.1 ms for this scenario
+    with ArduCopter's lag). ``dt_s``, over which the setpoint's reference turns, stays the
+    clock time since the last tick. Ticks half a period apart or more (a stream faster
+    than the loop) step the law by the clock: the law's time stays the clock's (a reviewer
+    found it running twice as fast with a 100 Hz stream when every step was a period)."""
     scenario = load_scenario(CONFIG)
     commands = []
     for gap_s in (1e-4, 0.02):
@@ -181,6 +183,16 @@ def test_a_tick_soon_after_the_last_takes_a_step_of_a_period() -> None:
         assert command.law_dt_s == pytest.approx(0.02) and command.dt_s == pytest.approx(gap_s)
         commands.append(command.accel_lat_m_s2)
     assert commands[0] == pytest.approx(commands[1], rel=1e-9)  # a period and 0.02 s apart
+    loop = GuidanceLoop(scenario, loop_rate_hz=50.0, stale_after_s=0.25)
+    t = known_origin()
+    steps = []
+    for k in range(6):  # a stream at 100 Hz, ticked as it comes: half a period apart
+        now = 1.0 + 0.01 * k
+        t.update(local(1000 + 10 * k, 8.0 - 0.0083 * k, -4.0 + 0.0055 * k, -0.83, 0.55), now)
+        command = loop.tick(t.snapshot(0.25, now), now)
+        assert isinstance(command, TickCommand)
+        steps.append(command.law_dt_s)
+    assert steps[1:] == pytest.approx([0.01] * 5)  # the first: a period, from a reset
 
 
 def _command(

@@ -16,6 +16,7 @@ from ezcompanion.guidance import GuidanceController, KinematicState, LawName
 from ezcompanion.guidance.abandon import abandon_gap
 from ezcompanion.guidance.single import least_speed_m_s, longest_step_s
 from ezcompanion.records import Hold, TickCommand, VehicleState
+from ezcompanion.service.ticks import EPSILON_S
 
 __all__ = ["GuidanceLoop", "Hold", "TickCommand"]
 
@@ -33,6 +34,9 @@ _LEAST_SPEED_FACTOR = 0.5
 # ... and a step at most this many periods long (a late tick's, however late), nor longer
 # than a revolution at the bound (``single.longest_step_s``).
 _LONGEST_STEP_PERIODS = 5.0
+# A tick sooner than this after the last (only a late sample's, just after a deadline tick:
+# ticks on samples are at least half a period apart) steps the law by a period.
+_SOON_PERIODS = 0.5
 
 
 class GuidanceLoop:
@@ -236,11 +240,13 @@ class GuidanceLoop:
                       longest_step_s(self.scenario.guidance.accel_max_m_s2, speed))  # fmt: skip
         elapsed = self.period_s if last is None else min(max(now_s - last, 1e-4), longest)
         # The law verifies its command over the step it is given, and the command is held
-        # until the next tick: half a period to a period and a tenth away (``ticks``), a
-        # period while the stream flows. So the step is at least a period, even where this
-        # tick comes soon after the last (a late sample just after a deadline tick: 0.1 ms
-        # verified, a period flown, and a shield step that cost as 1 / dt, 12 ms at 0.1 ms).
-        dt = min(max(elapsed, self.period_s), longest)
+        # until the next tick. Ticks on samples are at least half a period apart
+        # (``ticks``), so the law steps by the clock; only a late sample just after a
+        # deadline tick ticks sooner, and its command is then held half a period or more:
+        # its step is a period, not the 0.1 ms since (verified over 0.1 ms, it was flown
+        # for a period, and its shield step cost as 1 / dt: 12 ms at 0.1 ms).
+        soon = elapsed < _SOON_PERIODS * self.period_s - 2.0 * EPSILON_S  # (due within it)
+        dt = min(self.period_s, longest) if soon else elapsed
         rate = state.course_rate_rad_s
         rest = None
         if state.ground_speed_m_s < minimum:

@@ -59,6 +59,9 @@ def test_both_formats_decode_to_the_payload_the_service_built(fmt: str) -> None:
         ):
             raw = encode(leaf, payload, fmt)
             assert decode(raw, encoding_name(leaf, fmt)) == payload
+    # the law's step beside the clock's (a period for a tick less than half a period on)
+    assert [guidance_payload("v1", 1, c, 1.7e9, ())["law_dt_s"] for c in COMMANDS] == [
+        c.law_dt_s for c in COMMANDS] and COMMANDS[-1].law_dt_s == pytest.approx(0.02)
     # an infinite age (no attitude yet) is null in both
     assert decode(encode("state", payload, fmt), encoding_name("state", fmt))[
         "attitude_age_s"

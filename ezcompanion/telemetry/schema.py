@@ -180,6 +180,7 @@ def guidance_payload(
         "time_s": command.time_s,
         "wall_time_unix_s": wall_time_unix_s,
         "dt_s": command.dt_s,
+        "law_dt_s": _num(command.law_dt_s),
         "mode": _MODE_NAMES.get(int(step.mode), str(int(step.mode))),
         "captured": command.captured,
         "north_m": state.north_m,

@@ -56,6 +56,7 @@ __all__ = [
     "MAX_SIMULATION_STEPS",
     "POSITION_LIMIT_M",
     "SPEED_LIMIT_M_S",
+    "ZONE_SIZE_MIN",
     "Bound",
     "check_integer",
     "check_number",
@@ -67,11 +68,14 @@ ACCEL_LIMIT_M_S2 = 1000.0
 ANGLE_LIMIT_DEG = 360.0
 GAIN_LIMIT = 1000.0
 MAX_SIMULATION_STEPS = 1_000_000
-MAGNITUDE_LIMIT = 1e9  # no setting in SI units needs more
+# No setting in SI units needs more; nor does any number the law is given (a length, speed
+# or angle: ``guidance.params`` and the controller hold them to it), far below where the
+# law's squares and products overflow (a defender's range of 2.5e154 m made its gaps +inf,
+# which the shield counted as certified; a north of 1e155 m made the law NaN).
+MAGNITUDE_LIMIT = 1e9
 # a defender's range (m) and speed ratio at least this: their product mu R divides the
 # zone's reach, squared ((R + c) / (mu R))^2, which a range of 1e-300 m or a ratio of 1e-155
-# overflowed (an internal error, not a refusal); the library's Defender holds the same
-# floor (guidance.params.ZONE_SIZE_MIN), this one names the file's path
+# overflowed (an internal error, not a refusal); ``guidance.params.Defender`` holds it too
 ZONE_SIZE_MIN = 1e-6
 RESPONSE_LAG_LIMIT_S = 10.0
 

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from ezcompanion.config_limits import MAGNITUDE_LIMIT
 from ezcompanion.errors import ConfigError, StateError
 from ezcompanion.guidance import (
     Defender,
@@ -18,7 +19,7 @@ from ezcompanion.guidance import (
     Target,
     ZoneSet,
 )
-from ezcompanion.guidance.single import STATE_LIMIT, check_state, least_speed_m_s
+from ezcompanion.guidance.single import check_state, least_speed_m_s
 
 D1 = Defender(north_m=2.0, east_m=3.0, range_m=1.5, capture_radius_m=0.5, speed_ratio=0.7)
 D2 = Defender(north_m=4.4, east_m=-2.0, range_m=1.5, capture_radius_m=0.5, speed_ratio=0.7)
@@ -57,31 +58,31 @@ def test_bad_speed_step_and_reset_are_refused() -> None:
 @pytest.mark.parametrize("field", ["north_m", "east_m", "course_rad", "speed_m_s"])
 def test_a_state_beyond_the_limit_is_refused_naming_the_field(field: str, batch: bool) -> None:
     """Finite is not enough: a north of 1e155 m or a speed of 1e200 m/s overflowed the law
-    into a NaN command. Beyond ``STATE_LIMIT`` (1e9) each field is refused, on one vehicle
+    into a NaN command. Beyond ``MAGNITUDE_LIMIT`` (1e9) each field is refused, on one vehicle
     and in a batch (the first vehicle that is not within it named), and nothing advances."""
     values = {"north_m": 8.0, "east_m": -4.0, "course_rad": 2.5, "speed_m_s": 1.0}
     c = controller()
     if batch:
         c.reset(np.zeros(3))
         state = KinematicState(**{k: np.full(3, v) for k, v in values.items()})
-        getattr(state, field)[1] = 2.0 * STATE_LIMIT
+        getattr(state, field)[1] = 2.0 * MAGNITUDE_LIMIT
     else:
-        state = KinematicState(**{**values, field: -2.0 * STATE_LIMIT})
+        state = KinematicState(**{**values, field: -2.0 * MAGNITUDE_LIMIT})
     before = c.accel_m_s2
     with pytest.raises(StateError, match="within") as caught:
         c.step(state, 0.02)
-    assert caught.value.field == field and abs(caught.value.value) == 2.0 * STATE_LIMIT
+    assert caught.value.field == field and abs(caught.value.value) == 2.0 * MAGNITUDE_LIMIT
     np.testing.assert_array_equal(c.accel_m_s2, before)
 
 
 @pytest.mark.parametrize("law", list(LawName))
 def test_every_law_is_finite_across_the_limit(law: LawName) -> None:
-    """The limit is below the law's overflow: at every corner of +-``STATE_LIMIT`` in
+    """The limit is below the law's overflow: at every corner of +-``MAGNITUDE_LIMIT`` in
     position and speed (the course at the limit too), each law's command is finite."""
     c = controller(law=law)
     corners = np.array(list(itertools.product((-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0)))).T
-    north, east, course = STATE_LIMIT * corners
-    for speed in (1.0, STATE_LIMIT):
+    north, east, course = MAGNITUDE_LIMIT * corners
+    for speed in (1.0, MAGNITUDE_LIMIT):
         c.reset(np.zeros(north.size))
         step = c.step(KinematicState(north, east, course, np.full(north.size, speed)), 0.02)
         assert np.isfinite(step.accel_lat_cmd_m_s2).all(), (speed, step.accel_lat_cmd_m_s2)

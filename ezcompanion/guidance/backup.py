@@ -324,6 +324,13 @@ def sample_ticks(s: FloatArray, speed: float, dt: float) -> int:
     return max(1, ticks)
 
 
+@jit_inline
+def _or_none(value: float) -> float:
+    """A certificate or value as computed, but -inf for +inf or NaN: with at least one zone
+    every real one is finite, so those are an overflow, never a certificate (fail closed)."""
+    return value if value < math.inf else -math.inf
+
+
 @jit_borrow
 def acceptance_level_m(s: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
                        speed: float, dt: float) -> float:
@@ -834,10 +841,8 @@ def backup_certificates(
     is exact from theta up whatever ``below`` is: whether it reaches theta decides where
     the turns leave (at once where it does)."""
     theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
-    straight = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
-                                    min(below, theta), enough)  # fmt: skip
-    if not straight < math.inf:  # +inf or NaN: an overflow, never a certificate
-        straight = -math.inf
+    straight = _or_none(straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
+                                             dt, min(below, theta), enough))  # fmt: skip
     out[BACKUP_STRAIGHT] = straight
     if straight >= theta:  # both turns leave at once: they are STRAIGHT
         out[BACKUP_LEFT] = out[BACKUP_RIGHT] = straight
@@ -847,9 +852,9 @@ def backup_certificates(
         if best >= enough:
             out[policy] = -math.inf
             continue
-        value = turn_certificate(s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av, speed, dt,
-                                 straight, theta, max(best, below), enough, _FLAGS[0])  # fmt: skip
-        out[policy] = value if value < math.inf else -math.inf  # (an overflow: fail closed)
+        out[policy] = _or_none(turn_certificate(
+            s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av, speed, dt, straight, theta,
+            max(best, below), enough, _FLAGS[0]))  # fmt: skip
         best = max(best, out[policy])
 
 
@@ -1075,10 +1080,9 @@ def _ahead(
     backup_certificates(s, zn, ze, zmur, zreach, kz, n1, e1, h1, a1, av1, speed, dt, enough,
                         accept, certs)  # fmt: skip
     which = int(np.argmax(certs[:_N_BACKUPS]))
-    value = min(certs[which], gap)
-    if not (certs[which] < math.inf and gap < math.inf):  # an overflow, never a certificate
-        value = -math.inf  # (+inf or NaN, either one: fail closed)
-    return value, which, a1, av1
+    # (the certificates are -inf for an overflow already; the flight's own gap, NaN or
+    # +inf, would leave min() the certificate)
+    return min(certs[which], _or_none(gap)), which, a1, av1
 
 
 @jit_borrow
@@ -1241,8 +1245,8 @@ def _plan_step(
     was found: written into ``plan``, its value into ``certs``. (On its own, not inlined
     into ``shield_one``: inlined, a cold first step took some 3 s more, docs/service.md.)"""
     if current == BACKUP_PLAN:
-        held = plan_value(s, zn, ze, zmur, zreach, kz, plan, n, e, h, a, av, speed, dt)
-        certs[BACKUP_PLAN] = held if held < math.inf else -math.inf  # (an overflow)
+        certs[BACKUP_PLAN] = _or_none(plan_value(s, zn, ze, zmur, zreach, kz, plan, n, e, h, a,
+                                                 av, speed, dt))  # fmt: skip
     floor = theta - s[S_EPS]
     if certs[BACKUP_PLAN] >= floor:
         return False
@@ -1257,7 +1261,8 @@ def _plan_step(
     found = np.zeros(PLAN_SIZE, dtype=np.int64)
     value, spent = plan_search(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, need,
                                found)  # fmt: skip
-    if value >= need and value < math.inf:  # (+inf: an overflow, never a value)
+    value = _or_none(value)
+    if value >= need:
         for j in range(PLAN_SIZE):
             plan[j] = found[j]
         certs[BACKUP_PLAN] = value
@@ -1340,17 +1345,14 @@ def _floor_certificate(
     the flight's."""
     if not 0 <= policy < _N_BACKUPS:  # a rung or a plan
         return -math.inf
-    straight = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
-                                    theta, theta)  # fmt: skip
-    if not straight < math.inf:  # +inf or NaN: an overflow, never a certificate
-        straight = -math.inf
+    straight = _or_none(straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
+                                             dt, theta, theta))  # fmt: skip
     if policy == BACKUP_STRAIGHT:
         return straight
     if straight >= theta:
         return -math.inf
-    value = turn_certificate(s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av, speed, dt,
-                             straight, theta, theta, theta, _FLAGS[0])  # fmt: skip
-    return value if value < math.inf else -math.inf
+    return _or_none(turn_certificate(s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av, speed,
+                                     dt, straight, theta, theta, theta, _FLAGS[0]))  # fmt: skip
 
 
 @jit

@@ -23,6 +23,7 @@ from enum import IntEnum
 import numpy as np
 import numpy.typing as npt
 
+from ezcompanion.config_limits import MAGNITUDE_LIMIT
 from ezcompanion.errors import StateError
 from ezcompanion.guidance._jit import jit
 from ezcompanion.guidance.actuator import advance_one
@@ -54,7 +55,6 @@ from ezcompanion.guidance.law import (
 from ezcompanion.guidance.params import GuidanceParams, LawName, Target
 from ezcompanion.guidance.single import (
     MODE_PURE,
-    STATE_LIMIT,
     check_state,
     checked_rate,
     least_speed_m_s,
@@ -305,7 +305,7 @@ class GuidanceController:
         if type(north_m) is type(east_m) is type(course_rad) is type(speed_m_s) is float:
             # within the limit together (NaN: not), each is: else each field is checked
             total = abs(north_m) + abs(east_m) + abs(course_rad) + speed_m_s
-            if not (total <= STATE_LIMIT and speed_m_s >= least):
+            if not (total <= MAGNITUDE_LIMIT and speed_m_s >= least):
                 check_state((north_m, east_m, course_rad, speed_m_s), least)
         else:
             north_m, east_m, course_rad, speed_m_s = _numbers(
@@ -412,7 +412,7 @@ class GuidanceController:
             values = (state.north_m, state.east_m, state.course_rad, state.speed_m_s)
             if all(type(v) is float for v in values):
                 total = sum(map(abs, values))  # type: ignore[arg-type]
-                if total <= STATE_LIMIT and values[3] > least_speed:  # else named below
+                if total <= MAGNITUDE_LIMIT and values[3] > least_speed:  # else named below
                     rows = np.array(values).reshape(4, 1)
                     return rows[0], rows[1], rows[2], rows[3]
         rows = np.empty((4, self._accel.shape[0]))
@@ -422,7 +422,8 @@ class GuidanceController:
                 shaped[index] = getattr(state, name)
             except (ValueError, TypeError) as exc:
                 raise StateError(name, getattr(state, name), f"must fit the batch: {exc}") from None
-        ok = (np.abs(rows) <= STATE_LIMIT).all(axis=0) & (rows[3] > 0.0) & (rows[3] >= least_speed)
+        within = (np.abs(rows) <= MAGNITUDE_LIMIT).all(axis=0)
+        ok = within & (rows[3] > 0.0) & (rows[3] >= least_speed)
         if not ok.all():  # the first vehicle that is not, its first field named
             n, e, c, v = rows[:, int(np.flatnonzero(~ok)[0])]
             check_state((float(n), float(e), float(c), float(v)), least_speed)

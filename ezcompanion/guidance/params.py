@@ -31,6 +31,7 @@ import math
 from dataclasses import dataclass
 from enum import StrEnum
 
+from ezcompanion.config_limits import MAGNITUDE_LIMIT, ZONE_SIZE_MIN
 from ezcompanion.errors import ConfigError
 
 __all__ = [
@@ -66,16 +67,6 @@ class BlendMode(StrEnum):
 
     HARD = "hard"
     SIGMOID = "sigmoid"
-
-
-# The most a length (m), speed (m/s) or angle (rad) given to the law may be: far beyond any
-# frame (a scenario file holds positions to 1e5 m, the service's MAVLink gate to 1e7), far
-# below where the law's squares and products overflow (a defender's range of 2.5e154 m made
-# its gaps +inf, which the shield counted as certified; a north of 1e155 m made the law NaN).
-MAGNITUDE_LIMIT = 1e9
-# The least a defender's range (m) and speed ratio may be: their product divides the zone's
-# reach, squared, which a range of 1e-300 m or a ratio of 1e-155 overflowed.
-ZONE_SIZE_MIN = 1e-6
 
 
 def _finite(field: str, value: float) -> None:

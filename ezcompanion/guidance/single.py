@@ -20,6 +20,7 @@ import math
 import numpy as np
 import numpy.typing as npt
 
+from ezcompanion.config_limits import MAGNITUDE_LIMIT
 from ezcompanion.errors import StateError
 from ezcompanion.guidance._jit import jit
 from ezcompanion.guidance.actuator import advance_one
@@ -37,12 +38,10 @@ from ezcompanion.guidance.law import (
     P_SIZE,
     _evaluate_one,
 )
-from ezcompanion.guidance.params import MAGNITUDE_LIMIT
 from ezcompanion.guidance.zones import ZoneSet
 
 __all__ = [
     "MODE_PURE",
-    "STATE_LIMIT",
     "check_state",
     "checked_rate",
     "least_speed_m_s",
@@ -63,9 +62,6 @@ MODE_PURE = 0.01
 _INTERCEPT, _BLEND, _SAFETY, _CAPTURED = 0, 1, 2, 3
 # where the shield's settings end in ``pack_single``'s vector (then the target, the switch)
 _S_END = P_SIZE + S_SIZE
-# The most a state's number may be (m, rad, m/s): ``params.MAGNITUDE_LIMIT`` (a north of
-# 1e155 m, or a speed of 1e200 m/s, made the nominal NaN).
-STATE_LIMIT = MAGNITUDE_LIMIT
 
 
 @jit
@@ -97,12 +93,13 @@ def longest_step_s(accel_max_m_s2: float, speed_m_s: float) -> float:
 
 def check_state(values: tuple[float, float, float, float], least_speed: float = 0.0) -> None:
     """A ``StateError`` for the first of four numbers that is not finite or beyond
-    ``STATE_LIMIT``, or the speed if it is not > 0 and at least ``least_speed``."""
+    ``MAGNITUDE_LIMIT`` (a north of 1e155 m, or a speed of 1e200 m/s, made the nominal
+    NaN), or the speed if it is not > 0 and at least ``least_speed``."""
     for name, value in zip(("north_m", "east_m", "course_rad", "speed_m_s"), values, strict=True):
         if not math.isfinite(value):
             raise StateError(name, value, "must be finite")
-        if abs(value) > STATE_LIMIT:
-            raise StateError(name, value, f"must be within +-{STATE_LIMIT:g}")
+        if abs(value) > MAGNITUDE_LIMIT:
+            raise StateError(name, value, f"must be within +-{MAGNITUDE_LIMIT:g}")
     if not values[3] > 0.0:
         raise StateError("speed_m_s", values[3], "must be > 0")
     if values[3] < least_speed:

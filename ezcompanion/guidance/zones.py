@@ -22,9 +22,10 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from ezcompanion.config_limits import MAGNITUDE_LIMIT, ZONE_SIZE_MIN
 from ezcompanion.errors import ConfigError
 from ezcompanion.guidance._jit import jit
-from ezcompanion.guidance.params import MAGNITUDE_LIMIT, ZONE_SIZE_MIN, Defender
+from ezcompanion.guidance.params import Defender
 
 __all__ = ["ZoneSet", "ez_boundary_point"]
 

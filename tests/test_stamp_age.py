@@ -58,8 +58,9 @@ def test_a_sample_that_waited_through_a_stall_is_as_old_as_its_stamp() -> None:
     loop = GuidanceLoop(load_scenario(CONFIG / "paper_scenario1.yaml"), loop_rate_hz=50.0,
                         stale_after_s=BUDGET_S)  # fmt: skip
     assert loop.tick(state, now) is Hold.STALE
-    # a sample sent now is young again
-    assert t.update(local(1000 + 20 * 60 + 20_000, 0.02 * 60 + 20.0, 0.0), now + 0.004)
+    # a sample sent now is young again (stamped as the vehicle's clock reads now: 20 s
+    # after the last one before the stall)
+    assert t.update(local(1000 + 20 * 49 + 20_000, 0.02 * 49 + 20.0, 0.0), now + 0.004)
     state = t.snapshot(BUDGET_S, now + 0.004)
     assert state is not None and state.age_s(now + 0.004) < 0.01
 

@@ -127,6 +127,52 @@ def test_guidance_restarts_from_the_measured_turn_inside_the_bound() -> None:
             min(expected, 0.98 * bound), abs=0.03)
 
 
+@pytest.mark.parametrize("ahead_s", [0.5, 3.0, 100.0])
+def test_a_sample_stamped_ahead_of_the_vehicles_clock_is_refused_and_moves_nothing(
+    ahead_s: float,
+) -> None:
+    """A helper's attack: one LOCAL_POSITION_NED at the target (5 m on), stamped 3 s ahead
+    of the vehicle's clock, widened the gate by what 3 s allow and was taken ("intercepted",
+    5.5 m from the target); one ATTITUDE stamped 9 s ahead lowered the clock's offset, so
+    that every genuine position read 9 s old. Both are refused now, naming the stamp, and
+    the genuine stream goes on as before."""
+    t = known_origin()
+    used, (north, east, _) = fly_track(t, [0.0] * 50)  # 1 s straight north at 1 m/s
+    assert all(used)
+    now = 1.0 + DT_S * 50
+    boot_ms = 1000 + 20 * 50
+    forged = local(boot_ms + round(ahead_s * 1000), north + 5.0, east)
+    assert t.update(forged, now) is None
+    cause, why = t.take_refusal() or (None, "")
+    assert cause is Hold.GATE and "ahead of the vehicle's clock" in why, why
+    attitude = mavlink.MAVLink_attitude_message(boot_ms + round(ahead_s * 1000), 0.0, 0.0,
+                                                1.0, 0.0, 0.0, 0.0)  # fmt: skip
+    assert t.update(attitude, now) is None
+    cause, why = t.take_refusal() or (None, "")
+    assert cause is Hold.GATE and why.startswith("attitude sample stamped"), why
+    # the genuine next sample: taken, young (its time is the last that moved, 20 ms
+    # before: the attitude's 9 s would have made it 9 s old), where the vehicle is
+    assert t.update(local(boot_ms, north, east), now + 0.005) == "LOCAL_POSITION_NED"
+    state = t.snapshot(0.25, now + 0.005)
+    assert state is not None and state.age_s(now + 0.005) < 0.03
+    assert (state.north_m, state.east_m) == (north, east)
+
+
+def test_a_vehicle_clock_a_little_fast_or_a_first_sample_that_waited_is_not_ahead() -> None:
+    """Genuine samples are never refused as ahead: a vehicle clock 20% fast (each sample
+    sets a lower least offset), and a first sample that waited 2 s in a buffer (a serial
+    port's, or a socket's before a lost link), the rest read as they come."""
+    t = known_origin()
+    for k in range(100):  # the vehicle's 24 ms for our 20 ms
+        boot_ms = 1000 + 24 * k
+        assert t.update(local(boot_ms, 0.024 * k, 0.0), 1.0 + DT_S * k) == "LOCAL_POSITION_NED"
+    t = known_origin()
+    assert t.update(local(1000, 0.0, 0.0), 3.0) == "LOCAL_POSITION_NED"  # sent at 1.0
+    for k in range(1, 100):  # then each read 5 ms after it was sent
+        assert t.update(local(1000 + 2000 + 20 * k, 2.0 + 0.02 * k, 0.0),
+                        3.005 + DT_S * k) == "LOCAL_POSITION_NED"  # fmt: skip
+
+
 @pytest.mark.parametrize("jump_m", [1.0, 3.0, 50.0])
 def test_a_position_jump_over_udp_ends_guidance_with_the_gate_named(
     jump_m: float, tmp_path: Path

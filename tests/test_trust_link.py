@@ -113,6 +113,31 @@ def test_position_spoof_at_the_target_is_refused_and_ends_guidance(tmp_path: Pat
     assert_honest(flight)
 
 
+def test_one_position_at_the_target_stamped_ahead_is_refused_not_an_intercept(
+    tmp_path: Path,
+) -> None:
+    # A helper's attack: one LOCAL_POSITION_NED at the target stamped 3 s ahead of the
+    # vehicle's clock, from its own address, was taken (the gate widened by what 3 s
+    # allow): "intercepted; miss distance 0.000 m" with the truth 5.5 m away. (4 s here:
+    # the target is 5.0 m from the prediction, and 3 s widen the gate to 5.00 m only.)
+    mav = forger()
+
+    def attack(service: Any, relay: Relay, clock: Clock) -> None:
+        assert wait_for(service, EventKind.ENGAGED)
+        time.sleep(1.0 / SPEEDUP)
+        target = load_scenario(SCENARIO).target
+        msg = M.MAVLink_local_position_ned_message(
+            clock.boot_ms + 4000, target.north_m, target.east_m, -20.0, 0.0, 0.0, 0.0)
+        relay.inject(frame(mav, msg))
+
+    flight = relayed_flight(attack, tmp_path, max_time_s=20.0)
+    whys = [e.message for e in flight.events.of_kind(EventKind.ALARM)]
+    assert any("ahead of the vehicle's clock" in why for why in whys), whys
+    intercepted, *_ = judge_truth(load_scenario(SCENARIO), flight.truth)
+    assert flight.outcome.intercepted == intercepted  # the truth's word, not the forger's
+    assert_honest(flight)
+
+
 def test_an_origin_change_during_the_engagement_is_a_failsafe_never_applied(
     tmp_path: Path,
 ) -> None:

@@ -26,7 +26,18 @@ What the law uses, and why:
   socket while the companion was stalled (a 20 s stall once sent one command from a 20 s old
   position over TCP, every sample "fresh" on arrival) is as old as its stamp says, and the
   loop fails closed on it. A time stamp back by more than ``_REBOOT_BACKSTEP_S`` (a reboot)
-  and a lost link start the offset afresh. Only accepted samples move it.
+  and a lost link start the offset afresh. Only accepted position samples move it.
+- a stamp ahead of the vehicle's clock: the least offset seen (our clock at arrival less the
+  stamp) is the vehicle's clock plus the least delay, so a sample whose own offset is
+  lower by more than ``_AHEAD_S`` (plus ``_AHEAD_RATE`` of the time since that least was
+  set: a vehicle clock that runs a little fast) claims to have been sent before the
+  vehicle's clock got there. One LOCAL_POSITION_NED at the target stamped 3 s ahead
+  widened the gate by what 3 s allow (5 m) and was taken: "intercepted" 5.5 m from the
+  target; one ATTITUDE stamped 9 s ahead lowered the offset, and every genuine position
+  then read 9 s old (guidance held, the cause named as stale positions). Refused with
+  ``Hold.GATE``, naming the message and how far ahead. Over the first ``_YOUNG_S`` of a
+  time base the least offset is still being found (a sample that waited in a serial
+  buffer or a socket before a lost link may come first): there a lower offset is taken.
 
 Refused, and counted (a refused sample changes nothing):
 
@@ -104,6 +115,15 @@ _COURSE_RATE_TAU_S = 0.1
 # much slower than ours (a SITL behind real time) without ageing its samples; a stall of T
 # seconds still ages the samples that waited through it by (1 - this) T
 _CLOCK_SLEW = 0.2
+# a sample stamped more than this ahead of the vehicle's clock (the least offset seen) is
+# refused; genuine ones are behind it by their delay, ahead only by less than the least
+# delay seen (milliseconds)
+_AHEAD_S = 0.1
+# ... plus this much a second since that least offset was set: a vehicle clock up to 0.2%
+# faster than ours (a crystal is within 0.01%); a forger can age genuine samples by no more
+_AHEAD_RATE = 0.002
+# a time base's first this long (our clock): its least offset is still being found
+_YOUNG_S = 0.5
 
 
 @dataclass
@@ -154,22 +174,43 @@ class _VehicleClock:
     offset_s: float = math.nan  # our clock less the vehicle's; nan before any sample
     at_s: float = 0.0  # our clock when offset_s was last moved
     newest_boot_s: float = -math.inf
+    least_s: float = math.nan  # the least offset seen in this time base (no slew)
+    least_at_s: float = 0.0  # our clock when it was set
+    base_at_s: float = 0.0  # our clock when this time base began
 
     def offset_for(self, boot_s: float, now_s: float) -> float:
         """The offset for a sample stamped ``boot_s`` read at ``now_s`` (not kept: see
         :meth:`keep`)."""
         seen = now_s - boot_s  # the offset plus this sample's delay
-        if math.isnan(self.offset_s) or boot_s < self.newest_boot_s - _REBOOT_BACKSTEP_S:
+        if self._new_base(boot_s):
             return seen  # the first sample, or a rebooted vehicle's: a new time base
         return min(self.offset_s + _CLOCK_SLEW * max(0.0, now_s - self.at_s), seen)
 
+    def ahead_s(self, boot_s: float, now_s: float) -> tuple[float, float]:
+        """How far a sample stamped ``boot_s``, read at ``now_s``, is stamped ahead of the
+        vehicle's clock, and how far a genuine one can be (refuse it where the first is
+        larger); (0, 0) in a new or young time base."""
+        if self._new_base(boot_s) or now_s - self.base_at_s < _YOUNG_S:
+            return 0.0, 0.0
+        allowed = _AHEAD_S + _AHEAD_RATE * max(0.0, now_s - self.least_at_s)
+        return self.least_s - (now_s - boot_s), allowed
+
     def keep(self, boot_s: float, now_s: float) -> float:
         """Take an accepted sample's offset; when it was sent, on our clock."""
-        restarted = boot_s < self.newest_boot_s - _REBOOT_BACKSTEP_S
+        restarted = self._new_base(boot_s)
         self.offset_s = self.offset_for(boot_s, now_s)
         self.at_s = now_s
         self.newest_boot_s = boot_s if restarted else max(self.newest_boot_s, boot_s)
+        seen = now_s - boot_s
+        if restarted:
+            self.base_at_s = now_s
+        if restarted or seen < self.least_s:
+            self.least_s, self.least_at_s = seen, now_s
         return boot_s + self.offset_s
+
+    def _new_base(self, boot_s: float) -> bool:
+        """No sample yet, or one from a rebooted vehicle (its time well back)."""
+        return math.isnan(self.offset_s) or boot_s < self.newest_boot_s - _REBOOT_BACKSTEP_S
 
 
 @dataclass
@@ -356,10 +397,21 @@ class TelemetryState:
         if not is_finite(msg.yaw) or abs(msg.yaw) > 2.0 * math.pi:
             return False
         boot_s = ms_to_s(msg.time_boot_ms)
-        if not _advances(self._attitude_boot_s, boot_s):
+        last = self._attitude_boot_s
+        if boot_s <= last:
+            if boot_s < last - _REBOOT_BACKSTEP_S:  # as a position's: only a lost link
+                return self._refuse(  # starts the vehicle's time afresh
+                    Hold.GATE,
+                    f"attitude time went back {last - boot_s:.1f} s (a reboot or a forgery): "
+                    "refused",
+                )
+            return False  # duplicated or reordered
+        if not self._stamp_ok("attitude", boot_s, now_s):
             return False
         self._yaw_rad, self._attitude_boot_s = msg.yaw, boot_s
-        self._attitude_s = self._clock.keep(boot_s, now_s)
+        # (only positions, which pass the gate, move the vehicle's clock: a forger's
+        # attitudes, each a little ahead, would otherwise age every genuine position)
+        self._attitude_s = self._sent_s(boot_s, now_s)
         return True
 
     def _on_vfr_hud(self, msg: Message, now_s: float) -> bool:
@@ -419,10 +471,21 @@ class TelemetryState:
 
     def _take(self, kind: str, sample: _Position, now_s: float) -> bool:
         """Judge a position sample; an accepted one moves the vehicle's clock."""
-        if not self._accept(kind, sample):
+        if not self._stamp_ok(kind, sample.boot_s, now_s) or not self._accept(kind, sample):
             return False
         self._clock.keep(sample.boot_s, now_s)
         return True
+
+    def _stamp_ok(self, kind: str, boot_s: float, now_s: float) -> bool:
+        """A sample's stamp is not ahead of the vehicle's clock (else refused, named)."""
+        ahead, allowed = self._clock.ahead_s(boot_s, now_s)
+        if ahead <= allowed:
+            return True
+        return self._refuse(
+            Hold.GATE,
+            f"{kind} sample stamped {ahead:.2f} s ahead of the vehicle's clock (time_boot_ms "
+            f"{boot_s * 1000.0:.0f}; at most {allowed:.2f} s): refused",
+        )
 
     def _refuse(self, cause: Hold, why: str) -> bool:
         self._refusal = (cause, why)
@@ -540,11 +603,6 @@ def filtered_course_rate(rate_rad_s: float | None, before: tuple[float, float],
     rate = turn / dt_s
     gain = min(1.0, dt_s / (dt_s + _COURSE_RATE_TAU_S))
     return rate if rate_rad_s is None else rate_rad_s + gain * (rate - rate_rad_s)
-
-
-def _advances(last_boot_s: float, boot_s: float) -> bool:
-    """A new sample's time stamp must advance, unless the vehicle rebooted."""
-    return boot_s > last_boot_s or boot_s < last_boot_s - _REBOOT_BACKSTEP_S
 
 
 # each returns True (used), False (refused) or None (skipped)

@@ -26,6 +26,8 @@ from test_service_loopback import CONFIG, SPEEDUP, Flight, fly
 from ezcompanion.config import load_scenario
 from ezcompanion.service.demo import free_udp_port, judge_truth
 from ezcompanion.service.events import EventKind
+from ezcompanion.wire import Link
+from ezcompanion.wire.link import DATAGRAM_FRAMES_MAX
 from ezcompanion.wire.projection import ARDUPILOT_M_PER_DEG
 
 SCENARIO = CONFIG / "paper_scenario1.yaml"
@@ -168,6 +170,40 @@ def test_an_origin_change_during_the_engagement_is_a_failsafe_never_applied(
     assert [e.data["cause"] for e in flight.events.of_kind(EventKind.ABORTED)] == ["origin"]
     assert not flight.outcome.intercepted
     assert_honest(flight)
+
+
+def test_a_flood_of_big_datagrams_is_read_in_bounded_passes_and_the_vehicle_still_heard() -> None:
+    """A helper's flood: 65 KB datagrams of 3,000 heartbeats each from a stranger; 512
+    reads of them at once froze the service for 14 s. A datagram gives at most
+    ``DATAGRAM_FRAMES_MAX`` frames (the rest dropped, counted bad), a read pass stops at
+    ``max_frames``, and what is left waits in the socket: the vehicle's frame behind the
+    flood is read at the next pass."""
+    port = free_udp_port()
+    link = Link(f"udpin:127.0.0.1:{port}", system_id=255, component_id=190)
+    stranger = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    vehicle = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        mav = forger()
+        beat = frame(mav, M.MAVLink_heartbeat_message(M.MAV_TYPE_QUADROTOR,
+                                                      M.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0,
+                                                      M.MAV_STATE_ACTIVE, 3))  # fmt: skip
+        big = beat * (64_000 // len(beat))
+        for _ in range(2):
+            stranger.sendto(big, ("127.0.0.1", port))
+        position = M.MAVLink_local_position_ned_message(1234, 1.0, 2.0, -20.0, 0.0, 0.0, 0.0)
+        vehicle.sendto(frame(forger(), position), ("127.0.0.1", port))
+        time.sleep(0.2)  # all three in the socket
+        first = link.recv(512, max_frames=300)
+        assert len(first) == 2 * DATAGRAM_FRAMES_MAX  # two datagrams' worth, then it stopped
+        assert {f.kind for f in first} == {"HEARTBEAT"}
+        assert link.stats.bad_frames >= 2  # each big datagram's rest
+        second = link.recv(512, max_frames=300)
+        assert [f.kind for f in second] == ["LOCAL_POSITION_NED"]
+        assert second[0].message.time_boot_ms == 1234
+    finally:
+        stranger.close()
+        vehicle.close()
+        link.close()
 
 
 def test_heartbeats_acks_and_a_stranger_on_the_port_steer_nothing(tmp_path: Path) -> None:

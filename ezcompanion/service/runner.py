@@ -81,6 +81,11 @@ _WAKE_S = 0.1  # clock seconds: the session's checks run at least this often
 # frames read at once, at most, before what fell due (beside a real autopilot): a socket that
 # filled while the companion was busy is taken whole before a tick
 _DRAIN_READS = 512
+# ... and no more than this many frames, nor for longer than this (wall time), before what
+# fell due is done: a stranger's flood of 65 KB datagrams, 512 reads at once, froze the
+# tick for 14 s (the rest waits in the socket for the next pass)
+_DRAIN_FRAMES = 1024
+_DRAIN_BUDGET_WALL_S = 0.01
 # a plane's heading loop that flies less than this of the law's hardest turn is warned of
 _TURN_SHARE_MIN = 0.95  # the loop model's tolerance (its turn ratio is measured to 2 digits)
 
@@ -327,7 +332,7 @@ class CompanionService:
         now = clock.now_s()
         link.wait_readable(
             clock.wait_wall_s(max(0.0, min(timeout_s, self._next_heartbeat_s - now))))
-        for frame in link.recv():
+        for frame in link.recv(max_frames=_DRAIN_FRAMES, budget_s=_DRAIN_BUDGET_WALL_S):
             self._on_frame(frame)
         if clock.now_s() >= self._next_heartbeat_s:
             self._send_heartbeat(clock.now_s())
@@ -342,7 +347,8 @@ class CompanionService:
         runs from its stamp, :mod:`ezcompanion.service.state`: that one would fail closed
         for nothing). False when the time is up or the service is done."""
         each = self._lockstep is not None
-        for frame in link.recv(_DRAIN_READS):
+        for frame in link.recv(_DRAIN_READS, max_frames=_DRAIN_FRAMES,
+                               budget_s=_DRAIN_BUDGET_WALL_S):  # fmt: skip
             now = self._on_frame(frame, tick=each)
             if self._time_up(now, started_s, max_time_s):
                 return False

@@ -16,6 +16,11 @@ from ezcompanion.wire.streams import SerialPort, Stream, TcpClient
 
 URL_SCHEMES = ("udpin", "udpout", "udp", "tcpin", "tcp")
 _DEFAULT_BAUD = 57600
+# frames taken from one UDP datagram at most; the rest of it is dropped (counted bad). An
+# autopilot's datagram holds one message or a few dozen (a serial buffer flushed); a
+# stranger's 65 KB datagram of 3,000 heartbeats took 17 ms to parse, and 512 of them
+# froze the service for 14 s
+DATAGRAM_FRAMES_MAX = 256
 
 
 def is_serial_device(url: str) -> bool:
@@ -28,7 +33,7 @@ class LinkStats:
     """Counters of one link's receive side."""
 
     messages: int
-    bad_frames: int  # bad CRC, length, id or signature
+    bad_frames: int  # bad CRC, length, id or signature; a datagram's frames beyond its bound
     rejected_unsigned: int
     bad_signatures: int = 0  # signed, but not with our key, or a replay
 
@@ -223,15 +228,27 @@ class Link:
         """Every complete, valid message available now, without blocking (see :meth:`recv`)."""
         return [frame.message for frame in self.recv(max_reads)]
 
-    def recv(self, max_reads: int = 64) -> list[Frame]:
-        """Every complete, valid message available now with its source, without blocking.
+    def recv(
+        self, max_reads: int = 64, *, max_frames: int | None = None, budget_s: float | None = None
+    ) -> list[Frame]:
+        """Every complete, valid message available now with its source, without blocking:
+        at most ``max_reads`` reads, and no read begun once ``max_frames`` frames are in
+        or ``budget_s`` of wall time has passed (what is left waits in the socket for the
+        next call; a flood then delays the vehicle's frames, and the stale budget fails
+        closed, rather than freezing the caller).
 
         Frames with bad CRC, bad length, bad signature or unknown ids are dropped and
         counted; nothing raises for what a peer sends. A UDP datagram is parsed on its own
-        (a frame never spans two senders' datagrams).
+        (a frame never spans two senders' datagrams), and at most ``DATAGRAM_FRAMES_MAX``
+        frames of it are taken.
         """
         out: list[Frame] = []
+        deadline = time.monotonic() + budget_s if budget_s is not None else None
         for _ in range(max_reads):
+            if (max_frames is not None and len(out) >= max_frames) or (
+                deadline is not None and time.monotonic() > deadline
+            ):
+                break
             chunk = self._read_chunk()
             if chunk is None:
                 break
@@ -295,10 +312,16 @@ class Link:
 
     def _parse(self, chunk: bytes, source: Address, out: list[Frame]) -> None:
         mav = self._conn.mav
+        # a datagram's frames are bounded (a byte stream's are by the 4 KB read)
+        room = DATAGRAM_FRAMES_MAX if self._udp and self._stream is None else -1
         try:
             msg = mav.parse_char(chunk)
             while msg is not None:
                 self._keep(msg, source, out)
+                room -= 1
+                if room == 0:
+                    self._reset_parser()  # the rest of the datagram: dropped, counted bad
+                    return
                 msg = mav.parse_char(b"")
         except Exception:
             self._bad += 1

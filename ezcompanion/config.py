@@ -474,10 +474,13 @@ def _only(path: str, data: Mapping[str, Any], *, required: set[str], optional: s
 
 
 def _enum(path: str, kind: type[LawName] | type[BlendMode], value: object) -> Any:
+    choices = ", ".join(m.value for m in kind)
+    if not isinstance(value, str):  # (not handed to the enum: its error prints the value
+        # whole, and a YAML alias bomb's took all memory: MemoryError, exit 70)
+        raise ConfigError(path, value, f"must be one of {choices}")
     try:
-        return kind(str(value)) if isinstance(value, str) else kind(value)  # type: ignore[arg-type]
+        return kind(value)
     except ValueError:
-        choices = ", ".join(m.value for m in kind)
         raise ConfigError(path, value, f"must be one of {choices}") from None
 
 

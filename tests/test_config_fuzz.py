@@ -217,3 +217,36 @@ def test_sitl_stub_refuses_every_broken_scenario_in_one_line(case: Case) -> None
         path.write_bytes(content)
         argv = ["--config", str(path), "--duration", "1", "--connect", "udpout:127.0.0.1:9"]
         check_refused(stub_main, "sitl-stub", argv, expected)
+
+
+def _alias_bomb(levels: int) -> str:
+    """A YAML list of 9^levels leaves in a few hundred bytes (aliases of aliases)."""
+    names = [f"a{k}" for k in range(levels)]
+    parts = [f"&{names[0]} [{', '.join(['lol'] * 9)}]"]
+    parts += [f"&{names[k]} [{', '.join([f'*{names[k - 1]}'] * 9)}]" for k in range(1, levels)]
+    return f"[{', '.join(parts)}, *{names[-1]}]"
+
+
+def test_an_alias_bomb_where_a_law_is_named_is_one_line_without_reading_it_whole() -> None:
+    """A helper's YAML alias bomb (9^9 leaves) as `law:` ran out of memory (MemoryError,
+    exit 70, 17 s under a 2 GB cap): the law's name was handed to the enum, whose error
+    prints the value whole. Now refused as not a name, in one line; measured here with a
+    bomb of 9^7 leaves (a repr of some 40 MB), by the memory its refusal takes."""
+    import tracemalloc
+
+    scenario = (CONFIG / "paper_scenario1.yaml").read_text()
+    for key, old, new in (("law", "\nlaw: backup", f"\nlaw: {_alias_bomb(7)}"),
+                          ("guidance.blend", "\nguidance:", f"\nguidance:\n  blend: "
+                                                            f"{_alias_bomb(7)}")):  # fmt: skip
+        content = scenario.replace(old, new, 1)
+        assert content != scenario
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "scenario.yaml"
+            path.write_text(content)
+            tracemalloc.start()
+            try:
+                check_refused(ezcompanion_main, "ezcompanion", ["simulate", str(path)], key)
+                _, peak = tracemalloc.get_traced_memory()
+            finally:
+                tracemalloc.stop()
+        assert peak < 10_000_000, f"{key}: {peak / 1e6:.0f} MB to refuse it"

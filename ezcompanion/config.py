@@ -389,6 +389,17 @@ def scenario_update(current: Scenario, data: object) -> Scenario:
     top = _mapping("scenario", data)
     if "vehicle" in top:
         whole = scenario_from_dict(top)
+        # its local positions are in its own frame: taken in the running one only where the
+        # two are the same (a moved origin had them taken 111 m off, without a word)
+        running = dataclasses.asdict(current.origin) if current.origin_given else None
+        given = dataclasses.asdict(whole.origin) if whole.origin_given else None
+        if given != running:
+            raise ConfigError("origin", given, f"must be the running scenario's ({running}): "
+                              "an update does not move the frame (give positions in it, or "
+                              "in latitude and longitude)")  # fmt: skip
+        if whole.frame is not current.frame:
+            raise ConfigError("frame", whole.frame.value, f"must be the running scenario's "
+                              f"({current.frame.value}): an update does not move the frame")
         defenders, target, name, fixed = whole.defenders, whole.target, whole.name, whole.fixed
     else:
         _only("", top, required={"defenders", "target"}, optional={"name"})

@@ -126,6 +126,18 @@ def check_target(defenders: Sequence[Defender], target: Target, guidance: Guidan
             )
 
 
+def zone_entered(
+    defenders: Sequence[Defender], north_m: float, east_m: float, course_rad: float
+) -> tuple[str, float] | None:
+    """The first zone a vehicle at (north_m, east_m) on ``course_rad`` is inside, with its
+    clearance (< 0), or None."""
+    for name, defender in zip(zone_names(defenders), defenders, strict=True):
+        clearance = clearance_m(defender, north_m, east_m, course_rad)
+        if clearance < 0.0:
+            return name, clearance
+    return None
+
+
 def check_start(
     defenders: Sequence[Defender],
     target: Target,
@@ -137,15 +149,15 @@ def check_start(
 ) -> None:
     """Refuse a start inside a zone on its course, or already at the target."""
     start = {"north_m": north_m, "east_m": east_m, "course_deg": round(math.degrees(course_rad), 3)}
-    for name, defender in zip(zone_names(defenders), defenders, strict=True):
-        clearance = clearance_m(defender, north_m, east_m, course_rad)
-        if clearance < 0.0:
-            raise ConfigError(
-                "vehicle", start,
-                f"starts inside the engagement zone of {name} on its start course "
-                f"(clearance {clearance:.3g} m): the safety guarantee needs a start outside "
-                "every zone",
-            )  # fmt: skip
+    inside = zone_entered(defenders, north_m, east_m, course_rad)
+    if inside is not None:
+        name, clearance = inside
+        raise ConfigError(
+            "vehicle", start,
+            f"starts inside the engagement zone of {name} on its start course "
+            f"(clearance {clearance:.3g} m): the safety guarantee needs a start outside "
+            "every zone",
+        )  # fmt: skip
     if math.hypot(target.north_m - north_m, target.east_m - east_m) <= guidance.intercept_radius_m:
         raise ConfigError("vehicle", start, "starts within intercept_radius_m of the target")
 

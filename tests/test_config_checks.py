@@ -144,6 +144,29 @@ def test_a_target_inside_a_zone_for_every_course_is_refused() -> None:
         scenario_update(scenario, {"defenders": PAPER["defenders"], "target": data["target"]})
 
 
+def test_a_whole_scenario_update_in_another_frame_is_refused() -> None:
+    """A helper's update: a whole scenario whose origin lay 111 m north of the running one's
+    was taken, its local positions in the running frame, without a word. Its frame must be
+    the running one's (the same origin, or none where none was given, and the same
+    ``frame``); the same file sent again is taken."""
+    data = paper()
+    data["origin"] = {"lat_deg": 47.0, "lon_deg": 8.0, "alt_m": 400.0}
+    running = scenario_from_dict(copy.deepcopy(data))
+    assert scenario_update(running, copy.deepcopy(data)).defenders == running.defenders
+    moved = copy.deepcopy(data)
+    moved["origin"]["lat_deg"] = 47.001
+    with pytest.raises(ConfigError, match=r"^origin: must be the running scenario's"):
+        scenario_update(running, moved)
+    unplaced = copy.deepcopy(data)
+    del unplaced["origin"]
+    with pytest.raises(ConfigError, match=r"^origin: must be the running scenario's"):
+        scenario_update(running, unplaced)
+    relative = copy.deepcopy(data)
+    relative["frame"] = "vehicle"
+    with pytest.raises(ConfigError, match=r"^frame: must be the running scenario's \(local\)"):
+        scenario_update(running, relative)
+
+
 def test_a_target_whose_capture_disc_pokes_out_is_only_a_warning() -> None:
     data = paper()
     # 0.9 m from D1 (zone >= 0.95 m): inside for every course, but 0.9 + 0.1 reaches outside

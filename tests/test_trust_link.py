@@ -20,10 +20,13 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+import yaml
 from conftest_sitl import M, Relay, forger, frame
 from test_service_loopback import CONFIG, SPEEDUP, Flight, fly
 
 from ezcompanion.config import load_scenario
+from ezcompanion.config_checks import clearance_m
+from ezcompanion.guidance import Defender
 from ezcompanion.service.demo import free_udp_port, judge_truth
 from ezcompanion.service.events import EventKind
 from ezcompanion.wire import Link
@@ -311,3 +314,49 @@ def test_an_autopilot_heard_first_is_refused_with_the_vehicle_both_named(
     assert flight.outcome.setpoints_sent == 0 and not flight.outcome.intercepted
     (end,) = flight.events.of_kind(EventKind.ON_EXIT)
     assert end.data["mode"] is None  # no end mode asked of either
+
+
+def test_a_scenario_update_the_vehicle_cannot_be_kept_safe_under_is_refused(
+    tmp_path: Path,
+) -> None:
+    """A helper's update (an operator's, authorised): D2 moved onto the vehicle. It was
+    accepted ({"ok": true}), and the vehicle flew 1 s inside D2's zone, clearance down to
+    -0.90 m. Refused now, and so is D2 moved to just ahead of the vehicle on its course,
+    outside but with no backup certified (nothing can turn it away in time); nothing
+    changes. A move that leaves a backup certified is taken. (The offer is what a zenoh
+    query reaches: tests/test_telemetry_service.py.)"""
+    raw = yaml.safe_load(SCENARIO.read_text())
+    replies: list[str | None] = []
+
+    def operator(service: Any, *_: Any) -> None:
+        assert wait_for(service, EventKind.ENGAGED)
+        while service.last_command is None:
+            time.sleep(0.01)
+        last = service.last_command
+        n, e, course = last.state.north_m, last.state.east_m, last.course_rad
+        d2 = raw["defenders"][1]
+        ahead = 0.0  # D2 just ahead on the course: its zone's edge 2 to 3 cm from the vehicle
+        while clearance_m(Defender(**{**d2, "north_m": n + ahead * math.cos(course),
+                                      "east_m": e + ahead * math.sin(course)}),
+                          n, e, course) < 0.02:  # fmt: skip
+            ahead += 0.005
+        for change in ({"north_m": n, "east_m": e},  # on the vehicle
+                       {"north_m": n + ahead * math.cos(course),
+                        "east_m": e + ahead * math.sin(course)},
+                       {"east_m": d2["east_m"] + 0.2}):  # fmt: skip
+            defenders = [dict(d) for d in raw["defenders"]]
+            defenders[1].update(change)
+            update = {"defenders": defenders, "target": raw["target"]}
+            replies.append(service.offer_scenario(update))
+
+    flight = fly(SCENARIO, tmp_path, during=operator, max_time_s=30.0, lockstep=True, **LIGHT)
+    inside, uncertified, taken = replies
+    assert inside is not None and "inside the engagement zone of D2" in inside, inside
+    assert inside.startswith("invalid scenario: defenders: would have the vehicle (at north ")
+    assert uncertified is not None and "no backup manoeuvre certified" in uncertified, uncertified
+    assert taken is None
+    assert len(flight.events.of_kind(EventKind.SCENARIO)) == 1  # the last only
+    flown = flight.service.scenario
+    assert flown.defenders[1].east_m == raw["defenders"][1]["east_m"] + 0.2
+    # judged against the zones in force (the update's, taken at once, after 0.1 s or so)
+    assert min(judge_truth(flown, flight.truth)[3]) > 0.0

@@ -29,7 +29,11 @@ from ezcompanion.guidance._jit import jit
 from ezcompanion.guidance.actuator import advance_one
 from ezcompanion.guidance.backup import (
     BACKUP_NONE,
+    BACKUP_STRAIGHT,
+    N_POLICIES,
     PLAN_SIZE,
+    acceptance_level_m,
+    backup_certificates,
     pack_shield,
     rest_course,
     rest_line_gap_m,
@@ -210,6 +214,28 @@ class GuidanceController:
         new._weight = self._weight[mask].copy()
         new._plan = self._plan[mask].copy()
         return new
+
+    def backup_certificate_m(
+        self, state: KinematicState, dt_s: float, course_rate_rad_s: float | None = None
+    ) -> tuple[float, float]:
+        """For one vehicle: the best single backup's certificate (m) from ``state`` with this
+        controller's actuator state and flown a_v (``course_rate_rad_s`` times the speed,
+        clipped to the bound; None: the model's), at the step ``dt_s``, and the acceptance
+        level theta it must reach to be certified (docs/guidance.md, step 5). Any law's
+        zones: the shield's settings are this controller's parameters'."""
+        north, east, course, speed = (float(r[0]) for r in self._state_rows(state))
+        if not (math.isfinite(dt_s) and dt_s > 0.0):
+            raise StateError("dt_s", dt_s, "must be a finite number > 0")
+        bound = self.params.accel_max_m_s2
+        flown = float(self._flown[0]) if course_rate_rad_s is None else (
+            min(max(speed * course_rate_rad_s, -bound), bound))  # fmt: skip
+        zones, s = self.zones, self._shield
+        certs = np.full(N_POLICIES, -math.inf)
+        backup_certificates(s, zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0,
+                            north, east, course, float(self._accel[0]), flown, speed, dt_s,
+                            math.inf, -math.inf, certs)  # fmt: skip
+        theta = acceptance_level_m(s, zones.mu_range_m, zones.reach_m, 0, speed, dt_s)
+        return float(np.max(certs[: BACKUP_STRAIGHT + 1])), float(theta)
 
     def evaluate(self, state: KinematicState) -> LawOutput:
         """The law at ``state`` and the current actuator state, without advancing it."""

@@ -35,9 +35,10 @@ from typing import TYPE_CHECKING, Any
 
 from ezcompanion import __version__
 from ezcompanion.config import Scenario, scenario_to_dict, scenario_update
+from ezcompanion.config_checks import zone_entered
 from ezcompanion.errors import ConfigError
 from ezcompanion.field import VehiclePlacement, place_fixed, placement_warnings
-from ezcompanion.guidance import LawName, kernels_cached
+from ezcompanion.guidance import GuidanceController, KinematicState, LawName, kernels_cached
 from ezcompanion.guidance.scaling import GRAVITY_M_S2
 from ezcompanion.records import EventKind, Hold, TickCommand
 from ezcompanion.service.autopilots import AutopilotProfile
@@ -231,7 +232,44 @@ class CompanionService:
         session = self._session
         if update.fixed and session is not None:  # as the vehicle's autopilot maps them
             update, _ = place_fixed(update, session.telemetry.projection)
+        last = self.last_command
+        if last is not None:
+            self._check_update_here(update, last)
         return update
+
+    def _check_update_here(self, update: Scenario, last: TickCommand) -> None:
+        """Refuse an update the vehicle, where it was at the last tick, could not be kept
+        safe under: inside one of its zones (the zones keep a vehicle out only from
+        outside), or, with the backup law, with no backup manoeuvre certified to keep it out
+        of them all (the law's safety argument starts from a certified state). A helper's
+        update put D2 on the vehicle: accepted, and it flew 1 s inside D2's zone."""
+        placed = self.placement.zones(update) if self.placement is not None else update
+        state, course = last.state, last.course_rad
+        where = (f"the vehicle (at north {state.north_m:.2f} m, east {state.east_m:.2f} m on "
+                 f"course {math.degrees(course):.1f} deg)")  # fmt: skip
+        inside = zone_entered(placed.defenders, state.north_m, state.east_m, course)
+        if inside is not None:
+            name, clearance = inside
+            raise ConfigError("defenders", name, f"would have {where} inside the engagement "
+                              f"zone of {name} (clearance {clearance:.2f} m): the law keeps a "
+                              "vehicle out of a zone only from outside it")  # fmt: skip
+        law = self.loop.controller.law
+        if law is not LawName.BACKUP:
+            return
+        params = self.loop.scenario.guidance  # with what is assumed of the vehicle
+        trial = GuidanceController(zones=placed.zones(), target=placed.target, params=params,
+                                   law=law)  # fmt: skip
+        trial.reset(min(max(last.accel_lat_m_s2, -0.999 * params.accel_max_m_s2),
+                        0.999 * params.accel_max_m_s2))  # fmt: skip
+        best, theta = trial.backup_certificate_m(
+            KinematicState(state.north_m, state.east_m, course, last.speed_m_s),
+            self.loop.period_s, last.course_rate_rad_s)  # fmt: skip
+        if best < theta:
+            raise ConfigError("defenders", [d.name for d in placed.defenders],
+                              f"would leave {where} with no backup manoeuvre certified to keep "
+                              f"it out of every zone (the best keeps {best:.3f} m, it needs "
+                              f"{theta:.3f} m): the law's safety argument starts from a "
+                              "certified state")  # fmt: skip
 
     def status(self) -> dict[str, Any]:
         """What the service is doing, for a status query (plain data, JSON-ready)."""

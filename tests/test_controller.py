@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -19,7 +20,8 @@ from ezcompanion.guidance import (
     Target,
     ZoneSet,
 )
-from ezcompanion.guidance.single import check_state, least_speed_m_s
+from ezcompanion.guidance.law import O_AC, O_ALPHA
+from ezcompanion.guidance.single import check_state, least_speed_m_s, safety_share
 
 D1 = Defender(north_m=2.0, east_m=3.0, range_m=1.5, capture_radius_m=0.5, speed_ratio=0.7)
 D2 = Defender(north_m=4.4, east_m=-2.0, range_m=1.5, capture_radius_m=0.5, speed_ratio=0.7)
@@ -154,6 +156,35 @@ def test_modes_follow_alpha_and_capture() -> None:
     assert bool(done.captured) and int(done.mode) == GuidanceMode.CAPTURED
     # the robust law lets the actuator relax once captured
     assert abs(float(done.accel_lat_cmd_m_s2)) < 0.5
+
+
+def test_the_backup_flying_alone_reads_safety_whatever_the_nominals_alpha(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Where the shield refuses the nominal (weight 0) the held backup flies alone: the mode
+    is SAFETY even where the law's output is NaN (its alpha too), which the shield refuses.
+    The share was 1 - 0 * (1 - NaN) = NaN, which read BLEND."""
+    assert safety_share(0.0, math.nan) == 1.0
+    assert safety_share(0.0, 0.0) == 1.0
+    assert safety_share(1.0, 0.0) == 0.0
+    assert safety_share(0.5, 0.5) == 0.75
+    c = GuidanceController(zones=ZoneSet.from_defenders([D1, D2]), target=TARGET,
+                           law=LawName.BACKUP)  # fmt: skip
+    c.reset(np.zeros(1))  # a batch of one: the batch path, whose law can be replaced here
+    run_law = GuidanceController._run_law
+
+    def broken_law(self: GuidanceController, rows: Any) -> Any:
+        out, out_zone = run_law(self, rows)
+        out[:, O_AC] = math.nan
+        out[:, O_ALPHA] = math.nan
+        return out, out_zone
+
+    monkeypatch.setattr(GuidanceController, "_run_law", broken_law)
+    state = KinematicState(np.array([8.0]), np.array([-4.0]), np.array([2.5]), 1.0)
+    stepped = c.step(state, 0.02)
+    assert float(stepped.shield_weight[0]) == 0.0  # the NaN nominal refused
+    assert math.isfinite(float(stepped.accel_lat_cmd_m_s2[0]))
+    assert int(stepped.mode[0]) == GuidanceMode.SAFETY
 
 
 def test_a_batch_with_its_own_zones_and_targets_matches_single_vehicles() -> None:

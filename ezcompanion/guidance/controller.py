@@ -413,8 +413,11 @@ class GuidanceController:
         backup = np.where(active, shield[:, 2], BACKUP_NONE).astype(np.int8)
         self._backup = backup
         self._weight = np.where(active, shield[:, 3], math.nan)
-        # the safety share of what is flown: the backup's, plus the nominal's own alpha
-        share = 1.0 - shield[:, 3] * (1.0 - out[:, O_ALPHA])
+        # the safety share of what is flown (single.safety_share, on arrays): the backup's,
+        # plus the nominal's own alpha; 1 where the backup flies alone, whatever alpha is
+        weight = shield[:, 3]
+        with np.errstate(invalid="ignore"):
+            share = np.where(weight > 0.0, 1.0 - weight * (1.0 - out[:, O_ALPHA]), 1.0)
         mode[active & (share >= 1.0 - _MODE_PURE)] = _SAFETY
         mode[active & (share <= _MODE_PURE)] = _INTERCEPT
         mode[active & (share > _MODE_PURE) & (share < 1.0 - _MODE_PURE)] = _BLEND

@@ -47,6 +47,7 @@ __all__ = [
     "least_speed_m_s",
     "longest_step_s",
     "pack_single",
+    "safety_share",
     "stack_zones",
     "step_one",
 ]
@@ -72,6 +73,16 @@ def _mode_of(share: float) -> int:
     if share <= MODE_PURE:
         return _INTERCEPT
     return _BLEND
+
+
+@jit
+def safety_share(weight: float, alpha: float) -> float:
+    """The safety laws' share of what the shield flies: the held backup's (1 - ``weight``)
+    plus the nominal's own ``alpha`` of the nominal's part; 1 where the backup flies alone
+    (weight 0), whatever the nominal's alpha, NaN included."""
+    if not weight > 0.0:
+        return 1.0
+    return 1.0 - weight * (1.0 - alpha)
 
 
 def least_speed_m_s(accel_max_m_s2: float, dt_s: float) -> float:
@@ -213,7 +224,7 @@ def step_one(
             cert = shield[0, 4]
             cert_ahead = shield[0, 5]
             # the safety share of what is flown: the backup's, plus the nominal's own alpha
-            mode = _mode_of(1.0 - weight * (1.0 - alpha))
+            mode = _mode_of(safety_share(weight, alpha))
     weight_before[0] = weight
     result[0] = a_next
     result[1] = weight

@@ -60,7 +60,7 @@ class Hold(StrEnum):
     NO_TELEMETRY = "no position yet"
     STALE = "position older than the budget"
     CAPTURED = "the engagement is over"
-    GATE = "position outside the estimate gate"
+    GATE = "telemetry refused by the estimate gate"
     DISAGREE = "local and global positions disagree"
     ORIGIN = "the vehicle's origin changed during the engagement"
     SPOOF = "conflicting heartbeats from the vehicle's id"

@@ -360,3 +360,45 @@ def test_a_scenario_update_the_vehicle_cannot_be_kept_safe_under_is_refused(
     assert flown.defenders[1].east_m == raw["defenders"][1]["east_m"] + 0.2
     # judged against the zones in force (the update's, taken at once, after 0.1 s or so)
     assert min(judge_truth(flown, flight.truth)[3]) > 0.0
+
+
+def test_a_burst_of_positions_walked_to_the_target_is_not_an_intercept(tmp_path: Path) -> None:
+    # A reviewer's attack on the first fix: 22 LOCAL_POSITION_NED at once from the
+    # vehicle's address, each stamped 99 ms past the one before (each within 0.1 s of the
+    # least offset the one before had set), their velocities ramped within the gate's
+    # bound towards the target: "intercepted, miss 0.011 m", no alarm, the truth 5 m off.
+    mav = forger()
+
+    def attack(service: Any, relay: Relay, clock: Clock) -> None:
+        assert wait_for(service, EventKind.ENGAGED)
+        time.sleep(1.0 / SPEEDUP)
+        t = service.vehicle_telemetry
+        target = load_scenario(SCENARIO).target
+        seen = t.snapshot(1.0, service.clock.now_s())  # what a sniffer of the stream knows
+        n, e = seen.north_m, seen.east_m
+        vn, ve = seen.velocity_north_m_s, seen.velocity_east_m_s
+        dv_max = t.accel_bound_m_s2 * 0.099 + 0.19
+        boot, frames = clock.boot_ms, []
+        for _ in range(60):
+            boot += 99
+            dn, de = target.north_m - n, target.east_m - e
+            dist = math.hypot(dn, de)
+            if dist < 0.05:
+                break
+            want = min(math.sqrt(6.0 * dist), dist / 0.099)
+            cn, ce = want * dn / dist - vn, want * de / dist - ve
+            scale = min(1.0, dv_max / max(math.hypot(cn, ce), 1e-9))
+            nvn, nve = vn + cn * scale, ve + ce * scale
+            n, e = n + 0.5 * (vn + nvn) * 0.099, e + 0.5 * (ve + nve) * 0.099
+            vn, ve = nvn, nve
+            msg = M.MAVLink_local_position_ned_message(boot, n, e, -20.0, vn, ve, 0.0)
+            frames.append(frame(mav, msg))
+        for data in frames:
+            relay.inject(data)
+
+    flight = relayed_flight(attack, tmp_path, max_time_s=20.0)
+    whys = [e.message for e in flight.events.of_kind(EventKind.ALARM)]
+    assert any("ahead of the vehicle's clock" in why for why in whys), whys
+    intercepted, *_ = judge_truth(load_scenario(SCENARIO), flight.truth)
+    assert flight.outcome.intercepted == intercepted
+    assert_honest(flight)

@@ -29,15 +29,19 @@ What the law uses, and why:
   and a lost link start the offset afresh. Only accepted position samples move it.
 - a stamp ahead of the vehicle's clock: the least offset seen (our clock at arrival less the
   stamp) is the vehicle's clock plus the least delay, so a sample whose own offset is
-  lower by more than ``_AHEAD_S`` (plus ``_AHEAD_RATE`` of the time since that least was
-  set: a vehicle clock that runs a little fast) claims to have been sent before the
-  vehicle's clock got there. One LOCAL_POSITION_NED at the target stamped 3 s ahead
-  widened the gate by what 3 s allow (5 m) and was taken: "intercepted" 5.5 m from the
-  target; one ATTITUDE stamped 9 s ahead lowered the offset, and every genuine position
-  then read 9 s old (guidance held, the cause named as stale positions). Refused with
-  ``Hold.GATE``, naming the message and how far ahead. Over the first ``_YOUNG_S`` of a
-  time base the least offset is still being found (a sample that waited in a serial
-  buffer or a socket before a lost link may come first): there a lower offset is taken.
+  lower claims to have been sent before the vehicle's clock got there. A genuine one is
+  lower only by less than the least delay seen (milliseconds), or by a vehicle clock a
+  little faster than ours: the offset may go down by at most ``_AHEAD_S`` in all, a budget
+  that refills at ``_AHEAD_RATE`` a second. A sample beyond it is refused with
+  ``Hold.GATE``, naming the message and how far ahead. (One LOCAL_POSITION_NED at the
+  target stamped 3 s ahead had widened the gate by what 3 s allow and been taken:
+  "intercepted" 5.5 m from the target; a burst of 22, each 99 ms past the one before, did
+  the same where each was judged against the one before; one ATTITUDE stamped 9 s ahead
+  had aged every genuine position by 9 s.) Where the least offset itself came from a
+  sample that waited (the first after a lost link, out of a buffer), the vehicle's own
+  samples are all "ahead": ``_REBASE_SAMPLES`` of them in a row, agreeing with each other
+  and none taken between, start the least afresh (an ``alarm``); a forger's run is broken
+  by the vehicle's own samples, taken between.
 
 Refused, and counted (a refused sample changes nothing):
 
@@ -115,15 +119,23 @@ _COURSE_RATE_TAU_S = 0.1
 # much slower than ours (a SITL behind real time) without ageing its samples; a stall of T
 # seconds still ages the samples that waited through it by (1 - this) T
 _CLOCK_SLEW = 0.2
-# a sample stamped more than this ahead of the vehicle's clock (the least offset seen) is
-# refused; genuine ones are behind it by their delay, ahead only by less than the least
-# delay seen (milliseconds)
+# the least offset seen may go down by at most this in all (genuine samples are ahead of
+# it only by less than the least delay seen, milliseconds), a budget that refills at
+# _AHEAD_RATE a second: a vehicle clock up to 5% faster than ours (a crystal is within
+# 0.01%; a SITL runs at real time or behind it); a forger gets no more
 _AHEAD_S = 0.1
-# ... plus this much a second since that least offset was set: a vehicle clock up to 0.2%
-# faster than ours (a crystal is within 0.01%); a forger can age genuine samples by no more
-_AHEAD_RATE = 0.002
-# a time base's first this long (our clock): its least offset is still being found
-_YOUNG_S = 0.5
+_AHEAD_RATE = 0.05
+# after a lost link, a position source is used only once its samples have come for this
+# long (our clock): its first was taken with no gate, and a forger's first, at the target,
+# would otherwise be flown (and judged an intercept) before the vehicle's own samples,
+# stamped behind it, were seen as a second source
+_CONFIRM_S = 0.25
+# samples refused as ahead, in a row with none taken between and agreeing within _AHEAD_S,
+# that start the least offset afresh (it came from a sample that waited)
+_REBASE_SAMPLES = 5
+# samples stamped behind the newest taken, within a second, that are only reordering: one
+# more is a second source
+_BEHIND_MAX = 2
 
 
 @dataclass
@@ -150,9 +162,14 @@ class _Track:
     pred_boot_s: float
     spread_m: float = 0.0  # what the acceleration bound allows since the last acceptance
     course_rate_rad_s: float | None = None
+    # our clock at each recent sample stamped behind the newest taken (not a duplicate)
+    behind_s: list[float] = field(default_factory=list)
+    # a track begun after a lost link is used only once its samples have come for
+    # _CONFIRM_S of our clock (its first sample was taken with no gate): when it began
+    unconfirmed_since_s: float | None = None
 
     @classmethod
-    def start(cls, sample: _Position) -> _Track:
+    def start(cls, sample: _Position, confirm_from_s: float | None = None) -> _Track:
         return cls(
             sample,
             sample,
@@ -161,6 +178,7 @@ class _Track:
             sample.vn_m_s,
             sample.ve_m_s,
             sample.boot_s,
+            unconfirmed_since_s=confirm_from_s,
         )
 
 
@@ -175,8 +193,9 @@ class _VehicleClock:
     at_s: float = 0.0  # our clock when offset_s was last moved
     newest_boot_s: float = -math.inf
     least_s: float = math.nan  # the least offset seen in this time base (no slew)
-    least_at_s: float = 0.0  # our clock when it was set
-    base_at_s: float = 0.0  # our clock when this time base began
+    budget_s: float = _AHEAD_S  # how far it may still go down (refilling)
+    budget_at_s: float = 0.0  # our clock when the budget was last counted
+    ahead_run: list[float] = field(default_factory=list)  # offsets of the run refused ahead
 
     def offset_for(self, boot_s: float, now_s: float) -> float:
         """The offset for a sample stamped ``boot_s`` read at ``now_s`` (not kept: see
@@ -188,12 +207,27 @@ class _VehicleClock:
 
     def ahead_s(self, boot_s: float, now_s: float) -> tuple[float, float]:
         """How far a sample stamped ``boot_s``, read at ``now_s``, is stamped ahead of the
-        vehicle's clock, and how far a genuine one can be (refuse it where the first is
-        larger); (0, 0) in a new or young time base."""
-        if self._new_base(boot_s) or now_s - self.base_at_s < _YOUNG_S:
+        vehicle's clock (the least offset seen), and how far it may be (the budget); the
+        sample is refused where the first is larger. (0, 0) in a new time base."""
+        if self._new_base(boot_s):
             return 0.0, 0.0
-        allowed = _AHEAD_S + _AHEAD_RATE * max(0.0, now_s - self.least_at_s)
-        return self.least_s - (now_s - boot_s), allowed
+        return self.least_s - (now_s - boot_s), self._budget(now_s)
+
+    def refused_ahead(self, boot_s: float, now_s: float) -> bool:
+        """Count a sample refused as ahead; True where it ends a run of them that starts
+        the least offset afresh (``_REBASE_SAMPLES`` in a row, agreeing within
+        ``_AHEAD_S``): the caller takes it then."""
+        run = self.ahead_run
+        run.append(now_s - boot_s)
+        if len(run) < _REBASE_SAMPLES:
+            return False
+        del run[:-_REBASE_SAMPLES]
+        if max(run) - min(run) > _AHEAD_S:
+            return False
+        self.least_s = min(run)
+        self.budget_s, self.budget_at_s = _AHEAD_S, now_s
+        run.clear()
+        return True
 
     def keep(self, boot_s: float, now_s: float) -> float:
         """Take an accepted sample's offset; when it was sent, on our clock."""
@@ -202,11 +236,18 @@ class _VehicleClock:
         self.at_s = now_s
         self.newest_boot_s = boot_s if restarted else max(self.newest_boot_s, boot_s)
         seen = now_s - boot_s
+        self.ahead_run.clear()
         if restarted:
-            self.base_at_s = now_s
-        if restarted or seen < self.least_s:
-            self.least_s, self.least_at_s = seen, now_s
+            self.least_s = seen
+            self.budget_s, self.budget_at_s = _AHEAD_S, now_s
+        elif seen < self.least_s:
+            self.budget_s = max(0.0, self._budget(now_s) - (self.least_s - seen))
+            self.budget_at_s = now_s
+            self.least_s = seen
         return boot_s + self.offset_s
+
+    def _budget(self, now_s: float) -> float:
+        return min(_AHEAD_S, self.budget_s + _AHEAD_RATE * max(0.0, now_s - self.budget_at_s))
 
     def _new_base(self, boot_s: float) -> bool:
         """No sample yet, or one from a rebooted vehicle (its time well back)."""
@@ -242,6 +283,7 @@ class TelemetryState:
     _attitude_s: float = -math.inf
     _attitude_boot_s: float = -math.inf
     _local_offset: tuple[float, float, float] | None = None  # vehicle origin in ours
+    _relinked: bool = False  # after a lost link: new tracks wait for _CONFIRM_S
     _latched: bool = False
     _origin_told: bool = False  # adopt_origin: the vehicle's origin has been taken
     _refusal: tuple[Hold, str] | None = None
@@ -283,6 +325,7 @@ class TelemetryState:
         self._clock = _VehicleClock()
         self._attitude_s = self._attitude_boot_s = -math.inf
         self._refusal = None
+        self._relinked = True
 
     def latch_origin(self) -> None:
         """Fix the frame for the engagement: a different origin from now on is refused."""
@@ -308,7 +351,11 @@ class TelemetryState:
 
         A position's time is that of the last sample that moved: a frozen estimate re-sent
         with fresh stamps does not make it younger."""
-        samples = [(t, src) for src in ("local", "global") if (t := self._tracks.get(src))]
+        samples = [
+            (t, src)
+            for src in ("local", "global")
+            if (t := self._tracks.get(src)) and t.unconfirmed_since_s is None
+        ]
         if not samples:
             return None
         fresh = [(t, src) for t, src in samples if now_s - t.moved.arrived_s <= stale_after_s]
@@ -406,7 +453,7 @@ class TelemetryState:
                     "refused",
                 )
             return False  # duplicated or reordered
-        if not self._stamp_ok("attitude", boot_s, now_s):
+        if not self._stamp_ok("attitude", boot_s, now_s, position=False):
             return False
         self._yaw_rad, self._attitude_boot_s = msg.yaw, boot_s
         # (only positions, which pass the gate, move the vehicle's clock: a forger's
@@ -471,15 +518,25 @@ class TelemetryState:
 
     def _take(self, kind: str, sample: _Position, now_s: float) -> bool:
         """Judge a position sample; an accepted one moves the vehicle's clock."""
-        if not self._stamp_ok(kind, sample.boot_s, now_s) or not self._accept(kind, sample):
+        if not self._stamp_ok(kind, sample.boot_s, now_s, position=True) or not self._accept(
+            kind, sample, now_s
+        ):
             return False
         self._clock.keep(sample.boot_s, now_s)
         return True
 
-    def _stamp_ok(self, kind: str, boot_s: float, now_s: float) -> bool:
-        """A sample's stamp is not ahead of the vehicle's clock (else refused, named)."""
+    def _stamp_ok(self, kind: str, boot_s: float, now_s: float, *, position: bool) -> bool:
+        """A sample's stamp is not ahead of the vehicle's clock (else refused, named; a run
+        of positions so, agreeing, starts the clock's least offset afresh)."""
         ahead, allowed = self._clock.ahead_s(boot_s, now_s)
         if ahead <= allowed:
+            return True
+        if position and self._clock.refused_ahead(boot_s, now_s):
+            self._refusal = (
+                Hold.GATE,
+                f"the vehicle's clock taken afresh: {_REBASE_SAMPLES} {kind} samples in a row "
+                f"stamped {ahead:.2f} s ahead of it (the one it came from had waited)",
+            )
             return True
         return self._refuse(
             Hold.GATE,
@@ -491,12 +548,12 @@ class TelemetryState:
         self._refusal = (cause, why)
         return False
 
-    def _accept(self, kind: str, sample: _Position) -> bool:
+    def _accept(self, kind: str, sample: _Position, now_s: float) -> bool:
         track = self._tracks.get(kind)
         if track is None:
             if not self._cross_check(kind, sample):
                 return False
-            self._tracks[kind] = _Track.start(sample)
+            self._tracks[kind] = _Track.start(sample, now_s if self._relinked else None)
             return True
         last = track.last
         if sample.boot_s <= last.boot_s:
@@ -506,7 +563,9 @@ class TelemetryState:
                     f"{kind} position time went back {last.boot_s - sample.boot_s:.1f} s "
                     "(a reboot or a forgery): refused",
                 )
-            return False  # duplicated or reordered
+            if sample.boot_s == last.boot_s and _same_motion(sample, last):
+                return False  # the same sample again
+            return self._behind(kind, track, sample, now_s)
         if sample.boot_s <= track.pred_boot_s:
             return False  # not newer than a refused sample already judged
         # A position that stands still while the velocity says it moves is frozen (a stale
@@ -561,7 +620,28 @@ class TelemetryState:
         if progress:
             track.moved = sample
         track.last = sample
+        begun = track.unconfirmed_since_s
+        if begun is not None and now_s - begun >= _CONFIRM_S:
+            track.unconfirmed_since_s = None
         return True
+
+    def _behind(self, kind: str, track: _Track, sample: _Position, now_s: float) -> bool:
+        """A sample stamped behind the newest taken (or at its stamp, saying something
+        else): not taken. A few are reordering; more, within a second, are a second
+        stream of positions from the vehicle's id and address, whose stamps run ahead of
+        the vehicle's own (a forger's, walked ahead a step at a time, took a track 5 m off
+        while the vehicle's samples were dropped here without a word): refused, named."""
+        recent = [t for t in track.behind_s if now_s - t < 1.0]
+        recent.append(now_s)
+        track.behind_s = recent
+        if len(recent) <= _BEHIND_MAX:
+            return False
+        return self._refuse(
+            Hold.GATE,
+            f"{len(recent)} {kind} samples within 1 s stamped behind the newest taken (this one "
+            f"{track.last.boot_s - sample.boot_s:.3f} s behind): a second source of positions, "
+            "refused",
+        )
 
     def _cross_check(self, kind: str, sample: _Position) -> bool:
         other = self._tracks.get("global" if kind == "local" else "local")
@@ -589,6 +669,12 @@ class TelemetryState:
             track.course_rate_rad_s, (last.vn_m_s, last.ve_m_s), (sample.vn_m_s, sample.ve_m_s),
             sample.boot_s - last.boot_s,
         )  # fmt: skip
+
+
+def _same_motion(a: _Position, b: _Position) -> bool:
+    """The same position and velocity (a sample sent again)."""
+    return (a.north_m, a.east_m, a.down_m, a.vn_m_s, a.ve_m_s) == (
+        b.north_m, b.east_m, b.down_m, b.vn_m_s, b.ve_m_s)  # fmt: skip
 
 
 def filtered_course_rate(rate_rad_s: float | None, before: tuple[float, float],

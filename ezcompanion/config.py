@@ -43,8 +43,9 @@ import difflib
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from ezcompanion import config_checks
 from ezcompanion.config_field import ScenarioFrame, local_position, read_frame, read_scale
@@ -79,12 +80,15 @@ __all__ = [
     "SimulationSettings",
     "VehicleStart",
     "build_dataclass",
+    "enum_member",
     "load_scenario",
     "scenario_from_dict",
     "scenario_to_dict",
     "scenario_update",
     "scenario_warnings",
 ]
+
+_E = TypeVar("_E", bound=StrEnum)
 
 # Top-level sections owned and validated by other components; kept raw in ``Scenario.sections``.
 COMPONENT_SECTIONS = frozenset({"sitl_stub", "companion", "telemetry"})
@@ -485,14 +489,20 @@ def _only(path: str, data: Mapping[str, Any], *, required: set[str], optional: s
 
 
 def _enum(path: str, kind: type[LawName] | type[BlendMode], value: object) -> Any:
-    choices = ", ".join(m.value for m in kind)
-    if not isinstance(value, str):  # (not handed to the enum: its error prints the value
-        # whole, and a YAML alias bomb's took all memory: MemoryError, exit 70)
-        raise ConfigError(path, value, f"must be one of {choices}")
+    return enum_member(path, kind, value, "must be one of " + ", ".join(m.value for m in kind))
+
+
+def enum_member(path: str, kind: type[_E], value: object, expected: str) -> _E:
+    """``value`` as a member of the string enum ``kind``, else a ConfigError naming ``path``
+    (``expected``: what it must be). Anything but a string is refused before the enum sees
+    it: its error prints the value whole, and a YAML alias bomb's (9^9 leaves) took all
+    memory (MemoryError, exit 70)."""
+    if not isinstance(value, str):
+        raise ConfigError(path, value, expected)
     try:
         return kind(value)
     except ValueError:
-        raise ConfigError(path, value, f"must be one of {choices}") from None
+        raise ConfigError(path, value, expected) from None
 
 
 def build_dataclass(

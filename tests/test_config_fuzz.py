@@ -235,9 +235,14 @@ def test_an_alias_bomb_where_a_law_is_named_is_one_line_without_reading_it_whole
     import tracemalloc
 
     scenario = (CONFIG / "paper_scenario1.yaml").read_text()
-    for key, old, new in (("law", "\nlaw: backup", f"\nlaw: {_alias_bomb(7)}"),
-                          ("guidance.blend", "\nguidance:", f"\nguidance:\n  blend: "
-                                                            f"{_alias_bomb(7)}")):  # fmt: skip
+    bomb = _alias_bomb(7)
+    for key, old, new in (("law", "\nlaw: backup", f"\nlaw: {bomb}"),
+                          ("guidance.blend", "\nguidance:", f"\nguidance:\n  blend: {bomb}"),
+                          # (and the companion's, found by a reviewer)
+                          ("companion.setpoint", "\nlaw: backup",
+                           f"\nlaw: backup\ncompanion:\n  setpoint: {bomb}"),
+                          ("companion.on_exit", "\nlaw: backup",
+                           f"\nlaw: backup\ncompanion:\n  on_exit: {bomb}")):  # fmt: skip
         content = scenario.replace(old, new, 1)
         assert content != scenario
         with tempfile.TemporaryDirectory() as tmp:
@@ -245,7 +250,10 @@ def test_an_alias_bomb_where_a_law_is_named_is_one_line_without_reading_it_whole
             path.write_text(content)
             tracemalloc.start()
             try:
-                check_refused(ezcompanion_main, "ezcompanion", ["simulate", str(path)], key)
+                argv = ["simulate", str(path)] if not key.startswith("companion") else [
+                    "run", "--config", str(path), "--connect", "udpin:127.0.0.1:0",
+                    "--no-telemetry", "--max-time", "0.5"]  # fmt: skip
+                check_refused(ezcompanion_main, "ezcompanion", argv, key)
                 _, peak = tracemalloc.get_traced_memory()
             finally:
                 tracemalloc.stop()

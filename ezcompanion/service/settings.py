@@ -43,7 +43,7 @@ from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
-from ezcompanion.config import Scenario, build_dataclass
+from ezcompanion.config import Scenario, build_dataclass, enum_member
 from ezcompanion.errors import ConfigError
 from ezcompanion.wire import (
     URL_SCHEMES,
@@ -220,17 +220,10 @@ def companion_settings(scenario: Scenario, **overrides: Any) -> CompanionSetting
     raw = dict(scenario.sections.get("companion", {}))
     raw.update({key: value for key, value in overrides.items() if value is not None})
     if "setpoint" in raw:
-        try:
-            raw["setpoint"] = SetpointKind(raw["setpoint"])
-        except ValueError:
-            raise ConfigError(
-                "companion.setpoint", raw["setpoint"], "must be auto, velocity or course"
-            ) from None
+        raw["setpoint"] = enum_member("companion.setpoint", SetpointKind, raw["setpoint"],
+                                      "must be auto, velocity or course")  # fmt: skip
     if "on_exit" in raw:
-        try:
-            raw["on_exit"] = OnExit(raw["on_exit"])
-        except ValueError:
-            raise ConfigError("companion.on_exit", raw["on_exit"], f"must be one of {_ON_EXIT}"
-                              ) from None  # fmt: skip
+        raw["on_exit"] = enum_member("companion.on_exit", OnExit, raw["on_exit"],
+                                     f"must be one of {_ON_EXIT}")  # fmt: skip
     settings: CompanionSettings = build_dataclass("companion", CompanionSettings, raw)
     return settings

@@ -344,21 +344,33 @@ def test_a_rover_gets_the_horizontal_velocity_mask() -> None:
 
 def test_the_vehicles_texts_and_refusals_are_passed_on_at_a_bounded_rate() -> None:
     """A helper's flood of STATUSTEXT from the vehicle's address made 400,145 events in 25 s
-    (each kept and printed; RSS 222 -> 388 MB). Each of the link's kinds is passed on at
-    most LINK_EVENTS_PER_S a second; the rest are counted and named with the next one
-    passed on; other kinds are never held back."""
+    (each kept and printed; RSS 222 -> 388 MB). Each stream of the link's events is passed
+    on at most LINK_EVENTS_PER_S a second: texts of severity ERROR or worse apart from the
+    rest (a reviewer: a critical text after 20 routine ones was hidden), each command's
+    refusals apart. What is held back is named with the next one passed on, or in a
+    warning once its second is over, or at the end (``flush``); other kinds never wait."""
     seen: list[Event] = []
     log = EventLog(seen.append)
-    for k in range(5000):  # 5,000 texts and acks within 0.5 s
-        log.emit(EventKind.STATUSTEXT, 1.0 + 1e-4 * k, f"text {k}")
+    for k in range(5000):  # 5,000 routine texts and one command's refusals within 0.5 s
+        log.emit(EventKind.STATUSTEXT, 1.0 + 1e-4 * k, f"text {k}", severity=6)
         log.emit(EventKind.COMMAND_ACK, 1.0 + 1e-4 * k, "refused", command=176, result=4)
     assert len(log.of_kind(EventKind.STATUSTEXT)) == LINK_EVENTS_PER_S
     assert len(log.of_kind(EventKind.COMMAND_ACK)) == LINK_EVENTS_PER_S
     assert len(seen) == 2 * LINK_EVENTS_PER_S  # the sinks saw what was kept, no more
-    later = log.emit(EventKind.STATUSTEXT, 2.0, "after the flood")
-    assert later.data["suppressed"] == 5000 - LINK_EVENTS_PER_S
+    crash = log.emit(EventKind.STATUSTEXT, 1.6, "Crash: Disarming", severity=2)
+    other = log.emit(EventKind.COMMAND_ACK, 1.6, "refused", command=11, result=4)
+    assert crash in log.events and other in log.events  # their own streams: not held back
+    later = log.emit(EventKind.STATUSTEXT, 2.0, "after the flood", severity=6)
     dropped = 5000 - LINK_EVENTS_PER_S
+    assert later.data["suppressed"] == dropped
     assert later.message == f"after the flood ({dropped} more statustext before it not shown)"
+    # the acks' second is over: the next event of any kind has their count said first
+    warnings = log.of_kind(EventKind.WARNING)
+    assert [w.data for w in warnings] == [{"suppressed": dropped, "of": "command_ack"}]
     for k in range(100):  # the companion's own events are all kept
         log.emit(EventKind.ALARM, 2.0, f"alarm {k}", cause="gate")
     assert len(log.of_kind(EventKind.ALARM)) == 100
+    for k in range(30):  # held back at the very end: said by flush
+        log.emit(EventKind.STATUSTEXT, 2.5, f"late {k}", severity=6)
+    log.flush(2.6)
+    assert log.of_kind(EventKind.WARNING)[-1].data == {"suppressed": 11, "of": "statustext"}

@@ -24,7 +24,7 @@ import yaml
 from conftest_sitl import M, Relay, forger, frame
 from test_service_loopback import CONFIG, SPEEDUP, Flight, fly
 
-from ezcompanion.config import load_scenario
+from ezcompanion.config import load_scenario, scenario_update
 from ezcompanion.config_checks import clearance_m
 from ezcompanion.guidance import Defender
 from ezcompanion.service.demo import free_udp_port, judge_truth
@@ -321,7 +321,7 @@ def test_a_scenario_update_the_vehicle_cannot_be_kept_safe_under_is_refused(
 ) -> None:
     """A helper's update (an operator's, authorised): D2 moved onto the vehicle. It was
     accepted ({"ok": true}), and the vehicle flew 1 s inside D2's zone, clearance down to
-    -0.90 m. Refused now, and so is D2 moved to just ahead of the vehicle on its course,
+    -0.90 m. Refused now, and so is D2 moved to 0.3 m ahead of the vehicle on its course,
     outside but with no backup certified (nothing can turn it away in time); nothing
     changes. A move that leaves a backup certified is taken. (The offer is what a zenoh
     query reaches: tests/test_telemetry_service.py.)"""
@@ -335,10 +335,12 @@ def test_a_scenario_update_the_vehicle_cannot_be_kept_safe_under_is_refused(
         last = service.last_command
         n, e, course = last.state.north_m, last.state.east_m, last.course_rad
         d2 = raw["defenders"][1]
-        ahead = 0.0  # D2 just ahead on the course: its zone's edge 2 to 3 cm from the vehicle
+        # D2 ahead on the course, its zone's edge 0.3 m from the vehicle: outside (the vehicle
+        # flies 5 cm a tick until the offers), but a hard turn at 1 m/s^2 clears 5 cm of it
+        ahead = 0.0
         while clearance_m(Defender(**{**d2, "north_m": n + ahead * math.cos(course),
                                       "east_m": e + ahead * math.sin(course)}),
-                          n, e, course) < 0.02:  # fmt: skip
+                          n, e, course) < 0.3:  # fmt: skip
             ahead += 0.005
         for change in ({"north_m": n, "east_m": e},  # on the vehicle
                        {"north_m": n + ahead * math.cos(course),
@@ -402,3 +404,58 @@ def test_a_burst_of_positions_walked_to_the_target_is_not_an_intercept(tmp_path:
     intercepted, *_ = judge_truth(load_scenario(SCENARIO), flight.truth)
     assert flight.outcome.intercepted == intercepted
     assert_honest(flight)
+
+
+def test_an_update_is_checked_again_where_the_vehicle_is_when_the_loop_takes_it(
+    tmp_path: Path,
+) -> None:
+    """A reviewer: the offer is checked where the vehicle last ticked, the update taken a
+    step or more later; and before the first tick nothing was checked, nor, at engage,
+    where the vehicle was. The loop checks an update again where the telemetry has the
+    vehicle as it takes it (here one that passed no check at the offer: put in the inbox
+    as an accepted one would be), and guidance engages only from outside every zone."""
+    raw = yaml.safe_load(SCENARIO.read_text())
+    kept: list[Any] = []
+
+    def operator(service: Any, *_: Any) -> None:
+        assert wait_for(service, EventKind.ENGAGED)
+        while service.last_command is None:
+            time.sleep(0.01)
+        state = service.last_command.state
+        defenders = [dict(d) for d in raw["defenders"]]
+        defenders[1].update(north_m=state.north_m, east_m=state.east_m)
+        update = scenario_update(service.scenario, {"defenders": defenders,
+                                                    "target": raw["target"]})  # fmt: skip
+        kept.append(service.scenario)
+        with service.scenario_inbox._lock:  # as if the offer's check had passed
+            service.scenario_inbox._pending = update
+
+    flight = fly(SCENARIO, tmp_path, during=operator, max_time_s=30.0, lockstep=True, **LIGHT)
+    (warning,) = [e.message for e in flight.events.of_kind(EventKind.WARNING)
+                  if e.message.startswith("scenario update not taken")]  # fmt: skip
+    assert "inside the engagement zone of D2" in warning, warning
+    assert flight.service.scenario is kept[0]  # nothing changed
+    assert not flight.events.of_kind(EventKind.SCENARIO)
+    assert_honest(flight)
+
+
+def test_guidance_does_not_engage_a_vehicle_inside_a_zone(tmp_path: Path) -> None:
+    """An update before the first tick is taken unchecked (no vehicle state to check it
+    against): one that puts D2 on the vehicle's start. Guidance then refuses to engage
+    there, for good (``aborted``, cause ``inside``), and sends nothing."""
+    raw = yaml.safe_load(SCENARIO.read_text())
+    start = load_scenario(SCENARIO).start
+    defenders = [dict(d) for d in raw["defenders"]]
+    defenders[1].update(north_m=start.north_m, east_m=start.east_m)
+    replies: list[str | None] = []
+
+    def operator(service: Any, *_: Any) -> None:
+        replies.append(service.offer_scenario({"defenders": defenders,
+                                               "target": raw["target"]}))  # fmt: skip
+
+    flight = fly(SCENARIO, tmp_path, during=operator, max_time_s=20.0, lockstep=True, **LIGHT)
+    assert replies == [None]
+    (aborted,) = flight.events.of_kind(EventKind.ABORTED)
+    assert aborted.data["cause"] == "inside" and "zone of D2" in aborted.message
+    assert not flight.events.of_kind(EventKind.ENGAGED)
+    assert flight.outcome.setpoints_sent == 0

@@ -22,43 +22,70 @@ Sink = Callable[[Event], None]
 
 
 # what the vehicle's link says (its texts, its refusals) is passed on at most this many a
-# second of each kind; the rest is counted and named with the next one passed on. A flood of
-# STATUSTEXT from the vehicle's address made 400,145 events in 25 s (RSS 222 -> 388 MB, and
-# as many lines printed); of COMMAND_ACK 118,509.
+# second of each stream: STATUSTEXT of severity ERROR or worse apart from the rest, and each
+# command's refusals apart. A flood of STATUSTEXT from the vehicle's address made 400,145
+# events in 25 s (RSS 222 -> 388 MB, and as many lines printed); of COMMAND_ACK 118,509.
+# What is held back is counted: named with the next one of its stream passed on, or in a
+# warning once its second is over (at the next event of any kind, or ``flush``).
 LINK_EVENTS_PER_S = 20
 _LIMITED = frozenset({EventKind.STATUSTEXT, EventKind.COMMAND_ACK})
+_SEVERITY_ERROR = 3  # MAV_SEVERITY_ERROR: this and EMERGENCY, ALERT, CRITICAL apart
+
+_Stream = tuple[EventKind, int]
 
 
 class EventLog:
     """Keeps the events in order and passes each to the sinks (the vehicle's texts and
-    refusals at most ``LINK_EVENTS_PER_S`` a second of each kind)."""
+    refusals at most ``LINK_EVENTS_PER_S`` a second of each stream)."""
 
     def __init__(self, *sinks: Sink) -> None:
         self.events: list[Event] = []
         self._sinks = list(sinks)
-        self._window: dict[EventKind, tuple[float, int]] = {}  # (window start, passed)
-        self._suppressed: dict[EventKind, int] = {}
+        self._window: dict[_Stream, tuple[float, int]] = {}  # (window start, passed)
+        self._suppressed: dict[_Stream, int] = {}
 
     def add_sink(self, sink: Sink) -> None:
         """Also hand every later event to ``sink``."""
         self._sinks.append(sink)
 
     def emit(self, kind: EventKind, time_s: float, message: str, **data: Any) -> Event:
-        """Record an event and pass it on (one of a kind over its rate: only counted)."""
-        if kind in _LIMITED:
-            start, passed = self._window.get(kind, (-math.inf, 0))
+        """Record an event and pass it on (one of the link's over its stream's rate: only
+        counted)."""
+        stream = _stream(kind, data) if kind in _LIMITED else None
+        if self._suppressed:  # (this event's own stream names its count itself)
+            self.flush(time_s, over_only=True, but=stream)
+        if stream is not None:
+            start, passed = self._window.get(stream, (-math.inf, 0))
             if time_s - start >= 1.0:
                 start, passed = time_s, 0
             if passed >= LINK_EVENTS_PER_S:
-                self._window[kind] = (start, passed)
-                self._suppressed[kind] = self._suppressed.get(kind, 0) + 1
+                self._window[stream] = (start, passed)
+                self._suppressed[stream] = self._suppressed.get(stream, 0) + 1
                 return Event(kind, time_s, message, data)  # counted, not kept
-            self._window[kind] = (start, passed + 1)
-            dropped = self._suppressed.pop(kind, 0)
+            self._window[stream] = (start, passed + 1)
+            dropped = self._suppressed.pop(stream, 0)
             if dropped:
                 message = f"{message} ({dropped} more {kind.value} before it not shown)"
                 data = {**data, "suppressed": dropped}
-        event = Event(kind, time_s, message, data)
+        return self._record(Event(kind, time_s, message, data))
+
+    def flush(
+        self, time_s: float, *, over_only: bool = False, but: _Stream | None = None
+    ) -> None:
+        """Say how many of the link's events were held back and not yet named (``over_only``:
+        only for streams whose second is over; not for stream ``but``), a warning each."""
+        for stream, dropped in list(self._suppressed.items()):
+            start, _ = self._window[stream]
+            if stream == but or (over_only and time_s - start < 1.0):
+                continue
+            del self._suppressed[stream]
+            kind = stream[0]
+            self._record(Event(EventKind.WARNING, time_s,
+                               f"{dropped} {kind.value} events from the vehicle not shown (over "
+                               f"{LINK_EVENTS_PER_S} a second)",
+                               {"suppressed": dropped, "of": kind.value}))  # fmt: skip
+
+    def _record(self, event: Event) -> Event:
         self.events.append(event)
         _log.info("%s", event.line())
         for sink in self._sinks:
@@ -68,3 +95,11 @@ class EventLog:
     def of_kind(self, kind: EventKind) -> list[Event]:
         """The events of one kind, in order."""
         return [e for e in self.events if e.kind is kind]
+
+
+def _stream(kind: EventKind, data: dict[str, Any]) -> _Stream:
+    """The stream a link event is counted in: a text's severity class (ERROR or worse, or
+    not), a refusal's command."""
+    if kind is EventKind.STATUSTEXT:
+        return kind, int(int(data.get("severity", 7)) <= _SEVERITY_ERROR)
+    return kind, int(data.get("command", -1))

@@ -29,6 +29,7 @@ import dataclasses
 import math
 import threading
 import time
+from dataclasses import dataclass
 from enum import Enum, StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -232,22 +233,21 @@ class CompanionService:
         session = self._session
         if update.fixed and session is not None:  # as the vehicle's autopilot maps them
             update, _ = place_fixed(update, session.telemetry.projection)
-        last = self.last_command
-        if last is not None:
-            self._check_update_here(update, last)
+        last = self.last_command  # (this runs on the publisher's thread: what the loop
+        if last is not None:  # last flew, immutable, not the telemetry it is updating)
+            self._check_update_here(update, _Here.of(last))
         return update
 
-    def _check_update_here(self, update: Scenario, last: TickCommand) -> None:
-        """Refuse an update the vehicle, where it was at the last tick, could not be kept
-        safe under: inside one of its zones (the zones keep a vehicle out only from
-        outside), or, with the backup law, with no backup manoeuvre certified to keep it out
-        of them all (the law's safety argument starts from a certified state). A helper's
-        update put D2 on the vehicle: accepted, and it flew 1 s inside D2's zone."""
+    def _check_update_here(self, update: Scenario, here: _Here) -> None:
+        """Refuse an update the vehicle, ``here``, could not be kept safe under: inside one
+        of its zones (the zones keep a vehicle out only from outside), or, with the backup
+        law, with no backup manoeuvre certified to keep it out of them all (the law's safety
+        argument starts from a certified state). A helper's update put D2 on the vehicle:
+        accepted, and it flew 1 s inside D2's zone."""
         placed = self.placement.zones(update) if self.placement is not None else update
-        state, course = last.state, last.course_rad
-        where = (f"the vehicle (at north {state.north_m:.2f} m, east {state.east_m:.2f} m on "
-                 f"course {math.degrees(course):.1f} deg)")  # fmt: skip
-        inside = zone_entered(placed.defenders, state.north_m, state.east_m, course)
+        where = (f"the vehicle (at north {here.north_m:.2f} m, east {here.east_m:.2f} m on "
+                 f"course {math.degrees(here.course_rad):.1f} deg)")  # fmt: skip
+        inside = zone_entered(placed.defenders, here.north_m, here.east_m, here.course_rad)
         if inside is not None:
             name, clearance = inside
             raise ConfigError("defenders", name, f"would have {where} inside the engagement "
@@ -259,11 +259,11 @@ class CompanionService:
         params = self.loop.scenario.guidance  # with what is assumed of the vehicle
         trial = GuidanceController(zones=placed.zones(), target=placed.target, params=params,
                                    law=law)  # fmt: skip
-        trial.reset(min(max(last.accel_lat_m_s2, -0.999 * params.accel_max_m_s2),
-                        0.999 * params.accel_max_m_s2))  # fmt: skip
+        bound = 0.999 * params.accel_max_m_s2
+        trial.reset(min(max(here.accel_m_s2, -bound), bound))
         best, theta = trial.backup_certificate_m(
-            KinematicState(state.north_m, state.east_m, course, last.speed_m_s),
-            self.loop.period_s, last.course_rate_rad_s)  # fmt: skip
+            KinematicState(here.north_m, here.east_m, here.course_rad, here.speed_m_s),
+            self.loop.period_s, here.course_rate_rad_s)  # fmt: skip
         if best < theta:
             raise ConfigError("defenders", [d.name for d in placed.defenders],
                               f"would leave {where} with no backup manoeuvre certified to keep "
@@ -355,6 +355,7 @@ class CompanionService:
                 break
             self._due_work(clock.now_s())
         self.phase = Phase.DONE
+        self.events.flush(clock.now_s())  # the vehicle's texts held back and not yet named
         self.engagement.finish(clock.now_s())
         commanded = self.engagement.setpoints_sent + self.engagement.brakes_sent > 0
         self.exit_report = leave_vehicle(  # a defined end: the mode of on_exit (ending.py)
@@ -377,7 +378,9 @@ class CompanionService:
         self._answer_lockstep(clock.now_s())  # in lockstep the vehicle's time goes on
 
     def _take_frames(self, link: Link, started_s: float, max_time_s: float | None) -> bool:
-        """Every frame the link holds. In lockstep, after each whatever fell due, at that
+        """The frames the link holds, up to a pass's bounds (``_DRAIN_FRAMES``,
+        ``_DRAIN_BUDGET_WALL_S``: a backlog beyond them is read over several passes, what
+        fell due done between). In lockstep, after each whatever fell due, at that
         frame's time (the engagement is then a function of the frames alone). Otherwise
         the frames read at once are all taken first, and what fell due, a tick among it,
         is done after them (by the caller): a tick uses the newest sample the link held,
@@ -552,6 +555,7 @@ class CompanionService:
             and not session.disarm_pending
             and session.frame_settled
             and self._placed(now)
+            and (self._engaged_at_s is not None or self._outside_at_engage(now))
         ):
             self.phase = Phase.GUIDING
             self.schedule.start(self._position_stamp_s)  # the first tick at once
@@ -760,6 +764,26 @@ class CompanionService:
             return False
         return True
 
+    def _outside_at_engage(self, now: float) -> bool:
+        """Guidance first engages only from a fresh position outside every zone (the law's
+        guarantee needs a start outside; the scenario file's start is checked so, the
+        vehicle's own was not): inside one, refused for good (``aborted``, cause
+        ``inside``); with no fresh position yet, not now."""
+        here = self._here(now)
+        if here is None:
+            return False
+        inside = zone_entered(self.scenario.defenders, here.north_m, here.east_m,
+                              here.course_rad)  # fmt: skip
+        if inside is None:
+            return True
+        name, clearance = inside
+        self.events.emit(EventKind.ABORTED, now, f"the vehicle is inside the engagement zone of "
+                         f"{name} on its course (clearance {clearance:.2f} m): not guided",
+                         cause="inside")  # fmt: skip
+        self.engagement.done = True
+        self.phase = Phase.DONE
+        return False
+
     def _check_distrust(self, now: float) -> None:
         """Out of GUIDED after guidance started (a forged mode change, say), distrust still
         counts: a failsafe, and the end once it lasts."""
@@ -799,9 +823,23 @@ class CompanionService:
         )
 
     def _take_pending_scenario(self, now: float) -> None:
+        """Fly against the newest update accepted, checked again here against the vehicle
+        as the telemetry has it now (it was checked where the vehicle last ticked; it has
+        moved since): refused with a warning where that fails, or where guidance runs with
+        no fresh position to check it against."""
         scenario = self.scenario_inbox.take()
         if scenario is None:
             return
+        if self.phase is Phase.GUIDING:
+            here = self._here(now)
+            try:
+                if here is None:
+                    raise ConfigError("scenario", scenario.name, "no fresh position to check "
+                                      "it against")  # fmt: skip
+                self._check_update_here(scenario, here)
+            except ConfigError as exc:
+                self.events.emit(EventKind.WARNING, now, f"scenario update not taken: {exc}")
+                return
         if self.placement is not None:  # in the file's frame: placed as the first one was
             scenario = self.placement.zones(scenario)
         self.scenario = scenario
@@ -815,6 +853,18 @@ class CompanionService:
             f"({scenario.target.north_m:g}, {scenario.target.east_m:g}) m",
             defenders=len(scenario.defenders),
         )
+
+    def _here(self, now: float) -> _Here | None:
+        """The vehicle as the law would start from it now (the fresh position, the measured
+        course, speed and course rate, the actuator state), or None without a fresh one."""
+        stale_s = self.settings.stale_after_s
+        state = self.session.telemetry.snapshot(stale_s, now)
+        if state is None or state.age_s(now) > stale_s:
+            return None
+        loop = self.loop  # its tick's own reading of the state
+        return _Here(state.north_m, state.east_m, state.course_rad(loop.speed_floor_m_s),
+                     max(state.ground_speed_m_s, loop.flown_speed_m_s),
+                     float(loop.controller.accel_m_s2), state.course_rate_rad_s)  # fmt: skip
 
     def _tick(self, now: float) -> None:
         self.schedule.ticked(now)
@@ -871,3 +921,22 @@ class CompanionService:
         if sent and self._tlog is not None:
             self._tlog.write(frame)
         return sent
+
+
+@dataclass(frozen=True)
+class _Here:
+    """Where the vehicle is, as a scenario update is checked against it."""
+
+    north_m: float
+    east_m: float
+    course_rad: float
+    speed_m_s: float
+    accel_m_s2: float
+    course_rate_rad_s: float | None
+
+    @classmethod
+    def of(cls, last: TickCommand) -> _Here:
+        """The vehicle as the last tick flew it."""
+        s = last.state
+        return cls(s.north_m, s.east_m, last.course_rad, last.speed_m_s, last.accel_lat_m_s2,
+                   last.course_rate_rad_s)  # fmt: skip

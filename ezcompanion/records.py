@@ -66,6 +66,7 @@ class Hold(StrEnum):
     SPOOF = "conflicting heartbeats from the vehicle's id"
     DISARMED = "the vehicle disarmed during the engagement"
     REBOOTED = "the vehicle rebooted during the engagement"
+    RANGE = "the vehicle's state is beyond what the law computes"
 
 
 @dataclass(frozen=True)

@@ -15,13 +15,20 @@ from ezcompanion.guidance import (
     Defender,
     GuidanceController,
     GuidanceMode,
+    GuidanceParams,
     KinematicState,
     LawName,
     Target,
     ZoneSet,
 )
 from ezcompanion.guidance.law import O_AC, O_ALPHA
-from ezcompanion.guidance.single import check_state, least_speed_m_s, safety_share
+from ezcompanion.guidance.scaling import ScaleFactors, scale_params
+from ezcompanion.guidance.single import (
+    PRECISION_RATIO,
+    check_state,
+    least_speed_m_s,
+    safety_share,
+)
 
 D1 = Defender(north_m=2.0, east_m=3.0, range_m=1.5, capture_radius_m=0.5, speed_ratio=0.7)
 D2 = Defender(north_m=4.4, east_m=-2.0, range_m=1.5, capture_radius_m=0.5, speed_ratio=0.7)
@@ -83,12 +90,53 @@ def test_every_law_is_finite_across_the_limit(law: LawName) -> None:
     position and speed (the course at the limit too), each law's command is finite."""
     c = controller(law=law)
     corners = np.array(list(itertools.product((-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0)))).T
-    north, east, course = MAGNITUDE_LIMIT * corners
     for speed in (1.0, MAGNITUDE_LIMIT):
+        # positions at the nearer of the two limits (precision: 1e7 v^2 / a_max)
+        reach = min(MAGNITUDE_LIMIT, PRECISION_RATIO * speed**2 / c.params.accel_max_m_s2)
+        north, east = reach * corners[:2]
+        course = MAGNITUDE_LIMIT * corners[2]
         c.reset(np.zeros(north.size))
         step = c.step(KinematicState(north, east, course, np.full(north.size, speed)), 0.02)
         assert np.isfinite(step.accel_lat_cmd_m_s2).all(), (speed, step.accel_lat_cmd_m_s2)
         assert np.isfinite(step.law.accel_command_m_s2).all()
+
+
+@pytest.mark.parametrize("batch", [False, True])
+def test_an_engagement_too_small_for_its_distance_from_the_origin_is_refused(
+    batch: bool,
+) -> None:
+    """A helper's engagement 10 um across (every length of the defaults times 1e-5), 490,000
+    km from the origin, entered its zone from a certified start under this controller; the
+    same engagement at the origin did not: float64 rounding of the predictions' positions
+    (about 1e-16 of 4.9e8 m a step) reached the acceptance level (2.8e-8 m). Positions, the
+    zones' and the target's with the vehicle's, must lie within 1e7 v^2 / a_max of the
+    origin: refused beyond, naming the farthest; taken within."""
+    params = scale_params(GuidanceParams(), ScaleFactors(length=1e-5, time=1.0))
+    v = 1e-5  # the length 1e-5 m: the limit is 100 m
+    for origin, taken in ((4.9e8, False), (99.0, True), (0.0, True)):
+        d = Defender(north_m=origin + 3.3e-5, east_m=origin + 2.6e-5, range_m=1.2e-5,
+                     capture_radius_m=2.2e-6, speed_ratio=0.26)  # fmt: skip
+        c = GuidanceController(zones=ZoneSet.from_defenders([d]), params=params,
+                               target=Target(north_m=origin, east_m=origin))  # fmt: skip
+        state = KinematicState(origin - 5.3e-5, origin - 3.2e-5, 0.51, v)
+        if batch:
+            c.reset(np.zeros(1))
+            state = KinematicState(*(np.array([x]) for x in (state.north_m, state.east_m,
+                                                                 0.51, v)))  # fmt: skip
+        else:
+            c.reset()
+        if taken:
+            assert np.isfinite(c.step(state, 0.002).accel_lat_cmd_m_s2).all()
+            continue
+        with pytest.raises(StateError, match=r"must be within 100 m of the origin") as caught:
+            c.step(state, 0.002)
+        assert caught.value.field == "zones"  # the zone's reach lies farthest out
+    # the vehicle's own position named where it is the farthest
+    c = GuidanceController(zones=ZoneSet.from_defenders([D1, D2]), target=TARGET)
+    c.reset()
+    with pytest.raises(StateError) as caught:
+        c.step(KinematicState(0.0, -2e7, 2.5, 1.0), 0.02)
+    assert caught.value.field == "east_m" and "1e+07 m of the origin" in str(caught.value)
 
 
 @pytest.mark.parametrize("batch", [False, True])

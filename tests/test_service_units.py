@@ -161,6 +161,35 @@ def test_a_scenario_too_slow_for_the_loop_rate_is_refused_at_start_naming_the_sp
     assert late.dt_s == pytest.approx(revolution, rel=1e-5) and late.dt_s < 5.0 / rate_hz
 
 
+def test_a_scenario_too_far_out_for_its_speed_is_refused_and_a_tick_beyond_it_holds() -> None:
+    """The law computes within 1e7 v^2 / a_max of the origin (``single.check_precision``:
+    farther, float64 rounding nears its acceptance level). A scenario 90 km out at 1 cm/s
+    (half of it fed at the least: 250 m) is refused when the loop is made, naming the
+    speed; a tick on a position beyond that radius (3,000 km out at 0.5 m/s) holds as
+    RANGE, not a crash, and the next within it goes on."""
+    scenario = load_scenario(CONFIG)
+    far = 9e4
+    moved = dataclasses.replace(
+        scenario,
+        defenders=tuple(dataclasses.replace(d, north_m=d.north_m + far)
+                        for d in scenario.defenders),
+        target=dataclasses.replace(scenario.target, north_m=scenario.target.north_m + far),
+        start=dataclasses.replace(scenario.start, north_m=scenario.start.north_m + far,
+                                  speed_m_s=0.01),
+    )  # fmt: skip
+    with pytest.raises(ConfigError, match="too slow for where the scenario lies") as caught:
+        GuidanceLoop(moved, loop_rate_hz=50.0, stale_after_s=0.25)
+    assert caught.value.field == "vehicle.speed_m_s" and "within 250 m" in str(caught.value)
+    loop = GuidanceLoop(scenario, loop_rate_hz=50.0, stale_after_s=0.25)
+    loop.assume_speed_factor(0.0)  # the law fed the ground speed down to half the nominal
+    t = known_origin()
+    t.update(local(1000, 3e6, 0.0, 0.5, 0.0), now_s=1.0)
+    assert loop.tick(t.snapshot(0.25, 1.0), 1.0) is Hold.RANGE
+    t = known_origin()
+    t.update(local(1020, 8.0, -4.0, 0.5, 0.0), now_s=1.02)
+    assert isinstance(loop.tick(t.snapshot(0.25, 1.02), 1.02), TickCommand)
+
+
 def test_a_tick_soon_after_the_last_takes_a_step_of_a_period() -> None:
     """A late sample just after a deadline tick ticks at once, 0.1 ms after it; its command
     is then held until the next tick, half a period or more. The law verifies its command

@@ -59,6 +59,8 @@ from ezcompanion.guidance.law import (
 from ezcompanion.guidance.params import GuidanceParams, LawName, Target
 from ezcompanion.guidance.single import (
     MODE_PURE,
+    PRECISION_RATIO,
+    check_precision,
     check_state,
     checked_rate,
     least_speed_m_s,
@@ -178,6 +180,12 @@ class GuidanceController:
                                    float(self._target_e[0]), shielded=self._shielded)  # fmt: skip
         self._single_zones: FloatArray | None = None  # stacked on the first step_one
         zone_count = zones.north_m.shape[1]
+        # the farthest the zones (reach included) and targets lie from the origin: held with
+        # the vehicle's position to PRECISION_RATIO v^2 / a_max (``single.check_precision``)
+        self._extent_m = max(
+            float(np.max(np.maximum(np.abs(zones.north_m), np.abs(zones.east_m))
+                         + zones.reach_m)),
+            float(np.max(np.maximum(np.abs(self._target_n), np.abs(self._target_e)))))  # fmt: skip
         self._scratch = np.empty((6, max(zone_count, 6)))
         self._zone_shape = (1, Z_SIZE, zone_count)
 
@@ -337,6 +345,11 @@ class GuidanceController:
             north_m, east_m, course_rad, speed_m_s = _numbers(
                 KinematicState(north_m, east_m, course_rad, speed_m_s), least
             )
+        amax = self.params.accel_max_m_s2
+        if max(abs(north_m), abs(east_m), self._extent_m) * amax > (
+            PRECISION_RATIO * speed_m_s * speed_m_s
+        ):
+            self._check_precision(north_m, east_m, speed_m_s)
         rate_1_s = math.nan  # none: the model's own flown acceleration
         if self._shielded and course_rate_rad_s is not None:
             rate_1_s = checked_rate(course_rate_rad_s)
@@ -456,7 +469,19 @@ class GuidanceController:
         if not ok.all():  # the first vehicle that is not, its first field named
             n, e, c, v = rows[:, int(np.flatnonzero(~ok)[0])]
             check_state((float(n), float(e), float(c), float(v)), least_speed)
+        extent = np.maximum(np.maximum(np.abs(rows[0]), np.abs(rows[1])), self._extent_m)
+        near = extent * self.params.accel_max_m_s2 <= PRECISION_RATIO * rows[3] * rows[3]
+        if not near.all():
+            k = int(np.flatnonzero(~near)[0])
+            self._check_precision(float(rows[0, k]), float(rows[1, k]), float(rows[3, k]))
         return rows[0], rows[1], rows[2], rows[3]
+
+    def _check_precision(self, north_m: float, east_m: float, speed_m_s: float) -> None:
+        """``single.check_precision`` on the farthest of the vehicle's position and the
+        zones and targets, naming which."""
+        farthest = max((abs(north_m), "north_m"), (abs(east_m), "east_m"),
+                       (self._extent_m, "zones"))  # fmt: skip
+        check_precision(*farthest, speed_m_s, self.params.accel_max_m_s2)
 
 
 _STATE_FIELDS = ("north_m", "east_m", "course_rad", "speed_m_s")

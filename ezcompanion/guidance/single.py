@@ -42,6 +42,8 @@ from ezcompanion.guidance.zones import ZoneSet
 
 __all__ = [
     "MODE_PURE",
+    "PRECISION_RATIO",
+    "check_precision",
     "check_state",
     "checked_rate",
     "least_speed_m_s",
@@ -83,6 +85,29 @@ def safety_share(weight: float, alpha: float) -> float:
     if not weight > 0.0:
         return 1.0
     return 1.0 - weight * (1.0 - alpha)
+
+
+# positions (the vehicle's, the zones', the target's) are within this many times the
+# engagement's length v^2 / a_max of the origin: farther out, float64 rounding of the
+# predictions' positions, some 1e4 updates of about 1e-16 of the distance each, nears the
+# acceptance level theta (about 1e-3 of that length at a 2 ms step); a helper's
+# engagements 3 to 100 um across, 1,000 to 490,000 km out (ratios 3e11 and up), entered a
+# zone from a certified start (docs/guidance.md, assumption 5). At 1e7 the rounding is
+# some 1e-5 of the length, a hundredth of theta.
+PRECISION_RATIO = 1e7
+
+
+def check_precision(extent_m: float, field: str, speed_m_s: float, accel_max_m_s2: float
+                    ) -> None:
+    """A ``StateError`` naming ``field`` where ``extent_m`` (the largest coordinate of the
+    vehicle, zones or target, m) is beyond ``PRECISION_RATIO`` times v^2 / a_max."""
+    length = speed_m_s * speed_m_s / accel_max_m_s2
+    if not extent_m <= PRECISION_RATIO * length:
+        raise StateError(field, extent_m, f"must be within {PRECISION_RATIO * length:.4g} m of "
+                         f"the origin at {speed_m_s:g} m/s: {PRECISION_RATIO:g} times the "
+                         f"engagement's length v^2/a_max ({length:.3g} m); farther, float64 "
+                         "rounding of the law's predictions nears its acceptance level (move "
+                         "the origin nearer)")  # fmt: skip
 
 
 def least_speed_m_s(accel_max_m_s2: float, dt_s: float) -> float:

@@ -11,10 +11,10 @@ import dataclasses
 import math
 
 from ezcompanion.config import Scenario
-from ezcompanion.errors import ConfigError
+from ezcompanion.errors import ConfigError, StateError
 from ezcompanion.guidance import GuidanceController, KinematicState, LawName
 from ezcompanion.guidance.abandon import abandon_gap
-from ezcompanion.guidance.single import least_speed_m_s, longest_step_s
+from ezcompanion.guidance.single import check_precision, least_speed_m_s, longest_step_s
 from ezcompanion.records import Hold, TickCommand, VehicleState
 from ezcompanion.service.ticks import EPSILON_S
 
@@ -80,6 +80,19 @@ class GuidanceLoop:
                 f"loop (the law is fed half of it at the least, and a step of one period "
                 f"must not turn more than a revolution at accel_max_m_s2): raise the rate",
             )  # fmt: skip
+        # The positions must lie within the law's precision radius at the least speed it is
+        # fed (``single.check_precision``): a scenario whose zones lie farther out for its
+        # speed is refused here (a vehicle that flies out of it is held at a tick: RANGE).
+        slowest = _LEAST_SPEED_FACTOR * start.speed_m_s
+        extent = max(max(abs(d.north_m), abs(d.east_m)) + d.range_m
+                     for d in scenario.defenders)  # fmt: skip
+        extent = max(extent, abs(scenario.target.north_m), abs(scenario.target.east_m),
+                     abs(start.north_m), abs(start.east_m))  # fmt: skip
+        try:
+            check_precision(extent, "defenders", slowest, scenario.guidance.accel_max_m_s2)
+        except StateError as exc:
+            raise ConfigError("vehicle.speed_m_s", start.speed_m_s, f"is too slow for where the "
+                              f"scenario lies: at half of it {exc}") from None  # fmt: skip
         # Run the law once now: compiled, this loads it from numba's disk cache (or compiles
         # it on a first run), which must not happen on the first tick and stall the link.
         self.controller.reset()
@@ -256,10 +269,14 @@ class GuidanceLoop:
         if rest is not None:  # the course is ours, and the turn the model's own (from 0)
             course, rate = rest, None
         self._last_tick_s = now_s
-        step = self.controller.step_one(
-            north_m=state.north_m, east_m=state.east_m, course_rad=course, speed_m_s=speed,
-            dt_s=dt, course_rate_rad_s=rate,
-        )  # fmt: skip
+        try:
+            step = self.controller.step_one(
+                north_m=state.north_m, east_m=state.east_m, course_rad=course,
+                speed_m_s=speed, dt_s=dt, course_rate_rad_s=rate,
+            )  # fmt: skip
+        except StateError:  # (beyond the law's precision radius, so far out for its speed)
+            self._last_tick_s = last
+            return Hold.RANGE
         self.miss_distance_m = min(self.miss_distance_m, float(step.law.range_to_target_m))
         self.captured = bool(step.captured)
         return TickCommand(

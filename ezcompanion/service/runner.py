@@ -607,12 +607,8 @@ class CompanionService:
         try:
             placed, moved = place_fixed(scenario, projection)
         except ConfigError as error:
-            self.events.emit(EventKind.ABORTED, now, f"the scenario placed as {projection} "
-                             f"maps latitude and longitude: {error}: not guided",
-                             cause="placement")  # fmt: skip
-            self.engagement.done = True
-            self.phase = Phase.DONE
-            return False
+            return self._not_guided(now, f"the scenario placed as {projection} maps latitude "
+                                    f"and longitude: {error}: not guided", "placement")
         self.scenario = placed
         self.loop.update_scenario(placed)
         self.events.emit(
@@ -757,11 +753,8 @@ class CompanionService:
         for problem in problems:
             self.events.emit(EventKind.WARNING, now, f"placed scenario: {problem}")
         if problems and "starts inside" in problems[0]:  # no guarantee from there: refused
-            self.events.emit(EventKind.ABORTED, now, "the vehicle is inside a zone of the "
-                             "placed scenario: not guided", cause="placement")  # fmt: skip
-            self.engagement.done = True
-            self.phase = Phase.DONE
-            return False
+            return self._not_guided(now, "the vehicle is inside a zone of the placed scenario: "
+                                    "not guided", "placement")
         return True
 
     def _outside_at_engage(self, now: float) -> bool:
@@ -777,9 +770,12 @@ class CompanionService:
         if inside is None:
             return True
         name, clearance = inside
-        self.events.emit(EventKind.ABORTED, now, f"the vehicle is inside the engagement zone of "
-                         f"{name} on its course (clearance {clearance:.2f} m): not guided",
-                         cause="inside")  # fmt: skip
+        return self._not_guided(now, f"the vehicle is inside the engagement zone of {name} on "
+                                f"its course (clearance {clearance:.2f} m): not guided", "inside")
+
+    def _not_guided(self, now: float, why: str, cause: str) -> bool:
+        """End before guidance engages, for good (``aborted``, ``cause``); False."""
+        self.events.emit(EventKind.ABORTED, now, why, cause=cause)
         self.engagement.done = True
         self.phase = Phase.DONE
         return False

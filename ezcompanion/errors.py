@@ -12,7 +12,7 @@ import reprlib
 
 __all__ = [
     "ConfigError", "EzCompanionError", "FieldError", "IdentificationError", "LinkError",
-    "StateError", "shown",
+    "PrecisionError", "StateError", "shown",
 ]
 
 _SHOWN = reprlib.Repr()
@@ -59,6 +59,11 @@ class ConfigError(FieldError):
 
 class StateError(FieldError):
     """A vehicle state or step input the law must not be fed (non-finite, out of range)."""
+
+
+class PrecisionError(StateError):
+    """A state, zones or target farther from the origin than the law computes with at this
+    speed (``guidance.single.check_precision``)."""
 
 
 class LinkError(FieldError, ConnectionError):

@@ -11,7 +11,9 @@ import pytest
 from ezcompanion.config import GeoOrigin, Target, load_scenario
 from ezcompanion.errors import ConfigError
 from ezcompanion.service.events import LINK_EVENTS_PER_S, Event, EventKind, EventLog
+from ezcompanion.service.inbox import ScenarioInbox
 from ezcompanion.service.loop import GuidanceLoop, Hold, TickCommand
+from ezcompanion.service.runner import _Here
 from ezcompanion.service.setpoints import make_setpoints
 from ezcompanion.service.settings import SetpointKind, companion_settings
 from ezcompanion.service.state import TelemetryState
@@ -403,3 +405,44 @@ def test_the_vehicles_texts_and_refusals_are_passed_on_at_a_bounded_rate() -> No
         log.emit(EventKind.STATUSTEXT, 2.5, f"late {k}", severity=6)
     log.flush(2.6)
     assert log.of_kind(EventKind.WARNING)[-1].data == {"suppressed": 11, "of": "statustext"}
+    # a flood cycling the command id (a reviewer: 200,000 a second passed, each command its
+    # own stream): 8 commands have streams of their own at once, the rest share one
+    before = len(log.of_kind(EventKind.COMMAND_ACK))
+    for k in range(20_000):
+        log.emit(EventKind.COMMAND_ACK, 5.0 + 1e-5 * k, "refused", command=k, result=4)
+    assert len(log.of_kind(EventKind.COMMAND_ACK)) - before <= 9 * LINK_EVENTS_PER_S
+
+
+def test_a_vehicle_at_rest_is_inside_a_zone_only_if_inside_it_for_every_course() -> None:
+    """A reviewer: a copter hovering 2 m south of D1, its nose on D1, is inside D1's zone on
+    its yaw (clearance -1.05 m) and outside facing away (+1.05 m); the law flies it from
+    rest along a clear line of its own choice, not along the nose. At rest, an engage or an
+    update is refused only where the vehicle is inside a zone for every course."""
+    scenario = load_scenario(CONFIG)
+    d1 = scenario.defenders[0]
+    north, east = d1.north_m - 2.0, d1.east_m
+    facing = _Here(north, east, 0.0, 1.0, 0.0, None)
+    assert facing.inside(scenario.defenders) is not None  # flying at it
+    resting = dataclasses.replace(facing, at_rest=True)
+    assert resting.inside(scenario.defenders) is None
+    on_it = dataclasses.replace(resting, north_m=d1.north_m, east_m=d1.east_m)
+    name, _ = on_it.inside(scenario.defenders) or ("", 0.0)
+    assert name == "D1"
+
+
+def test_an_update_taken_with_no_fresh_position_waits_for_one() -> None:
+    """Once guidance has engaged, the loop checks an update where the vehicle is as it
+    takes it; with no fresh position it keeps the update (restore) until one comes, rather
+    than dropping what the operator was told was accepted; a newer one replaces it."""
+    scenario = load_scenario(CONFIG)
+    inbox = ScenarioInbox(lambda data: scenario)
+    assert inbox.offer({}) is None
+    taken = inbox.take()
+    assert taken is scenario and inbox.take() is None
+    inbox.restore(taken)
+    assert inbox.take() is scenario
+    newer = dataclasses.replace(scenario, name="newer")
+    inbox = ScenarioInbox(lambda data: newer)
+    inbox.offer({})
+    inbox.restore(scenario)  # a newer one came meanwhile: it stays
+    assert inbox.take() is newer

@@ -174,19 +174,56 @@ def test_a_vehicle_clock_a_little_fast_or_a_first_sample_that_waited_is_not_ahea
         assert t.update(local(boot_ms, 0.0208 * k, 0.0), 1.0 + DT_S * k) == "LOCAL_POSITION_NED"
     t = known_origin()
     assert t.update(local(1000, 0.0, 0.0), 3.0) == "LOCAL_POSITION_NED"  # sent at 1.0
-    taken = []
+    taken, whys = [], []
     for k in range(1, 100):  # then each read 5 ms after it was sent
         taken.append(t.update(local(1000 + 2000 + 20 * k, 2.0 + 0.02 * k, 0.0),
                               3.005 + DT_S * k) == "LOCAL_POSITION_NED")  # fmt: skip
         refusal = t.take_refusal()
-        if k < 5:
-            assert refusal is not None and "ahead of the vehicle's clock" in refusal[1]
-        elif k == 5:
-            assert refusal is not None and refusal[1].startswith("the vehicle's clock taken "
-                                                                 "afresh: 5 local samples")
-    assert taken == [False] * 4 + [True] * 95
+        whys.append(refusal[1] if refusal is not None else "")
+    # refused for 0.25 s (13 samples, none taken), then the clock is taken afresh
+    assert taken == [False] * 13 + [True] * 86
+    assert all("ahead of the vehicle's clock" in why for why in whys[:13])
+    assert whys[13].startswith("the vehicle's clock taken afresh: local samples stamped")
     state = t.snapshot(0.25, 3.005 + DT_S * 99)
     assert state is not None and state.age_s(3.005 + DT_S * 99) < 0.01
+
+
+def test_a_run_of_samples_ahead_does_not_take_the_clock_while_the_vehicle_is_heard() -> None:
+    """A reviewer's attack on the first re-base rule (five in a row): five copies of the
+    vehicle's last sample in a burst, stamped 3 s ahead, re-based the clock; the next
+    forged sample, 3 s ahead and 7.9 m on, was then taken (over UDP: "intercepted"). The
+    clock is taken afresh only after 0.25 s of our clock with samples refused as ahead
+    and none taken: the vehicle's own, taken between, keep it."""
+    t = known_origin()
+    _used, (north, east, _) = fly_track(t, [0.0] * 50)
+    now, boot_ms = 1.0 + DT_S * 49, 1000 + 20 * 49
+    for k in range(1, 40):  # 0.8 s: the vehicle at 50 Hz, a forger's five between each
+        now += DT_S
+        for copy in range(5):
+            t.update(local(boot_ms + 20 * k + 3000 + copy, north + 0.02 * k + 7.9, east),
+                     now + 1e-4 * (copy + 1))  # fmt: skip
+            cause, why = t.take_refusal() or (None, "")
+            assert cause is Hold.GATE and "ahead of the vehicle's clock" in why, why
+        assert t.update(local(boot_ms + 20 * k, north + 0.02 * k, east),
+                        now + 0.001) == "LOCAL_POSITION_NED"  # fmt: skip
+    state = t.snapshot(0.25, now + 0.001)
+    assert state is not None and abs(state.north_m - (north + 0.02 * 39)) < 1e-9
+
+
+def test_a_late_repeat_of_a_sample_taken_is_no_second_source() -> None:
+    """A reviewer: two routes to the vehicle (mavlink-router, MAVProxy: no de-duplication by
+    default) deliver each sample twice, one copy late, after the next sample; a late copy
+    had been counted as stamped behind, and from the third on refused as a second source,
+    holding guidance until it ended. A repeat of any of the last few samples taken is
+    dropped without a word."""
+    t = known_origin()
+    for k in range(100):
+        sample = local(1000 + 20 * k, 0.02 * k, 0.0)
+        assert t.update(sample, 1.0 + DT_S * k) == "LOCAL_POSITION_NED"
+        if k > 0:  # the one before, again, by the other route
+            assert t.update(local(1000 + 20 * (k - 1), 0.02 * (k - 1), 0.0),
+                            1.0 + DT_S * k + 0.001) is None  # fmt: skip
+            assert t.take_refusal() is None
 
 
 def test_a_burst_of_samples_each_a_little_ahead_of_the_last_is_refused() -> None:

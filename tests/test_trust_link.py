@@ -439,10 +439,15 @@ def test_an_update_is_checked_again_where_the_vehicle_is_when_the_loop_takes_it(
     assert_honest(flight)
 
 
-def test_guidance_does_not_engage_a_vehicle_inside_a_zone(tmp_path: Path) -> None:
+@pytest.mark.parametrize(("profile", "mode"), [("copter", "GUIDED"), ("px4", "AUTO.LOITER")])
+def test_guidance_does_not_engage_a_vehicle_inside_a_zone(
+    profile: str, mode: str, tmp_path: Path
+) -> None:
     """An update before the first tick is taken unchecked (no vehicle state to check it
     against): one that puts D2 on the vehicle's start. Guidance then refuses to engage
-    there, for good (``aborted``, cause ``inside``), and sends nothing."""
+    there, for good (``aborted``, cause ``inside``), and sends nothing: on PX4 too, whose
+    setpoints are streamed ahead of OFFBOARD (a reviewer: there 3 were sent, computed from
+    inside D2, and PX4 flew them)."""
     raw = yaml.safe_load(SCENARIO.read_text())
     start = load_scenario(SCENARIO).start
     defenders = [dict(d) for d in raw["defenders"]]
@@ -453,9 +458,61 @@ def test_guidance_does_not_engage_a_vehicle_inside_a_zone(tmp_path: Path) -> Non
         replies.append(service.offer_scenario({"defenders": defenders,
                                                "target": raw["target"]}))  # fmt: skip
 
-    flight = fly(SCENARIO, tmp_path, during=operator, max_time_s=20.0, lockstep=True, **LIGHT)
+    flight = fly(SCENARIO, tmp_path, profile=profile, start_mode=mode, during=operator,
+                 max_time_s=20.0, lockstep=True, **LIGHT)  # fmt: skip
     assert replies == [None]
     (aborted,) = flight.events.of_kind(EventKind.ABORTED)
     assert aborted.data["cause"] == "inside" and "zone of D2" in aborted.message
     assert not flight.events.of_kind(EventKind.ENGAGED)
     assert flight.outcome.setpoints_sent == 0
+
+
+def test_a_burst_that_would_retake_the_clock_then_one_at_the_target_is_not_an_intercept(
+    tmp_path: Path,
+) -> None:
+    # A reviewer's attack on the first re-base rule: five copies of the vehicle's own last
+    # LOCAL_POSITION_NED, stamped 8 s ahead, in a burst between two of its samples, took
+    # the clock afresh (five in a row, agreeing); 1.5 s later one sample 8 s ahead at the
+    # target was taken: "intercepted" where the truth was 2.1 m off. A run retakes the
+    # clock only after 0.25 s with none taken: the vehicle's own samples keep it.
+    mav = forger()
+    parser = M.MAVLink(None)
+    parser.robust_parsing = True
+    mode: list[str | None] = [None]
+    target = load_scenario(SCENARIO).target
+
+    def attack(service: Any, relay: Relay, clock: Clock) -> None:
+        def tamper(data: bytes) -> bytes:
+            data = clock(data)
+            own = [m for m in parser.parse_buffer(data) or []
+                   if m.get_type() == "LOCAL_POSITION_NED"]  # fmt: skip
+            if not own or mode[0] is None:
+                return data
+            g, extra = own[-1], b""
+            ahead_ms = g.time_boot_ms + 8000
+            if mode[0] == "burst":
+                for j in range(5):
+                    extra += frame(mav, M.MAVLink_local_position_ned_message(
+                        ahead_ms + j, g.x, g.y, g.z, g.vx, g.vy, g.vz))  # fmt: skip
+            else:  # its velocity puts the gate's prediction at the target
+                vn = 2.0 * (target.north_m - g.x) / 8.0 - g.vx
+                ve = 2.0 * (target.east_m - g.y) / 8.0 - g.vy
+                extra = frame(mav, M.MAVLink_local_position_ned_message(
+                    ahead_ms, target.north_m, target.east_m, g.z, vn, ve, 0.0))  # fmt: skip
+            mode[0] = None
+            return data + extra
+
+        relay.tamper = tamper
+        assert wait_for(service, EventKind.ENGAGED)
+        time.sleep(0.5 / SPEEDUP)
+        mode[0] = "burst"
+        time.sleep(1.5 / SPEEDUP)
+        mode[0] = "single"
+
+    flight = relayed_flight(attack, tmp_path, max_time_s=20.0)
+    whys = [e.message for e in flight.events.of_kind(EventKind.ALARM)]
+    assert any("ahead of the vehicle's clock" in why for why in whys), whys
+    assert not any("taken afresh" in why for why in whys), whys
+    intercepted, *_ = judge_truth(load_scenario(SCENARIO), flight.truth)
+    assert flight.outcome.intercepted == intercepted
+    assert_honest(flight)

@@ -454,7 +454,10 @@ class GuidanceController:
             values = (state.north_m, state.east_m, state.course_rad, state.speed_m_s)
             if all(type(v) is float for v in values):
                 total = sum(map(abs, values))  # type: ignore[arg-type]
-                if total <= MAGNITUDE_LIMIT and values[3] > least_speed:  # else named below
+                n, e, v = float(values[0]), float(values[1]), float(values[3])
+                if (total <= MAGNITUDE_LIMIT and v > least_speed  # else named below
+                        and max(abs(n), abs(e), self._extent_m) * self.params.accel_max_m_s2
+                        <= PRECISION_RATIO * v * v):  # fmt: skip
                     rows = np.array(values).reshape(4, 1)
                     return rows[0], rows[1], rows[2], rows[3]
         rows = np.empty((4, self._accel.shape[0]))

@@ -21,7 +21,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ezcompanion.config_limits import MAGNITUDE_LIMIT
-from ezcompanion.errors import StateError
+from ezcompanion.errors import PrecisionError, StateError
 from ezcompanion.guidance._jit import jit
 from ezcompanion.guidance.actuator import advance_one
 from ezcompanion.guidance.backup import BACKUP_NONE, S_SIZE, shield_one
@@ -99,11 +99,11 @@ PRECISION_RATIO = 1e7
 
 def check_precision(extent_m: float, field: str, speed_m_s: float, accel_max_m_s2: float
                     ) -> None:
-    """A ``StateError`` naming ``field`` where ``extent_m`` (the largest coordinate of the
+    """A ``PrecisionError`` naming ``field`` where ``extent_m`` (the largest coordinate of the
     vehicle, zones or target, m) is beyond ``PRECISION_RATIO`` times v^2 / a_max."""
     length = speed_m_s * speed_m_s / accel_max_m_s2
     if not extent_m <= PRECISION_RATIO * length:
-        raise StateError(field, extent_m, f"must be within {PRECISION_RATIO * length:.4g} m of "
+        raise PrecisionError(field, extent_m, f"must be within {PRECISION_RATIO * length:.4g} m of "
                          f"the origin at {speed_m_s:g} m/s: {PRECISION_RATIO:g} times the "
                          f"engagement's length v^2/a_max ({length:.3g} m); farther, float64 "
                          "rounding of the law's predictions nears its acceptance level (move "

@@ -30,6 +30,7 @@ Sink = Callable[[Event], None]
 LINK_EVENTS_PER_S = 20
 _LIMITED = frozenset({EventKind.STATUSTEXT, EventKind.COMMAND_ACK})
 _SEVERITY_ERROR = 3  # MAV_SEVERITY_ERROR: this and EMERGENCY, ALERT, CRITICAL apart
+_COMMAND_STREAMS = 8  # commands with a stream of their own at once (the companion sends few)
 
 _Stream = tuple[EventKind, int]
 
@@ -51,7 +52,7 @@ class EventLog:
     def emit(self, kind: EventKind, time_s: float, message: str, **data: Any) -> Event:
         """Record an event and pass it on (one of the link's over its stream's rate: only
         counted)."""
-        stream = _stream(kind, data) if kind in _LIMITED else None
+        stream = self._stream(kind, time_s, data) if kind in _LIMITED else None
         if self._suppressed:  # (this event's own stream names its count itself)
             self.flush(time_s, over_only=True, but=stream)
         if stream is not None:
@@ -85,6 +86,22 @@ class EventLog:
                                f"{LINK_EVENTS_PER_S} a second)",
                                {"suppressed": dropped, "of": kind.value}))  # fmt: skip
 
+    def _stream(self, kind: EventKind, time_s: float, data: dict[str, Any]) -> _Stream:
+        """The stream a link event is counted in: a text's severity class (ERROR or worse,
+        or not); a refusal's command, for at most ``_COMMAND_STREAMS`` commands a second
+        (the rest share one: a reviewer's flood cycling the command id passed 200,000
+        refusals a second, each its own stream)."""
+        if kind is EventKind.STATUSTEXT:
+            return kind, int(int(data.get("severity", 7)) <= _SEVERITY_ERROR)
+        stream = (kind, int(data.get("command", -1)))
+        if stream in self._window and time_s - self._window[stream][0] < 1.0:
+            return stream
+        for old in [s for s, (start, _) in self._window.items()  # (the windows over, with
+                    if time_s - start >= 1.0 and s not in self._suppressed]:  # nothing to say)
+            del self._window[old]
+        open_now = sum(1 for k, c in self._window if k is kind and c != -1)
+        return stream if open_now < _COMMAND_STREAMS else (kind, -1)
+
     def _record(self, event: Event) -> Event:
         self.events.append(event)
         _log.info("%s", event.line())
@@ -96,10 +113,3 @@ class EventLog:
         """The events of one kind, in order."""
         return [e for e in self.events if e.kind is kind]
 
-
-def _stream(kind: EventKind, data: dict[str, Any]) -> _Stream:
-    """The stream a link event is counted in: a text's severity class (ERROR or worse, or
-    not), a refusal's command."""
-    if kind is EventKind.STATUSTEXT:
-        return kind, int(int(data.get("severity", 7)) <= _SEVERITY_ERROR)
-    return kind, int(data.get("command", -1))

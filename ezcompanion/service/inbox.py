@@ -37,6 +37,12 @@ class ScenarioInbox:
             self.accepted += 1
         return None
 
+    def restore(self, scenario: Scenario) -> None:
+        """Keep ``scenario``, taken but not yet flown, unless a newer one came meanwhile."""
+        with self._lock:
+            if self._pending is None:
+                self._pending = scenario
+
     def take(self) -> Scenario | None:
         """The newest accepted scenario not yet taken, or None."""
         with self._lock:

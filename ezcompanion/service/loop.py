@@ -11,7 +11,7 @@ import dataclasses
 import math
 
 from ezcompanion.config import Scenario
-from ezcompanion.errors import ConfigError, StateError
+from ezcompanion.errors import ConfigError, PrecisionError
 from ezcompanion.guidance import GuidanceController, KinematicState, LawName
 from ezcompanion.guidance.abandon import abandon_gap
 from ezcompanion.guidance.single import check_precision, least_speed_m_s, longest_step_s
@@ -90,7 +90,7 @@ class GuidanceLoop:
                      abs(start.north_m), abs(start.east_m))  # fmt: skip
         try:
             check_precision(extent, "defenders", slowest, scenario.guidance.accel_max_m_s2)
-        except StateError as exc:
+        except PrecisionError as exc:
             raise ConfigError("vehicle.speed_m_s", start.speed_m_s, f"is too slow for where the "
                               f"scenario lies: at half of it {exc}") from None  # fmt: skip
         # Run the law once now: compiled, this loads it from numba's disk cache (or compiles
@@ -274,7 +274,7 @@ class GuidanceLoop:
                 north_m=state.north_m, east_m=state.east_m, course_rad=course,
                 speed_m_s=speed, dt_s=dt, course_rate_rad_s=rate,
             )  # fmt: skip
-        except StateError:  # (beyond the law's precision radius, so far out for its speed)
+        except PrecisionError:  # beyond the law's precision radius, so far out at its speed
             self._last_tick_s = last
             return Hold.RANGE
         self.miss_distance_m = min(self.miss_distance_m, float(step.law.range_to_target_m))

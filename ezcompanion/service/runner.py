@@ -29,6 +29,7 @@ import dataclasses
 import math
 import threading
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import Enum, StrEnum
 from pathlib import Path
@@ -36,10 +37,21 @@ from typing import TYPE_CHECKING, Any
 
 from ezcompanion import __version__
 from ezcompanion.config import Scenario, scenario_to_dict, scenario_update
-from ezcompanion.config_checks import zone_entered
-from ezcompanion.errors import ConfigError
+from ezcompanion.config_checks import (
+    clearance_m,
+    inside_for_every_course,
+    zone_entered,
+    zone_names,
+)
+from ezcompanion.errors import ConfigError, PrecisionError
 from ezcompanion.field import VehiclePlacement, place_fixed, placement_warnings
-from ezcompanion.guidance import GuidanceController, KinematicState, LawName, kernels_cached
+from ezcompanion.guidance import (
+    Defender,
+    GuidanceController,
+    KinematicState,
+    LawName,
+    kernels_cached,
+)
 from ezcompanion.guidance.scaling import GRAVITY_M_S2
 from ezcompanion.records import EventKind, Hold, TickCommand
 from ezcompanion.service.autopilots import AutopilotProfile
@@ -247,23 +259,28 @@ class CompanionService:
         placed = self.placement.zones(update) if self.placement is not None else update
         where = (f"the vehicle (at north {here.north_m:.2f} m, east {here.east_m:.2f} m on "
                  f"course {math.degrees(here.course_rad):.1f} deg)")  # fmt: skip
-        inside = zone_entered(placed.defenders, here.north_m, here.east_m, here.course_rad)
+        inside = here.inside(placed.defenders)
         if inside is not None:
             name, clearance = inside
             raise ConfigError("defenders", name, f"would have {where} inside the engagement "
                               f"zone of {name} (clearance {clearance:.2f} m): the law keeps a "
                               "vehicle out of a zone only from outside it")  # fmt: skip
         law = self.loop.controller.law
-        if law is not LawName.BACKUP:
+        if law is not LawName.BACKUP or here.at_rest:  # (at rest: the law's own course)
             return
         params = self.loop.scenario.guidance  # with what is assumed of the vehicle
         trial = GuidanceController(zones=placed.zones(), target=placed.target, params=params,
                                    law=law)  # fmt: skip
         bound = 0.999 * params.accel_max_m_s2
         trial.reset(min(max(here.accel_m_s2, -bound), bound))
-        best, theta = trial.backup_certificate_m(
-            KinematicState(here.north_m, here.east_m, here.course_rad, here.speed_m_s),
-            self.loop.period_s, here.course_rate_rad_s)  # fmt: skip
+        try:
+            best, theta = trial.backup_certificate_m(
+                KinematicState(here.north_m, here.east_m, here.course_rad, here.speed_m_s),
+                self.loop.period_s, here.course_rate_rad_s)  # fmt: skip
+        except PrecisionError as exc:  # (beyond the law's precision radius at this speed)
+            raise ConfigError("defenders", [d.name for d in placed.defenders],
+                              f"would put the engagement where the law cannot fly it: "
+                              f"{exc}") from None  # fmt: skip
         if best < theta:
             raise ConfigError("defenders", [d.name for d in placed.defenders],
                               f"would leave {where} with no backup manoeuvre certified to keep "
@@ -355,13 +372,13 @@ class CompanionService:
                 break
             self._due_work(clock.now_s())
         self.phase = Phase.DONE
-        self.events.flush(clock.now_s())  # the vehicle's texts held back and not yet named
         self.engagement.finish(clock.now_s())
         commanded = self.engagement.setpoints_sent + self.engagement.brakes_sent > 0
         self.exit_report = leave_vehicle(  # a defined end: the mode of on_exit (ending.py)
             self.settings.on_exit, self.session, self.events, commanded=commanded,
             now=clock.now_s, pump=self._pump,
         )  # fmt: skip
+        self.events.flush(clock.now_s())  # the vehicle's texts held back and not yet named
 
     def _pump(self, timeout_s: float) -> None:
         """Frames in and heartbeats out while the service ends (the phase is done: no
@@ -540,6 +557,7 @@ class CompanionService:
             and self._heading_loop_checked
             and session.frame_settled
             and self._placed(now)
+            and (self._engaged_at_s is not None or self._outside_at_engage(now))
         ):
             # PX4 flies what is streamed as soon as it takes OFFBOARD, before the companion
             # hears of it (0.1 s, its heartbeat asked for): so what is streamed is the
@@ -765,8 +783,7 @@ class CompanionService:
         here = self._here(now)
         if here is None:
             return False
-        inside = zone_entered(self.scenario.defenders, here.north_m, here.east_m,
-                              here.course_rad)  # fmt: skip
+        inside = here.inside(self.scenario.defenders)
         if inside is None:
             return True
         name, clearance = inside
@@ -819,19 +836,21 @@ class CompanionService:
         )
 
     def _take_pending_scenario(self, now: float) -> None:
-        """Fly against the newest update accepted, checked again here against the vehicle
-        as the telemetry has it now (it was checked where the vehicle last ticked; it has
-        moved since): refused with a warning where that fails, or where guidance runs with
-        no fresh position to check it against."""
+        """Fly against the newest update accepted, checked again here, once guidance has
+        engaged, against the vehicle as the telemetry has it now (it was checked where the
+        vehicle last ticked; it has moved since): refused with a warning where that fails;
+        kept until a fresh position comes where there is none (a newer update replaces
+        it). Before the first engage it is taken as it is: the engage checks the vehicle
+        against it."""
         scenario = self.scenario_inbox.take()
         if scenario is None:
             return
-        if self.phase is Phase.GUIDING:
+        if self._engaged_at_s is not None:  # (before, the engage's own check covers it)
             here = self._here(now)
+            if here is None:  # kept until there is a fresh position to check it against
+                self.scenario_inbox.restore(scenario)
+                return
             try:
-                if here is None:
-                    raise ConfigError("scenario", scenario.name, "no fresh position to check "
-                                      "it against")  # fmt: skip
                 self._check_update_here(scenario, here)
             except ConfigError as exc:
                 self.events.emit(EventKind.WARNING, now, f"scenario update not taken: {exc}")
@@ -860,7 +879,8 @@ class CompanionService:
         loop = self.loop  # its tick's own reading of the state
         return _Here(state.north_m, state.east_m, state.course_rad(loop.speed_floor_m_s),
                      max(state.ground_speed_m_s, loop.flown_speed_m_s),
-                     float(loop.controller.accel_m_s2), state.course_rate_rad_s)  # fmt: skip
+                     float(loop.controller.accel_m_s2), state.course_rate_rad_s,
+                     at_rest=state.ground_speed_m_s < loop.speed_floor_m_s)  # fmt: skip
 
     def _tick(self, now: float) -> None:
         self.schedule.ticked(now)
@@ -929,6 +949,19 @@ class _Here:
     speed_m_s: float
     accel_m_s2: float
     course_rate_rad_s: float | None
+    # slower than the law flies a course: it starts along a clear line of its own choice
+    # (``GuidanceLoop``'s course from rest), not along the nose
+    at_rest: bool = False
+
+    def inside(self, defenders: Sequence[Defender]) -> tuple[str, float] | None:
+        """The zone the vehicle is inside, with its clearance, or None: on its course, or,
+        at rest, for every course (its course is then the law's to choose)."""
+        if not self.at_rest:
+            return zone_entered(defenders, self.north_m, self.east_m, self.course_rad)
+        for name, defender in zip(zone_names(defenders), defenders, strict=True):
+            if inside_for_every_course(defender, self.north_m, self.east_m):
+                return name, clearance_m(defender, self.north_m, self.east_m, self.course_rad)
+        return None
 
     @classmethod
     def of(cls, last: TickCommand) -> _Here:

@@ -75,6 +75,7 @@ is stale, every global sample is converted again.
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -131,11 +132,15 @@ _AHEAD_RATE = 0.05
 # stamped behind it, were seen as a second source
 _CONFIRM_S = 0.25
 # samples refused as ahead, in a row with none taken between and agreeing within _AHEAD_S,
-# that start the least offset afresh (it came from a sample that waited)
+# over _REBASE_S of our clock with no position taken for as long, that start the least
+# offset afresh (it came from a sample that waited)
 _REBASE_SAMPLES = 5
+_REBASE_S = 0.25
 # samples stamped behind the newest taken, within a second, that are only reordering: one
 # more is a second source
 _BEHIND_MAX = 2
+# taken samples remembered, so that a repeat of one arriving late is known as a repeat
+_REPEATS_KEPT = 8
 
 
 @dataclass
@@ -162,15 +167,17 @@ class _Track:
     pred_boot_s: float
     spread_m: float = 0.0  # what the acceleration bound allows since the last acceptance
     course_rate_rad_s: float | None = None
-    # our clock at each recent sample stamped behind the newest taken (not a duplicate)
-    behind_s: list[float] = field(default_factory=list)
+    # our clock at each recent sample stamped behind the newest taken (not a repeat)
+    behind_s: deque[float] = field(default_factory=lambda: deque(maxlen=_BEHIND_MAX + 1))
+    # the last few taken: a repeat of any of them (two routes, one late) is no second source
+    taken: deque[_Position] = field(default_factory=lambda: deque(maxlen=_REPEATS_KEPT))
     # a track begun after a lost link is used only once its samples have come for
     # _CONFIRM_S of our clock (its first sample was taken with no gate): when it began
     unconfirmed_since_s: float | None = None
 
     @classmethod
     def start(cls, sample: _Position, confirm_from_s: float | None = None) -> _Track:
-        return cls(
+        track = cls(
             sample,
             sample,
             sample.north_m,
@@ -180,6 +187,8 @@ class _Track:
             sample.boot_s,
             unconfirmed_since_s=confirm_from_s,
         )
+        track.taken.append(sample)
+        return track
 
 
 @dataclass
@@ -195,7 +204,8 @@ class _VehicleClock:
     least_s: float = math.nan  # the least offset seen in this time base (no slew)
     budget_s: float = _AHEAD_S  # how far it may still go down (refilling)
     budget_at_s: float = 0.0  # our clock when the budget was last counted
-    ahead_run: list[float] = field(default_factory=list)  # offsets of the run refused ahead
+    # (our clock, offset) of each sample refused as ahead since one was last taken
+    ahead_run: list[tuple[float, float]] = field(default_factory=list)
 
     def offset_for(self, boot_s: float, now_s: float) -> float:
         """The offset for a sample stamped ``boot_s`` read at ``now_s`` (not kept: see
@@ -214,19 +224,25 @@ class _VehicleClock:
         return self.least_s - (now_s - boot_s), self._budget(now_s)
 
     def refused_ahead(self, boot_s: float, now_s: float) -> bool:
-        """Count a sample refused as ahead; True where it ends a run of them that starts
-        the least offset afresh (``_REBASE_SAMPLES`` in a row, agreeing within
-        ``_AHEAD_S``): the caller takes it then."""
+        """Count a sample refused as ahead; True where it ends a run of them that may start
+        the least offset afresh: ``_REBASE_SAMPLES`` or more in a row, agreeing within
+        ``_AHEAD_S``, over ``_REBASE_S`` of our clock at least, with no position taken for
+        as long (the vehicle's own, all ahead of a least offset that came from a sample that
+        waited). The caller lets this one through to the gate; only if it is taken does it
+        lower the least offset (``keep``). A forger's run, however fast, cannot: the
+        vehicle's own samples are taken between (a reviewer's five copies in a burst had
+        re-based the clock and let the next forged sample in)."""
         run = self.ahead_run
-        run.append(now_s - boot_s)
-        if len(run) < _REBASE_SAMPLES:
+        run.append((now_s, now_s - boot_s))
+        del run[:-_REBASE_SAMPLES * 8]  # (bounded: the newest are what count)
+        if len(run) < _REBASE_SAMPLES or now_s - self.at_s < _REBASE_S:
             return False
-        del run[:-_REBASE_SAMPLES]
-        if max(run) - min(run) > _AHEAD_S:
+        recent = [seen for at, seen in run if now_s - at <= 2.0 * _REBASE_S]
+        if now_s - run[0][0] < _REBASE_S or len(recent) < _REBASE_SAMPLES:
             return False
-        self.least_s = min(run)
-        self.budget_s, self.budget_at_s = _AHEAD_S, now_s
-        run.clear()
+        if max(recent) - min(recent) > _AHEAD_S:
+            return False
+        self.budget_s, self.budget_at_s = math.inf, now_s  # for the one the caller takes
         return True
 
     def keep(self, boot_s: float, now_s: float) -> float:
@@ -241,9 +257,14 @@ class _VehicleClock:
             self.least_s = seen
             self.budget_s, self.budget_at_s = _AHEAD_S, now_s
         elif seen < self.least_s:
-            self.budget_s = max(0.0, self._budget(now_s) - (self.least_s - seen))
+            if math.isinf(self.budget_s):  # a re-base (``refused_ahead``): a full budget
+                self.budget_s = _AHEAD_S
+            else:
+                self.budget_s = max(0.0, self._budget(now_s) - (self.least_s - seen))
             self.budget_at_s = now_s
             self.least_s = seen
+        elif math.isinf(self.budget_s):
+            self.budget_s = _AHEAD_S
         return boot_s + self.offset_s
 
     def _budget(self, now_s: float) -> float:
@@ -534,8 +555,8 @@ class TelemetryState:
         if position and self._clock.refused_ahead(boot_s, now_s):
             self._refusal = (
                 Hold.GATE,
-                f"the vehicle's clock taken afresh: {_REBASE_SAMPLES} {kind} samples in a row "
-                f"stamped {ahead:.2f} s ahead of it (the one it came from had waited)",
+                f"the vehicle's clock taken afresh: {kind} samples stamped {ahead:.2f} s ahead "
+                f"of it for {_REBASE_S:g} s, none taken (the one it came from had waited)",
             )
             return True
         return self._refuse(
@@ -563,8 +584,8 @@ class TelemetryState:
                     f"{kind} position time went back {last.boot_s - sample.boot_s:.1f} s "
                     "(a reboot or a forgery): refused",
                 )
-            if sample.boot_s == last.boot_s and _same_motion(sample, last):
-                return False  # the same sample again
+            if any(p.boot_s == sample.boot_s and _same_motion(p, sample) for p in track.taken):
+                return False  # a sample taken already, again (a second route, later)
             return self._behind(kind, track, sample, now_s)
         if sample.boot_s <= track.pred_boot_s:
             return False  # not newer than a refused sample already judged
@@ -620,6 +641,7 @@ class TelemetryState:
         if progress:
             track.moved = sample
         track.last = sample
+        track.taken.append(sample)
         begun = track.unconfirmed_since_s
         if begun is not None and now_s - begun >= _CONFIRM_S:
             track.unconfirmed_since_s = None
@@ -631,9 +653,8 @@ class TelemetryState:
         stream of positions from the vehicle's id and address, whose stamps run ahead of
         the vehicle's own (a forger's, walked ahead a step at a time, took a track 5 m off
         while the vehicle's samples were dropped here without a word): refused, named."""
+        track.behind_s.append(now_s)
         recent = [t for t in track.behind_s if now_s - t < 1.0]
-        recent.append(now_s)
-        track.behind_s = recent
         if len(recent) <= _BEHIND_MAX:
             return False
         return self._refuse(

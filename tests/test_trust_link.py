@@ -22,7 +22,7 @@ from typing import Any
 import pytest
 import yaml
 from conftest_sitl import M, Relay, forger, frame
-from test_service_loopback import CONFIG, SPEEDUP, Flight, fly
+from test_service_loopback import CONFIG, SPEEDUP, Flight, fly, scenario_file
 
 from ezcompanion.config import load_scenario, scenario_update
 from ezcompanion.config_checks import clearance_m
@@ -399,8 +399,9 @@ def test_a_burst_of_positions_walked_to_the_target_is_not_an_intercept(tmp_path:
             relay.inject(data)
 
     flight = relayed_flight(attack, tmp_path, max_time_s=20.0)
-    whys = [e.message for e in flight.events.of_kind(EventKind.ALARM)]
-    assert any("ahead of the vehicle's clock" in why for why in whys), whys
+    whys = [e.message for e in flight.events.of_kind(EventKind.ALARM)
+            if e.data["cause"] == "gate"]  # (ahead of the clock, or its velocity's step)
+    assert whys, "the burst was not refused"
     intercepted, *_ = judge_truth(load_scenario(SCENARIO), flight.truth)
     assert flight.outcome.intercepted == intercepted
     assert_honest(flight)
@@ -514,5 +515,82 @@ def test_a_burst_that_would_retake_the_clock_then_one_at_the_target_is_not_an_in
     assert any("ahead of the vehicle's clock" in why for why in whys), whys
     assert not any("taken afresh" in why for why in whys), whys
     intercepted, *_ = judge_truth(load_scenario(SCENARIO), flight.truth)
+    assert flight.outcome.intercepted == intercepted
+    assert_honest(flight)
+
+
+def test_a_forged_sample_just_after_each_of_the_vehicles_steers_nothing(tmp_path: Path) -> None:
+    # A reviewer's silent steer: after each of the vehicle's LOCAL_POSITION_NED (stamp b),
+    # one stamped b + 1 ms, 0.4 m farther from the nearest defender, its velocity turned
+    # 0.15 m/s away from it: never ahead of the vehicle's clock, never behind the newest
+    # taken, within the 0.5 m gate. Every tick read it: no alarm, and the truth entered all
+    # three zones by up to 0.86 m. Each is now refused: its velocity turned more than 0.05
+    # m/s (plus the bound's) from the sample before, or its position off that one's path.
+    mav = forger()
+    parser = M.MAVLink(None)
+    parser.robust_parsing = True
+    scenario = load_scenario(SCENARIO)
+    armed = [False]
+
+    def shifted(g: Any) -> bytes:
+        d = min(scenario.defenders, key=lambda d: math.hypot(g.x - d.north_m, g.y - d.east_m))
+        un, ue = g.x - d.north_m, g.y - d.east_m
+        r = math.hypot(un, ue)
+        un, ue = un / r, ue / r
+        return frame(mav, M.MAVLink_local_position_ned_message(
+            g.time_boot_ms + 1, g.x + 0.4 * un, g.y + 0.4 * ue, g.z, g.vx + 0.15 * un,
+            g.vy + 0.15 * ue, g.vz))  # fmt: skip
+
+    def attack(service: Any, relay: Relay, clock: Clock) -> None:
+        def tamper(data: bytes) -> bytes:
+            data = clock(data)
+            if not armed[0]:
+                return data
+            own = [g for g in parser.parse_buffer(data) or []
+                   if g.get_type() == "LOCAL_POSITION_NED"]  # fmt: skip
+            return data + b"".join(shifted(g) for g in own)
+
+        relay.tamper = tamper
+        assert wait_for(service, EventKind.ENGAGED)
+        armed[0] = True
+
+    flight = relayed_flight(attack, tmp_path, max_time_s=40.0)
+    whys = [e.message for e in flight.events.of_kind(EventKind.ALARM)]
+    assert any("off the path" in why or "velocity changed" in why for why in whys), whys
+    assert_honest(flight)
+
+
+def test_an_origin_after_the_latch_drops_no_track(tmp_path: Path) -> None:
+    # A reviewer: a scenario with no origin and a vehicle that never tells its own, so the
+    # service assumes it and engages; then one forged GPS_GLOBAL_ORIGIN (the very one
+    # assumed) was taken as the vehicle's first, both position tracks were dropped, and
+    # the next forged LOCAL_POSITION_NED, at the target, started a new track with no gate:
+    # "intercepted", the truth 5.9 m off. After the latch no origin is taken as a first.
+    config = scenario_file(tmp_path, sitl_stub={"local_origin_after_s": -1.0})
+    scenario = load_scenario(config)
+    assert not scenario.origin_given
+    mav = forger()
+    port = free_udp_port()
+    relay = Relay(port)
+    clock = Clock()
+    relay.tamper = clock
+
+    def attack(service: Any, *_: Any) -> None:
+        assert wait_for(service, EventKind.ENGAGED)
+        time.sleep(0.3 / SPEEDUP)
+        o = service.session.telemetry.origin  # the one assumed
+        origin = M.MAVLink_gps_global_origin_message(
+            round(o.lat_deg * 1e7), round(o.lon_deg * 1e7), round(o.alt_m * 1000), 0)
+        t = scenario.target
+        position = M.MAVLink_local_position_ned_message(clock.boot_ms + 1, t.north_m,
+                                                        t.east_m, -20.0, 0.0, 0.0, 0.0)
+        relay.inject(frame(mav, origin) + frame(mav, position))
+
+    try:
+        flight = fly(config, tmp_path, port=port, stub_port=relay.vehicle_port, during=attack,
+                     max_time_s=30.0, **LIGHT)  # fmt: skip
+    finally:
+        relay.close()
+    intercepted, *_ = judge_truth(scenario, flight.truth)
     assert flight.outcome.intercepted == intercepted
     assert_honest(flight)

@@ -292,6 +292,33 @@ def test_a_second_stream_of_positions_is_refused_and_steers_nothing(kind: str) -
     assert state is None or abs(state.east_m) < 0.06, state
 
 
+@pytest.mark.parametrize(("step_m", "dv_m_s"), [(0.3, 0.0), (0.05, 0.3), (0.4, 0.2)])
+def test_an_estimate_that_steps_is_taken_again_once_its_samples_keep_to_the_new_path(
+    step_m: float, dv_m_s: float
+) -> None:
+    """An estimator's reset (an EKF's after a GPS glitch, a lane switch) steps the position
+    or the velocity, then goes on from there: its samples are refused while the step is
+    new (each off the path of the last taken), and taken, named, once they have kept to
+    the new path for 0.25 s with none on the old one; the track then follows them. (A
+    forger's run cannot last so: the vehicle's own samples, on the old path, are taken
+    between: the test above.)"""
+    t = known_origin()
+    _used, (north, east, _) = fly_track(t, [0.0] * 50)
+    whys, taken = [], []
+    for k in range(50):  # 1 s after the step
+        now = 1.0 + DT_S * (50 + k)
+        vn = 1.0 + dv_m_s
+        sample = local(1000 + 20 * (50 + k), north + vn * DT_S * k, east + step_m, vn, 0.0)
+        taken.append(t.update(sample, now) == "LOCAL_POSITION_NED")
+        refusal = t.take_refusal()
+        whys.append(refusal[1] if refusal else "")
+    first = taken.index(True)
+    assert 12 <= first <= 14 and all(taken[first:]), taken  # 0.25 s at 50 Hz
+    assert whys[first].startswith("local position stepped"), whys[first]
+    state = t.snapshot(0.25, 1.0 + DT_S * 99)
+    assert state is not None and state.east_m == pytest.approx(east + step_m)
+
+
 def test_a_slow_stream_whose_first_sample_waited_is_taken_again() -> None:
     """A reviewer: a stream slower than 8 Hz (a configured rate, a radio that gives only
     that) whose first sample waited 2 s was refused as ahead for good: the clock was

@@ -118,6 +118,10 @@ _GATE_VELOCITY_M_S = 0.05
 # vehicle 0.86 m into the zones, every tick reading the forger's: now it can move the
 # picture by these and no more, against the 0.1 m margin (velocity: 0.2 m/s before)
 _STEP_POSITION_M = 0.05
+# an estimate that steps (an EKF reset, a lane switch) is followed by samples on the new
+# path and none on the old: taken once they have come for this long (our clock), which a
+# forger's run cannot while the vehicle's own samples, on the old path, are taken between
+_STEP_RUN_S = 0.25
 # the cross-check compares with the other source only when it is this recent (vehicle time)
 _CROSS_MAX_AGE_S = 0.5
 # two origins this close are the same
@@ -183,6 +187,9 @@ class _Track:
     # our clock at each recent sample stamped behind the newest taken (not a repeat)
     behind_s: deque[float] = field(default_factory=deque)
     taken_s: deque[float] = field(default_factory=deque)  # our clock at each taken, 1 s
+    # samples off the path of the last taken but each on the path of the one before it,
+    # with our clock: an estimate that stepped (a reset), taken after _STEP_RUN_S
+    step_run: list[tuple[float, _Position]] = field(default_factory=list)
     # the last few taken: a repeat of any of them (two routes, one late) is no second source
     taken: deque[_Position] = field(default_factory=lambda: deque(maxlen=_REPEATS_KEPT))
     # a track begun after a lost link is used only once its samples have come for
@@ -636,12 +643,6 @@ class TelemetryState:
             sample.north_m - track.pred_north_m, sample.east_m - track.pred_east_m
         )
         limit = self.gate_position_m + track.spread_m
-        if not velocity_ok:
-            return self._refuse(
-                Hold.GATE,
-                f"{kind} velocity changed by {dv:.2f} m/s in {dt:.3f} s (bound "
-                f"{bound:g} m/s2): refused",
-            )
         if innovation > limit:
             return self._refuse(
                 Hold.GATE,
@@ -649,14 +650,31 @@ class TelemetryState:
                 f"{limit:.2f} m): refused",
             )
         off, within = _off_path(last, sample, bound)
-        if off > within:
+        stepped = (not velocity_ok or off > within) and _stepped(track, sample, now_s, bound)
+        if not velocity_ok and not stepped:
+            return self._refuse(
+                Hold.GATE,
+                f"{kind} velocity changed by {dv:.2f} m/s in {dt:.3f} s (bound "
+                f"{bound:g} m/s2): refused",
+            )
+        if off > within and not stepped:
             return self._refuse(
                 Hold.GATE,
                 f"{kind} position {off:.3f} m off the path of the sample before it (at most "
                 f"{within:.3f} m in {sample.boot_s - last.boot_s:.3f} s): refused",
             )
+        if stepped:  # the prediction follows the estimate's new velocity
+            track.pred_vn_m_s, track.pred_ve_m_s = sample.vn_m_s, sample.ve_m_s
         if not self._cross_check(kind, sample):
             return False
+        track.step_run.clear()
+        if stepped:  # taken, and named (it holds guidance as a refusal does)
+            self._refusal = (
+                Hold.GATE,
+                f"{kind} position stepped {off:.3f} m, velocity {dv:.2f} m/s (the estimate "
+                f"reset): its samples kept to the new path for {_STEP_RUN_S:g} s, none to the "
+                "old: taken",
+            )
         # Accepted: pull the prediction towards it, keep the course rate.
         gain = min(1.0, dt / _GATE_TAU_S)
         track.pred_north_m += gain * (sample.north_m - track.pred_north_m)
@@ -717,6 +735,22 @@ class TelemetryState:
             track.course_rate_rad_s, (last.vn_m_s, last.ve_m_s), (sample.vn_m_s, sample.ve_m_s),
             sample.boot_s - last.boot_s,
         )  # fmt: skip
+
+
+def _stepped(track: _Track, sample: _Position, now_s: float, bound: float) -> bool:
+    """``sample``, off the path of the last taken, extends a run of samples each on the
+    path of the one before it (velocity too) that has lasted ``_STEP_RUN_S`` of our clock:
+    the estimate stepped. Else it starts or extends the run; False."""
+    run = track.step_run
+    if run:
+        before = run[-1][1]
+        off, within = _off_path(before, sample, bound)
+        dv = math.hypot(sample.vn_m_s - before.vn_m_s, sample.ve_m_s - before.ve_m_s)
+        if off > within or dv > bound * (sample.boot_s - before.boot_s) + _GATE_VELOCITY_M_S:
+            run.clear()
+    run.append((now_s, sample))
+    del run[:-64]
+    return now_s - run[0][0] >= _STEP_RUN_S and len(run) >= 2
 
 
 def _within_second(times: deque[float], now_s: float) -> deque[float]:

@@ -10,6 +10,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -317,6 +318,27 @@ def test_an_estimate_that_steps_is_taken_again_once_its_samples_keep_to_the_new_
     assert whys[first].startswith("local position stepped"), whys[first]
     state = t.snapshot(0.25, 1.0 + DT_S * 99)
     assert state is not None and state.east_m == pytest.approx(east + step_m)
+
+
+def test_a_fast_plane_with_whole_millisecond_stamps_is_taken() -> None:
+    """A plane at 22 m/s, its estimate up to 2.5 ms older than its whole-millisecond stamp
+    (an estimator's step at 400 Hz), turning at 4.5 m/s^2 within a gate of 9: every sample
+    is taken (at 22 m/s a millisecond is 2.2 cm; the path check allows for 5 ms at the
+    speed)."""
+    t = known_origin(accel_bound_m_s2=9.0)
+    rng = np.random.default_rng(7)
+    course, north, east = 0.0, 0.0, 0.0
+    for k in range(500):  # 10 s at 50 Hz
+        true_s = 1.0 + DT_S * k - rng.uniform(0.0, 0.0025)  # when the estimate was true
+        vn, ve = 22.0 * math.cos(course), 22.0 * math.sin(course)
+        stamp_ms = round((1.0 + DT_S * k) * 1000)
+        n = north + vn * (true_s - (1.0 + DT_S * k))
+        e = east + ve * (true_s - (1.0 + DT_S * k))
+        assert t.update(local(stamp_ms, n, e, vn, ve), 1.0 + DT_S * k + 0.002), (
+            k, t.take_refusal())
+        north += vn * DT_S
+        east += ve * DT_S
+        course += 4.5 / 22.0 * DT_S
 
 
 def test_a_slow_stream_whose_first_sample_waited_is_taken_again() -> None:

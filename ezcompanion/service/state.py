@@ -118,6 +118,10 @@ _GATE_VELOCITY_M_S = 0.05
 # vehicle 0.86 m into the zones, every tick reading the forger's: now it can move the
 # picture by these and no more, against the 0.1 m margin (velocity: 0.2 m/s before)
 _STEP_POSITION_M = 0.05
+# a position's stamp says when it was true to within this (time_boot_ms is whole
+# milliseconds; an estimator's output trails its own clock by a step, 2.5 ms at 400 Hz):
+# at 22 m/s, 11 cm more of tolerance, at 1 m/s half a centimetre
+_STAMP_JITTER_S = 0.005
 # an estimate that steps (an EKF reset, a lane switch) is followed by samples on the new
 # path and none on the old: taken once they have come for this long (our clock), which a
 # forger's run cannot while the vehicle's own samples, on the old path, are taken between
@@ -762,13 +766,15 @@ def _within_second(times: deque[float], now_s: float) -> deque[float]:
 
 def _off_path(last: _Position, sample: _Position, bound: float) -> tuple[float, float]:
     """How far ``sample`` lies from the path of ``last`` (propagated to its stamp by the
-    two velocities, trapezoid; back in time too), and how far it may (``_STEP_POSITION_M``
-    plus the trapezoid's error for |a| <= ``bound``)."""
+    two velocities, trapezoid; back in time too), and how far it may (``_STEP_POSITION_M``,
+    the stamps' resolution at the speed, ``_STAMP_JITTER_S``, and the trapezoid's error for
+    |a| <= ``bound``)."""
     dt = sample.boot_s - last.boot_s
     north = last.north_m + 0.5 * (last.vn_m_s + sample.vn_m_s) * dt
     east = last.east_m + 0.5 * (last.ve_m_s + sample.ve_m_s) * dt
     off = math.hypot(sample.north_m - north, sample.east_m - east)
-    return off, _STEP_POSITION_M + 0.25 * bound * dt * dt
+    speed = max(math.hypot(last.vn_m_s, last.ve_m_s), math.hypot(sample.vn_m_s, sample.ve_m_s))
+    return off, _STEP_POSITION_M + speed * _STAMP_JITTER_S + 0.25 * bound * dt * dt
 
 
 def _same_motion(a: _Position, b: _Position) -> bool:

@@ -118,10 +118,12 @@ _GATE_VELOCITY_M_S = 0.05
 # vehicle 0.86 m into the zones, every tick reading the forger's: now it can move the
 # picture by these and no more, against the 0.1 m margin (velocity: 0.2 m/s before)
 _STEP_POSITION_M = 0.05
-# a position's stamp says when it was true to within this (time_boot_ms is whole
-# milliseconds; an estimator's output trails its own clock by a step, 2.5 ms at 400 Hz):
-# at 22 m/s, 11 cm more of tolerance, at 1 m/s half a centimetre
-_STAMP_JITTER_S = 0.005
+# a position's stamp leads the estimate by up to this (time_boot_ms is whole milliseconds
+# and taken when the message is sent; the estimate is the estimator's last output, 50 Hz
+# on ArduPlane: 0 to 20 ms): allowed along the velocity only, 44 cm at 22 m/s, 2 cm at
+# 1 m/s (a reviewer's plane at 22 m/s with 0 to 19 ms of lead was refused a third of the
+# time at 5 ms)
+_STAMP_JITTER_S = 0.02
 # an estimate that steps (an EKF reset, a lane switch) is followed by samples on the new
 # path and none on the old: taken once they have come for this long (our clock), which a
 # forger's run cannot while the vehicle's own samples, on the old path, are taken between
@@ -152,15 +154,9 @@ _CONFIRM_S = 0.25
 # offset afresh (it came from a sample that waited)
 _REBASE_SAMPLES = 5
 _REBASE_S = 0.25
-# samples stamped behind the newest taken, within a second, that are only reordering: one
-# more is a second source
-_BEHIND_MAX = 2
-# ... and, beyond that, at least this share of the samples taken over the second: two routes
-# that lose and deliver late (a reviewer: 10% lost on the fast route, 48 refusals in 10 s),
-# or a route that reorders 5%, stay below it; a second stream that keeps ahead of the
-# vehicle's makes every one of the vehicle's samples "behind"
-_BEHIND_SHARE = 0.3
-# taken samples remembered, so that a repeat of one arriving late is known as a repeat
+# taken samples remembered: a repeat of one arriving late is known as a repeat, a sample
+# behind the newest is judged against the nearest of them, and a new one against the
+# oldest too
 _REPEATS_KEPT = 8
 
 
@@ -189,8 +185,6 @@ class _Track:
     spread_m: float = 0.0  # what the acceleration bound allows since the last acceptance
     course_rate_rad_s: float | None = None
     # our clock at each recent sample stamped behind the newest taken (not a repeat)
-    behind_s: deque[float] = field(default_factory=deque)
-    taken_s: deque[float] = field(default_factory=deque)  # our clock at each taken, 1 s
     # samples off the path of the last taken but each on the path of the one before it,
     # with our clock: an estimate that stepped (a reset), taken after _STEP_RUN_S
     step_run: list[tuple[float, _Position]] = field(default_factory=list)
@@ -616,8 +610,9 @@ class TelemetryState:
             if any(p.boot_s == sample.boot_s and _same_motion(p, sample) for p in track.taken):
                 return False  # a sample taken already, again (a second route, later)
             return self._behind(kind, track, sample, now_s)
-        if sample.boot_s <= track.pred_boot_s:
-            return False  # not newer than a refused sample already judged
+        if sample.boot_s <= track.pred_boot_s:  # not newer than a refused sample judged:
+            return self._behind(kind, track, sample, now_s)  # as one behind (a reviewer's
+            # forged sample just past the vehicle's next had had that one dropped silently)
         # A position that stands still while the velocity says it moves is frozen (a stale
         # estimate re-sent with fresh time stamps): no information, and it leaves the
         # prediction alone. Judged from the last sample that moved.
@@ -654,25 +649,34 @@ class TelemetryState:
                 f"{limit:.2f} m): refused",
             )
         off, within = _off_path(last, sample, bound)
-        stepped = (not velocity_ok or off > within) and _stepped(track, sample, now_s, bound)
+        # and on the path of the oldest of the last few taken: the noise allowances are
+        # granted once over them, not at every sample (a reviewer's forger at 200 Hz
+        # accelerated at 12 m/s^2 within the per-sample allowance of a 2 m/s^2 bound)
+        oldest = track.taken[0]
+        on_oldest = oldest is last or _on_path(oldest, sample, bound)
+        stepped = (not velocity_ok or off > within or not on_oldest) and _stepped(
+            track, sample, now_s, bound
+        )
         if not velocity_ok and not stepped:
             return self._refuse(
                 Hold.GATE,
                 f"{kind} velocity changed by {dv:.2f} m/s in {dt:.3f} s (bound "
                 f"{bound:g} m/s2): refused",
             )
-        if off > within and not stepped:
+        if (off > within or not on_oldest) and not stepped:
             return self._refuse(
                 Hold.GATE,
-                f"{kind} position {off:.3f} m off the path of the sample before it (at most "
-                f"{within:.3f} m in {sample.boot_s - last.boot_s:.3f} s): refused",
+                f"{kind} position off the path of the samples before it ({off:.3f} m from "
+                f"the last's, at most {within:.3f} m in {sample.boot_s - last.boot_s:.3f} s; "
+                f"on the path {_REPEATS_KEPT} back: {on_oldest}): refused",
             )
         if stepped:  # the prediction follows the estimate's new velocity
             track.pred_vn_m_s, track.pred_ve_m_s = sample.vn_m_s, sample.ve_m_s
         if not self._cross_check(kind, sample):
             return False
         track.step_run.clear()
-        if stepped:  # taken, and named (it holds guidance as a refusal does)
+        if stepped:  # taken, and named (it holds guidance as a refusal does); the old path
+            track.taken.clear()  # is no longer one to judge samples against
             self._refusal = (
                 Hold.GATE,
                 f"{kind} position stepped {off:.3f} m, velocity {dv:.2f} m/s (the estimate "
@@ -689,7 +693,6 @@ class TelemetryState:
             track.moved = sample
         track.last = sample
         track.taken.append(sample)
-        _within_second(track.taken_s, now_s).append(now_s)
         begun = track.unconfirmed_since_s
         if begun is not None and now_s - begun >= _CONFIRM_S:
             track.unconfirmed_since_s = None
@@ -697,20 +700,20 @@ class TelemetryState:
 
     def _behind(self, kind: str, track: _Track, sample: _Position, now_s: float) -> bool:
         """A sample stamped behind the newest taken (or at its stamp, saying something
-        else): not taken. A few are reordering; more, within a second, are a second
-        stream of positions from the vehicle's id and address, whose stamps run ahead of
-        the vehicle's own (a forger's, walked ahead a step at a time, took a track 5 m off
-        while the vehicle's samples were dropped here without a word): refused, named."""
-        behind = _within_second(track.behind_s, now_s)
-        behind.append(now_s)
-        taken = len(_within_second(track.taken_s, now_s))
-        if len(behind) <= max(_BEHIND_MAX, _BEHIND_SHARE * taken):
+        else, or behind a refused one): not taken. On the path of the taken sample nearest
+        its stamp (velocity too) it is reordering, and it shows the old path goes on (an
+        estimate's step is then no step); off it, it is a second source of positions: the
+        vehicle's own samples behind a forger's that runs ahead of them (a reviewer's at
+        200 Hz, 6 ms ahead, the vehicle's 50 Hz a quarter of those taken, had steered the
+        track 15 m without a word): refused, named."""
+        nearest = min(track.taken, key=lambda p: abs(p.boot_s - sample.boot_s))
+        if _on_path(nearest, sample, self.accel_bound_m_s2):
+            track.step_run.clear()
             return False  # reordering
         return self._refuse(
             Hold.GATE,
-            f"{len(behind)} {kind} samples within 1 s stamped behind the newest taken, of "
-            f"{taken} taken (this one {track.last.boot_s - sample.boot_s:.3f} s behind): a "
-            "second source of positions, refused",
+            f"{kind} sample stamped {track.last.boot_s - sample.boot_s:.3f} s behind the "
+            "newest taken, off the path it took: a second source of positions, refused",
         )
 
     def _cross_check(self, kind: str, sample: _Position) -> bool:
@@ -746,35 +749,38 @@ def _stepped(track: _Track, sample: _Position, now_s: float, bound: float) -> bo
     path of the one before it (velocity too) that has lasted ``_STEP_RUN_S`` of our clock:
     the estimate stepped. Else it starts or extends the run; False."""
     run = track.step_run
-    if run:
-        before = run[-1][1]
-        off, within = _off_path(before, sample, bound)
-        dv = math.hypot(sample.vn_m_s - before.vn_m_s, sample.ve_m_s - before.ve_m_s)
-        if off > within or dv > bound * (sample.boot_s - before.boot_s) + _GATE_VELOCITY_M_S:
-            run.clear()
+    if run and not _on_path(run[-1][1], sample, bound):
+        run.clear()
     run.append((now_s, sample))
     del run[:-64]
     return now_s - run[0][0] >= _STEP_RUN_S and len(run) >= 2
 
 
-def _within_second(times: deque[float], now_s: float) -> deque[float]:
-    """``times`` without those more than a second before ``now_s`` (oldest first)."""
-    while times and now_s - times[0] >= 1.0:
-        times.popleft()
-    return times
-
-
 def _off_path(last: _Position, sample: _Position, bound: float) -> tuple[float, float]:
     """How far ``sample`` lies from the path of ``last`` (propagated to its stamp by the
-    two velocities, trapezoid; back in time too), and how far it may (``_STEP_POSITION_M``,
-    the stamps' resolution at the speed, ``_STAMP_JITTER_S``, and the trapezoid's error for
-    |a| <= ``bound``)."""
+    two velocities, trapezoid; back in time too), and how far it may: ``_STEP_POSITION_M``
+    and the trapezoid's error for |a| <= ``bound``, and along the velocity the stamp's
+    lead on the estimate at the speed (``_STAMP_JITTER_S``). (The distance returned is
+    scaled so that the along-track allowance counts as the across-track one.)"""
     dt = sample.boot_s - last.boot_s
-    north = last.north_m + 0.5 * (last.vn_m_s + sample.vn_m_s) * dt
-    east = last.east_m + 0.5 * (last.ve_m_s + sample.ve_m_s) * dt
-    off = math.hypot(sample.north_m - north, sample.east_m - east)
-    speed = max(math.hypot(last.vn_m_s, last.ve_m_s), math.hypot(sample.vn_m_s, sample.ve_m_s))
-    return off, _STEP_POSITION_M + speed * _STAMP_JITTER_S + 0.25 * bound * dt * dt
+    d_north = sample.north_m - (last.north_m + 0.5 * (last.vn_m_s + sample.vn_m_s) * dt)
+    d_east = sample.east_m - (last.east_m + 0.5 * (last.ve_m_s + sample.ve_m_s) * dt)
+    within = _STEP_POSITION_M + 0.25 * bound * dt * dt
+    speed = math.hypot(sample.vn_m_s, sample.ve_m_s)
+    if speed < 1e-6:
+        return math.hypot(d_north, d_east), within
+    along = (d_north * sample.vn_m_s + d_east * sample.ve_m_s) / speed
+    across = (d_east * sample.vn_m_s - d_north * sample.ve_m_s) / speed
+    along *= within / (within + speed * _STAMP_JITTER_S)  # its allowance, as across's
+    return math.hypot(along, across), within
+
+
+def _on_path(before: _Position, sample: _Position, bound: float) -> bool:
+    """``sample`` on the path of ``before``, its velocity within what the bound allows."""
+    off, within = _off_path(before, sample, bound)
+    dv = math.hypot(sample.vn_m_s - before.vn_m_s, sample.ve_m_s - before.ve_m_s)
+    return off <= within and dv <= bound * abs(sample.boot_s - before.boot_s) + (
+        _GATE_VELOCITY_M_S)
 
 
 def _same_motion(a: _Position, b: _Position) -> bool:

@@ -372,6 +372,33 @@ def test_a_forger_faster_than_the_vehicle_has_its_samples_named_a_second_source(
     assert len(named) >= 90 and (gaps < 0.5).all()  # the hold never lapses after that
 
 
+def test_the_vehicles_samples_are_not_silenced_as_frozen_by_a_forgers() -> None:
+    """A reviewer's forger before each of a 22 m/s plane's samples: one at the very position
+    the vehicle's next will report, stamped 10 ms before it, its velocity turned up to 0.25
+    m/s across. Each of the vehicle's then lay within 2 cm of the forger's, and was dropped
+    as "frozen" (a position standing still while its velocity says it moves): 500 of 500,
+    nothing named, the picture's velocity 0.25 m/s off. Only the same estimate again
+    (position and velocity within 1 mm) is frozen; the forger's are refused, named."""
+    t = known_origin()
+    for k in range(50):
+        boot_ms = 1000 + 20 * k
+        assert t.update(local(boot_ms, 22.0 * (boot_ms - 1000) / 1000, 0.0, 22.0, 0.0),
+                        1.003 + DT_S * k)  # fmt: skip
+    genuine_taken, named = 0, 0
+    for k in range(50, 550):  # 10 s
+        stamp = 1000 + 20 * k
+        north = 22.0 * (stamp - 1000) / 1000
+        across = min(0.25, 0.04 * (k - 49))
+        t.update(local(stamp - 10, north, 0.0, 22.0, across), 1.0 + DT_S * k + 0.0019)
+        named += t.take_refusal() is not None
+        genuine_taken += t.update(local(stamp, north, 0.0, 22.0, 0.0),
+                                  1.003 + DT_S * k) is not None  # fmt: skip
+        t.take_refusal()
+    assert genuine_taken == 500 and named >= 499
+    state = t.snapshot(0.25, 1.003 + DT_S * 549)
+    assert state is not None and state.velocity_east_m_s == 0.0
+
+
 def test_a_slow_stream_whose_first_sample_waited_is_taken_again() -> None:
     """A reviewer: a stream slower than 8 Hz (a configured rate, a radio that gives only
     that) whose first sample waited 2 s was refused as ahead for good: the clock was

@@ -106,6 +106,12 @@ _REBOOT_BACKSTEP_S = 10.0
 # GLOBAL_POSITION_INT is 1e-7 deg, about 1 cm); frozen once its velocity says it should
 # have moved twice this
 _STILL_M = 0.02
+# ... but dropped without a word as frozen only where it is the same estimate again, its
+# position and velocity to this: a reviewer's forger placed its samples where the
+# vehicle's next would be, stamped 10 ms before it, and each of the vehicle's was then
+# dropped as "frozen", 500 of 500, while the forger's, their velocity turned 0.25 m/s
+# across, were taken
+_FROZEN_M = 0.001
 # the gate's prediction follows accepted samples with this time constant
 _GATE_TAU_S = 2.0
 # a velocity may differ from the bound's prediction by this much (quantisation, noise)
@@ -624,8 +630,9 @@ class TelemetryState:
         )
         expected = (sample.boot_s - anchor.boot_s) * speed
         moved = since > _STILL_M
-        if not moved and expected > 2.0 * _STILL_M:
-            return False  # frozen (a jump elsewhere is not: the gate judges it)
+        if (since <= _FROZEN_M and expected > 2.0 * _STILL_M and math.hypot(
+                sample.vn_m_s - anchor.vn_m_s, sample.ve_m_s - anchor.ve_m_s) <= _FROZEN_M):
+            return False  # frozen: the same estimate again (anything else is judged below)
         progress = moved or expected <= 0.5 * _STILL_M
         # Propagate the prediction to this sample and gate it.
         dt = sample.boot_s - track.pred_boot_s

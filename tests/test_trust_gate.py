@@ -399,6 +399,26 @@ def test_the_vehicles_samples_are_not_silenced_as_frozen_by_a_forgers() -> None:
     assert state is not None and state.velocity_east_m_s == 0.0
 
 
+@pytest.mark.parametrize("speed", [0.5, 0.75, 1.0, 3.0])
+def test_a_frozen_estimate_is_dropped_without_a_word_at_any_speed(speed: float) -> None:
+    """An estimate re-sent unchanged with fresh stamps (frozen) is dropped silently, as
+    before the frozen rule was narrowed to the same estimate again: a reviewer found that
+    between 0.5 and 1 m/s (under 2 cm a sample, so the last taken is not the last that
+    moved) the re-sends went through the gate, up to 21 taken as fresh and the rest
+    refused under the wrong name. Matched against the last taken as well."""
+    t = known_origin()
+    for k in range(50):
+        assert t.update(local(1000 + 20 * k, speed * 0.02 * k, 0.0, speed, 0.0),
+                        1.0 + DT_S * k)  # fmt: skip
+    frozen = local(1000 + 20 * 49, speed * 0.02 * 49, 0.0, speed, 0.0)
+    taken = named = 0
+    for k in range(50, 150):  # the same estimate, fresh stamps
+        frozen.time_boot_ms = 1000 + 20 * k
+        taken += t.update(frozen, 1.0 + DT_S * k) is not None
+        named += t.take_refusal() is not None
+    assert taken <= 3 and named == 0, (taken, named)
+
+
 def test_a_slow_stream_whose_first_sample_waited_is_taken_again() -> None:
     """A reviewer: a stream slower than 8 Hz (a configured rate, a radio that gives only
     that) whose first sample waited 2 s was refused as ahead for good: the clock was

@@ -630,8 +630,8 @@ class TelemetryState:
         )
         expected = (sample.boot_s - anchor.boot_s) * speed
         moved = since > _STILL_M
-        if (since <= _FROZEN_M and expected > 2.0 * _STILL_M and math.hypot(
-                sample.vn_m_s - anchor.vn_m_s, sample.ve_m_s - anchor.ve_m_s) <= _FROZEN_M):
+        if expected > 2.0 * _STILL_M and (_same_estimate(sample, anchor)
+                                          or _same_estimate(sample, last)):  # fmt: skip
             return False  # frozen: the same estimate again (anything else is judged below)
         progress = moved or expected <= 0.5 * _STILL_M
         # Propagate the prediction to this sample and gate it.
@@ -788,6 +788,12 @@ def _on_path(before: _Position, sample: _Position, bound: float) -> bool:
     dv = math.hypot(sample.vn_m_s - before.vn_m_s, sample.ve_m_s - before.ve_m_s)
     return off <= within and dv <= bound * abs(sample.boot_s - before.boot_s) + (
         _GATE_VELOCITY_M_S)
+
+
+def _same_estimate(a: _Position, b: _Position) -> bool:
+    """The same position and velocity to ``_FROZEN_M`` (an estimate re-sent, frozen)."""
+    return (math.hypot(a.north_m - b.north_m, a.east_m - b.east_m) <= _FROZEN_M
+            and math.hypot(a.vn_m_s - b.vn_m_s, a.ve_m_s - b.ve_m_s) <= _FROZEN_M)  # fmt: skip
 
 
 def _same_motion(a: _Position, b: _Position) -> bool:

@@ -39,18 +39,21 @@ What the law uses, and why:
   the same where each was judged against the one before; one ATTITUDE stamped 9 s ahead
   had aged every genuine position by 9 s.) Where the least offset itself came from a
   sample that waited (the first after a lost link, out of a buffer), the vehicle's own
-  samples are all "ahead": ``_REBASE_SAMPLES`` of them in a row, agreeing with each other
-  and none taken between, start the least afresh (an ``alarm``); a forger's run is broken
-  by the vehicle's own samples, taken between.
+  samples are all "ahead": ``_REBASE_SAMPLES`` or more over ``_REBASE_S`` of our clock,
+  the last of them agreeing and none taken for as long, let the next through, and if the
+  gate takes it, it starts the least afresh (an ``alarm``); a forger's run cannot last so
+  while the vehicle's own samples are taken between.
 
 Refused, and counted (a refused sample changes nothing):
 
 - a field non-finite or out of range;
-- a sample not newer than the last of its kind (duplicated or reordered), silently; a
-  time stamp going back by more than ``_REBOOT_BACKSTEP_S`` raises ``Hold.GATE``;
-- a frozen estimate (the position stands still while its velocity says it moves): not an
-  alarm, but it does not refresh the position, so the stale budget runs from the last
-  sample that moved and the loop fails closed;
+- a sample not newer than the last of its kind: a repeat of one of the last taken, or one
+  on the path of the taken sample nearest its stamp (reordering), silently; off that path,
+  as a second source of positions (``Hold.GATE``); a time stamp going back by more than
+  ``_REBOOT_BACKSTEP_S`` raises ``Hold.GATE``;
+- a frozen estimate (the same position and velocity again, to ``_FROZEN_M``, while the
+  velocity says it moves): not an alarm, but it does not refresh the position, so the
+  stale budget runs from the last sample that moved and the loop fails closed;
 - outside the estimate gate (``Hold.GATE``): each source keeps a prediction, propagated
   from sample to sample by the reported velocities (trapezoid), and pulled towards accepted
   samples with a time constant of ``_GATE_TAU_S``. A position farther from it than
@@ -60,6 +63,13 @@ Refused, and counted (a refused sample changes nothing):
   faster than the bound. The prediction goes on through
   refused samples, so a jumped stream stays refused (no re-acceptance once it is "old
   enough"); only samples back on the prediction are taken again.
+- off the path of the samples taken before it (``Hold.GATE``): within the gate, a position
+  must keep to the path of the last taken and of the oldest of the last few
+  (``_STEP_POSITION_M`` across, ``_STAMP_JITTER_S`` of travel more along), its velocity
+  within ``_GATE_VELOCITY_M_S`` plus the bound's; an estimate that steps (a reset) is
+  taken again once its samples have kept to the new path for ``_STEP_RUN_S``.
+- after a lost link or the latch, a new source is used once its samples have come for
+  ``_CONFIRM_S``.
 - local and global disagreeing (``Hold.DISAGREE``): when both are fresh, each new sample is
   compared with the other source propagated to its time stamp.
 
@@ -231,6 +241,7 @@ class _VehicleClock:
     budget_at_s: float = 0.0  # our clock when the budget was last counted
     # (our clock, offset) of each sample refused as ahead since one was last taken
     ahead_run: list[tuple[float, float]] = field(default_factory=list)
+    rebasing: bool = False  # a run let one through: if taken, it sets the least afresh
 
     def offset_for(self, boot_s: float, now_s: float) -> float:
         """The offset for a sample stamped ``boot_s`` read at ``now_s`` (not kept: see
@@ -267,7 +278,7 @@ class _VehicleClock:
         last = [seen for _, seen in run[-_REBASE_SAMPLES:]]
         if max(last) - min(last) > _AHEAD_S:
             return False
-        self.budget_s, self.budget_at_s = math.inf, now_s  # for the one the caller takes
+        self.rebasing = True  # for the one the caller lets through, if it is taken
         return True
 
     def keep(self, boot_s: float, now_s: float) -> float:
@@ -278,18 +289,14 @@ class _VehicleClock:
         self.newest_boot_s = boot_s if restarted else max(self.newest_boot_s, boot_s)
         seen = now_s - boot_s
         self.ahead_run.clear()
-        if restarted:
-            self.least_s = seen
+        if restarted or self.rebasing:  # a new time base, or a run's (``refused_ahead``)
+            self.least_s = seen if restarted else min(self.least_s, seen)
             self.budget_s, self.budget_at_s = _AHEAD_S, now_s
+            self.rebasing = False
         elif seen < self.least_s:
-            if math.isinf(self.budget_s):  # a re-base (``refused_ahead``): a full budget
-                self.budget_s = _AHEAD_S
-            else:
-                self.budget_s = max(0.0, self._budget(now_s) - (self.least_s - seen))
+            self.budget_s = max(0.0, self._budget(now_s) - (self.least_s - seen))
             self.budget_at_s = now_s
             self.least_s = seen
-        elif math.isinf(self.budget_s):
-            self.budget_s = _AHEAD_S
         return boot_s + self.offset_s
 
     def _budget(self, now_s: float) -> float:

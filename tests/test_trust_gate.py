@@ -212,6 +212,47 @@ def test_a_run_of_samples_ahead_does_not_take_the_clock_while_the_vehicle_is_hea
     assert state is not None and abs(state.north_m - (north + 0.02 * 39)) < 1e-9
 
 
+@pytest.mark.parametrize(("ahead_ms", "off_m"), [(3000, 3.0), (9000, 30.0)])
+def test_a_forger_cannot_silence_the_vehicle_to_take_the_clock(
+    ahead_ms: int, off_m: float
+) -> None:
+    """A reviewer's attack on the retake of the clock: each of the vehicle's samples
+    preceded by a forged one stamped 60 ms ahead of it and 30 m off (refused, but the
+    prediction went on through it), so that the vehicle's own were dropped as "behind"
+    and none taken; meanwhile a stream stamped 3 to 9 s ahead and 3 to 30 m off. After
+    0.25 s the clock was retaken from the second stream, and from then on its samples were
+    taken, every one of the vehicle's dropped without a word: the picture 3 to 30 m off for
+    the 8 s left. Now the vehicle's samples are judged as new (and taken), and a sample
+    whose stamp is not ahead breaks the run that may retake the clock."""
+    t = known_origin()
+    fly_track(t, [0.0] * 50)
+    for k in range(50, 550):  # 10 s
+        now, boot_ms, north = 1.0 + DT_S * k, 1000 + 20 * k, DT_S * k
+        t.update(local(boot_ms + 60, north + 0.06, 30.0), now - 0.0005)
+        assert t.take_refusal() is not None  # each forged sample named
+        assert t.update(local(boot_ms + ahead_ms, north + ahead_ms / 1000, off_m),
+                        now - 0.0002) is None  # fmt: skip
+        assert t.take_refusal() is not None
+        assert t.update(local(boot_ms, north, 0.0), now) == "LOCAL_POSITION_NED"
+        state = t.snapshot(0.25, now)
+        assert state is not None and (state.north_m, state.east_m) == (north, 0.0)
+
+
+def test_the_clock_is_not_retaken_while_the_vehicles_samples_are_refused_otherwise() -> None:
+    """The vehicle's own samples refused by the gate (here: its estimate 2 m off) are no
+    samples ahead: they break the run that may retake the clock, so a forger's stream
+    stamped 3 s ahead, where the old path would be by then, is never let through."""
+    t = known_origin()
+    fly_track(t, [0.0] * 50)
+    for k in range(50, 150):  # 2 s
+        now, boot_ms, north = 1.0 + DT_S * k, 1000 + 20 * k, DT_S * k
+        assert t.update(local(boot_ms + 3000, north + 3.0, 0.0), now - 0.0002) is None
+        cause, why = t.take_refusal() or (None, "")
+        assert cause is Hold.GATE and "ahead of the vehicle's clock" in why, why
+        assert t.update(local(boot_ms, north, 2.0), now) is None
+        assert t.take_refusal() is not None
+
+
 def test_a_late_repeat_of_a_sample_taken_is_no_second_source() -> None:
     """A reviewer: two routes to the vehicle (mavlink-router, MAVProxy: no de-duplication by
     default) deliver each sample twice, one copy late, after the next sample; a late copy

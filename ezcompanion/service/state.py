@@ -40,15 +40,16 @@ What the law uses, and why:
   had aged every genuine position by 9 s.) Where the least offset itself came from a
   sample that waited (the first after a lost link, out of a buffer), the vehicle's own
   samples are all "ahead": ``_REBASE_SAMPLES`` or more over ``_REBASE_S`` of our clock,
-  the last of them agreeing and none taken for as long, let the next through, and if the
-  gate takes it, it starts the least afresh (an ``alarm``); a forger's run cannot last so
-  while the vehicle's own samples are taken between.
+  the last of them agreeing, none taken for as long and no position between them stamped
+  otherwise, let the next through, and if the gate takes it, it starts the least afresh
+  (an ``alarm``); a forger's run cannot last so while the vehicle's own samples, not
+  ahead, arrive between (taken or not).
 
 Refused, and counted (a refused sample changes nothing):
 
 - a field non-finite or out of range;
-- a sample not newer than the last of its kind: a repeat of one of the last taken, or one
-  on the path of the taken sample nearest its stamp (reordering), silently; off that path,
+- a sample not newer than the last taken of its kind: a repeat of one of the last taken,
+  or one on the path of the taken sample nearest its stamp (reordering), silently; off that path,
   as a second source of positions (``Hold.GATE``); a time stamp going back by more than
   ``_REBOOT_BACKSTEP_S`` raises ``Hold.GATE``;
 - a frozen estimate (the same position and velocity again, to ``_FROZEN_M``, while the
@@ -62,7 +63,9 @@ Refused, and counted (a refused sample changes nothing):
   metres over a silent gap of seconds) is refused, and so is a velocity that changed
   faster than the bound. The prediction goes on through
   refused samples, so a jumped stream stays refused (no re-acceptance once it is "old
-  enough"); only samples back on the prediction are taken again.
+  enough"); only samples back on the prediction are taken again. A sample newer than the
+  last taken but stamped before a refused one is judged as new, the prediction taken back
+  to its stamp.
 - off the path of the samples taken before it (``Hold.GATE``): within the gate, a position
   must keep to the path of the last taken and of the oldest of the last few
   (``_STEP_POSITION_M`` across, ``_STAMP_JITTER_S`` of travel more along), its velocity
@@ -263,11 +266,14 @@ class _VehicleClock:
         """Count a sample refused as ahead; True where it ends a run of them that may start
         the least offset afresh: ``_REBASE_SAMPLES`` or more in a row, agreeing within
         ``_AHEAD_S``, over ``_REBASE_S`` of our clock at least, with no position taken for
-        as long (the vehicle's own, all ahead of a least offset that came from a sample that
-        waited). The caller lets this one through to the gate; only if it is taken does it
-        lower the least offset (``keep``). A forger's run, however fast, cannot: the
-        vehicle's own samples are taken between (a reviewer's five copies in a burst had
-        re-based the clock and let the next forged sample in)."""
+        as long and none not ahead between them (the vehicle's own, all ahead of a least
+        offset that came from a sample that waited). The caller lets this one through to
+        the gate; only if it is taken does it lower the least offset (``keep``). A
+        forger's run, however fast, cannot: the vehicle's own samples arrive between, not
+        ahead, and the caller clears the run (a reviewer's forger, its refused samples
+        stamped just ahead of the vehicle's, had had those dropped as behind and the run
+        left to grow; before that, its five copies in a burst had re-based the clock and
+        let the next forged sample in)."""
         run = self.ahead_run
         run.append((now_s, now_s - boot_s))
         del run[:-_REBASE_SAMPLES * 8]  # (bounded: the newest are what count)
@@ -586,6 +592,8 @@ class TelemetryState:
         of positions so, agreeing, starts the clock's least offset afresh)."""
         ahead, allowed = self._clock.ahead_s(boot_s, now_s)
         if ahead <= allowed:
+            if position:  # the vehicle's clock is not ahead of the least offset after all:
+                self._clock.ahead_run.clear()  # whatever happens to this sample next
             return True
         if position and self._clock.refused_ahead(boot_s, now_s):
             self._refusal = (
@@ -623,9 +631,6 @@ class TelemetryState:
             if any(p.boot_s == sample.boot_s and _same_motion(p, sample) for p in track.taken):
                 return False  # a sample taken already, again (a second route, later)
             return self._behind(kind, track, sample, now_s)
-        if sample.boot_s <= track.pred_boot_s:  # not newer than a refused sample judged:
-            return self._behind(kind, track, sample, now_s)  # as one behind (a reviewer's
-            # forged sample just past the vehicle's next had had that one dropped silently)
         # A position that stands still while the velocity says it moves is frozen (a stale
         # estimate re-sent with fresh time stamps): no information, and it leaves the
         # prediction alone. Judged from the last sample that moved.
@@ -641,11 +646,16 @@ class TelemetryState:
                                           or _same_estimate(sample, last)):  # fmt: skip
             return False  # frozen: the same estimate again (anything else is judged below)
         progress = moved or expected <= 0.5 * _STILL_M
-        # Propagate the prediction to this sample and gate it.
+        # Propagate the prediction to this sample and gate it. Newer than the last taken
+        # but not than a refused sample (the prediction went on through it), the sample is
+        # judged as new all the same, the prediction taken back to its stamp (dt < 0; the
+        # trapezoid and its error bound hold either way): a reviewer's forger, its refused
+        # samples each stamped just ahead of the vehicle's next, had had every one of the
+        # vehicle's dropped as "behind", no position taken, and so the clock retaken.
         dt = sample.boot_s - track.pred_boot_s
         bound = self.accel_bound_m_s2
         dv = math.hypot(sample.vn_m_s - track.pred_vn_m_s, sample.ve_m_s - track.pred_ve_m_s)
-        velocity_ok = dv <= bound * dt + _GATE_VELOCITY_M_S
+        velocity_ok = dv <= bound * abs(dt) + _GATE_VELOCITY_M_S
         vn = sample.vn_m_s if velocity_ok else track.pred_vn_m_s
         ve = sample.ve_m_s if velocity_ok else track.pred_ve_m_s
         track.pred_north_m += 0.5 * (track.pred_vn_m_s + vn) * dt
@@ -674,7 +684,7 @@ class TelemetryState:
         if not velocity_ok and not stepped:
             return self._refuse(
                 Hold.GATE,
-                f"{kind} velocity changed by {dv:.2f} m/s in {dt:.3f} s (bound "
+                f"{kind} velocity changed by {dv:.2f} m/s in {abs(dt):.3f} s (bound "
                 f"{bound:g} m/s2): refused",
             )
         if (off > within or not on_oldest) and not stepped:
@@ -698,7 +708,7 @@ class TelemetryState:
                 "old: taken",
             )
         # Accepted: pull the prediction towards it, keep the course rate.
-        gain = min(1.0, dt / _GATE_TAU_S)
+        gain = min(1.0, (sample.boot_s - last.boot_s) / _GATE_TAU_S)
         track.pred_north_m += gain * (sample.north_m - track.pred_north_m)
         track.pred_east_m += gain * (sample.east_m - track.pred_east_m)
         track.spread_m = 0.0

@@ -47,14 +47,15 @@ def attitude(time_s: float) -> Frame:
 
 
 @contextmanager
-def session_and_vehicle(telemetry_rate_hz: float = 50.0
+def session_and_vehicle(telemetry_rate_hz: float = 50.0, **overrides: object
                         ) -> Iterator[tuple[VehicleSession, Link]]:  # fmt: skip
     scenario = load_scenario(CONFIG)
     with open_link("udpin:127.0.0.1:0", system_id=1, component_id=1) as vehicle:
         host, port = vehicle.local_address or ("", 0)
         settings = companion_settings(scenario, connect=f"udpout:{host}:{port}", engage=True,
                                       telemetry_rate_hz=telemetry_rate_hz,
-                                      stale_after_s=max(0.25, 2.0 / telemetry_rate_hz))  # fmt: skip
+                                      stale_after_s=max(0.25, 2.0 / telemetry_rate_hz),
+                                      **overrides)  # fmt: skip
         with open_link(settings.connect, system_id=245, component_id=191) as link:
             yield VehicleSession(scenario, settings, EventLog(), link, link.send), vehicle
 

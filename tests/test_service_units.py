@@ -279,6 +279,14 @@ def test_settings_errors_name_the_field() -> None:
         companion_settings(scenario, connect="serial:/dev/ttyS0")
     with pytest.raises(ConfigError, match=r"^companion\.stale_after_s"):
         companion_settings(scenario, stale_after_s=0.01)
+    # a gate wide enough to be off: 1e9 let any jump through
+    with pytest.raises(ConfigError,
+                       match=r"^companion\.gate_position_m: must be at most 25 \(got 1000000000"):
+        companion_settings(scenario, gate_position_m=1e9)
+    with pytest.raises(ConfigError,
+                       match=r"^companion\.gate_accel_m_s2: must be at most 50 \(got 100"):
+        companion_settings(scenario, gate_accel_m_s2=100.0)
+    assert companion_settings(scenario, gate_position_m=25.0).gate_position_m == 25.0
 
 
 def test_a_scenario_update_is_checked_and_keeps_the_turn() -> None:

@@ -41,6 +41,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
+from ezcompanion.guidance.scaling import accel_from_bank
 from ezcompanion.wire import Message, is_fixed_wing, mavlink
 
 __all__ = ["AutopilotProfile", "autopilot_profile"]
@@ -74,6 +75,12 @@ class AutopilotProfile:
     # degrees); pi / 2: none
     roll_limit_rad: float = 0.5 * math.pi
     roll_limit_parameter: str | None = None
+    # the most horizontal acceleration the vehicle flies under its autopilot's defaults
+    # (a copter's thrust at its tilt limit, a plane's turn at its roll limit): g tan(limit).
+    # The telemetry's estimate gate takes at least this as its bound (a vehicle seen to
+    # accelerate harder than the bound is refused): ArduCopter SITL braked at 2.5 to 2.8 m/s^2
+    # (WPNAV_ACCEL) and rode turbulence at 4.1, where the paper's scale gave a bound of 2
+    manoeuvre_accel_m_s2: float
 
     @property
     def steering_parameter_names(self) -> tuple[str, ...]:
@@ -124,16 +131,18 @@ ARDUCOPTER = AutopilotProfile(
     name="ArduCopter", response_lag_s=0.6, abandon_turn_s=0.0, abandon_hold_s=3.0,
     abandon_brake_m_s2=2.5, timeout_parameter="GUID_TIMEOUT", brake_delay_s=0.6,
     shaping_parameters=("WPNAV_ACCEL", "PSC_JERK_XY"), tracking_lag_s=0.1,
+    manoeuvre_accel_m_s2=accel_from_bank(30.0),  # ANGLE_MAX 3000 cdeg
 )  # fmt: skip
 PX4_COPTER = AutopilotProfile(
     name="PX4", response_lag_s=0.3, setpoint_lead_s=1.2, abandon_turn_s=0.0, abandon_hold_s=1.15,
     abandon_brake_m_s2=3.0, timeout_parameter="COM_OF_LOSS_T", timeout_overshoot_s=0.15,
+    manoeuvre_accel_m_s2=accel_from_bank(45.0),  # MPC_TILTMAX_AIR 45 degrees
 )  # fmt: skip
 ARDUPLANE = AutopilotProfile(
     name="ArduPlane", response_lag_s=1.0, turn_ratio=0.73, abandon_turn_s=6.0, abandon_hold_s=4.0,
     abandon_brake_m_s2=0.0, heading_roll_gain=GUIDED_P_DEFAULT_RAD_PER_RAD,
     heading_gain_parameter="GUIDED_P", roll_limit_rad=math.radians(45.0),
-    roll_limit_parameter="ROLL_LIMIT_DEG",
+    roll_limit_parameter="ROLL_LIMIT_DEG", manoeuvre_accel_m_s2=accel_from_bank(45.0),
 )  # fmt: skip
 
 

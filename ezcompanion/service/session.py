@@ -331,6 +331,9 @@ class VehicleSession(StreamRequests):
             # its global positions are compared with its local ones as it maps them
             self.telemetry.projection = Projection.of_autopilot(int(msg.autopilot))
             profile = autopilot_profile(msg)
+            if not self.settings.gate_accel_m_s2:  # at least what its autopilot flies
+                self.telemetry.accel_bound_m_s2 = max(self.telemetry.accel_bound_m_s2,
+                                                      profile.manoeuvre_accel_m_s2)  # fmt: skip
             names = (profile.parameter_names if self.settings.abandon_check
                      else profile.steering_parameter_names)  # fmt: skip
             if names:

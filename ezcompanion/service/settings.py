@@ -20,8 +20,9 @@ Layout (every key optional)::
       accept_soft_heading_loop: false  # fly a plane whose GUIDED_P cannot fly the law's
                                      # hardest turn (a warning, not a refusal: the safety
                                      # argument then does not hold)
-      gate_position_m: 0.5           # estimate gate: position innovation allowed
-      gate_accel_m_s2: 0.0           # the gate's acceleration bound; 0 = 2 x accel_max
+      gate_position_m: 0.5           # estimate gate: position innovation allowed (<= 25)
+      gate_accel_m_s2: 0.0           # the gate's acceleration bound (<= 50); 0 = 2 x
+                                     # accel_max, at least what the autopilot flies
       distrust_give_up_s: 3.0        # untrusted input this long without a break ends guidance
       signing_key_hex: null          # 64 hex digits: sign, refuse unsigned input
       signing_key_file: null         # or a file holding the 64 hex digits (mode 600)
@@ -62,6 +63,9 @@ __all__ = [
 ]
 
 _ON_EXIT = "hold, loiter, rtl, none or default"
+# the estimate gate's widest settings (see CompanionSettings.__post_init__)
+_GATE_POSITION_MAX_M = 25.0
+_GATE_ACCEL_MAX_M_S2 = 50.0
 
 #: Environment variables a signing key may come from (hex key, passphrase).
 SIGNING_ENV = ("EZCOMPANION_SIGNING_KEY", "EZCOMPANION_SIGNING_PASSPHRASE")
@@ -145,6 +149,14 @@ class CompanionSettings:
             or not (math.isfinite(value) and value >= 0.0)
         ):
             raise ConfigError("gate_accel_m_s2", value, "must be a finite number >= 0")
+        # Wider than these, the gate is off in all but name (1e9 let any jump through): a
+        # position gate wider than the 25 m at which ArduPilot's EKF3 itself gives up on
+        # its estimate and resets onto the GPS (EK3_GLITCH_RAD's default), an acceleration
+        # bound above 5 g, which no multirotor or small plane reaches.
+        for name, most in (("gate_position_m", _GATE_POSITION_MAX_M),
+                           ("gate_accel_m_s2", _GATE_ACCEL_MAX_M_S2)):  # fmt: skip
+            if getattr(self, name) > most:
+                raise ConfigError(name, getattr(self, name), f"must be at most {most:g}")
         if not 1.0 <= self.loop_rate_hz <= 1000.0:
             raise ConfigError("loop_rate_hz", self.loop_rate_hz, "must be within [1, 1000]")
         if self.stale_after_s < 2.0 / self.telemetry_rate_hz:

@@ -318,7 +318,9 @@ class TelemetryState:
     """Accumulates telemetry; :meth:`update` takes each message, :meth:`snapshot` reads.
 
     ``origin`` is the geodetic position of the scenario's local NED origin;
-    ``accel_bound_m_s2`` the most the vehicle can accelerate (the gate's bound);
+    ``accel_bound_m_s2`` the most the vehicle can accelerate (the gate's bound; a vehicle
+    that accelerates harder is refused, its second source for good where the prediction
+    runs away from it, so it must be at least what the airframe can fly);
     ``projection`` how the vehicle's autopilot maps its global positions to its local frame,
     which global positions are mapped by to be compared with local ones (set when the
     vehicle is found: ``ezcompanion.wire.projection``).
@@ -655,6 +657,11 @@ class TelemetryState:
         dt = sample.boot_s - track.pred_boot_s
         bound = self.accel_bound_m_s2
         dv = math.hypot(sample.vn_m_s - track.pred_vn_m_s, sample.ve_m_s - track.pred_ve_m_s)
+        # (beyond the bound the prediction runs on at its own velocity: so a vehicle that
+        # does accelerate harder than the bound is refused, and the bound must be at least
+        # what it can fly, TelemetryState.accel_bound_m_s2. Following such samples'
+        # velocities at the bound's rate was tried: a forger's, refused, then turned the
+        # prediction and had the vehicle's own refused)
         velocity_ok = dv <= bound * abs(dt) + _GATE_VELOCITY_M_S
         vn = sample.vn_m_s if velocity_ok else track.pred_vn_m_s
         ve = sample.ve_m_s if velocity_ok else track.pred_ve_m_s

@@ -31,8 +31,8 @@ def test_the_service_reads_the_vehicles_timeout_and_checks_every_setpoint_agains
     config = scenario_file(tmp_path, 2, sitl_stub={"setpoint_timeout_s": 1.25})
     flight = fly(config, tmp_path, abandon_check=True, max_time_s=40.0, lockstep=True)
     read = flight.events.of_kind(EventKind.PARAMETER)
-    assert sorted((e.data["name"], e.data["value"]) for e in read) == [
-        ("GUID_TIMEOUT", 1.25), ("PSC_JERK_XY", 5.0), ("WPNAV_ACCEL", 250.0)]
+    assert sorted((e.data["name"], e.data["value"]) for e in read) == [("ANGLE_MAX", 3000.0),
+        ("GUID_TIMEOUT", 1.25), ("PSC_JERK_XY", 5.0), ("WPNAV_ACCEL", 250.0)]  # fmt: skip
     abandon = flight.events.of_kind(EventKind.ABANDON)
     assert "GUID_TIMEOUT, WPNAV_ACCEL, PSC_JERK_XY as read" in abandon[0].message
     # the timeout, then the braking as late as the shaping starts it (2.5 / 5 + 0.1 s)
@@ -77,10 +77,12 @@ def test_the_abandon_path_from_the_vehicles_parameters_covers_where_the_copter_s
     assert flown >= 0.9 * (straight + stop)  # and not much more than needed
 
 
-def test_without_the_check_nothing_is_asked(tmp_path: Path) -> None:
+def test_without_the_check_only_the_tilt_limit_is_asked(tmp_path: Path) -> None:
     config = scenario_file(tmp_path, 1)
     flight = fly(config, tmp_path, max_time_s=40.0, lockstep=True)
-    assert not flight.events.of_kind(EventKind.PARAMETER)
+    # (the estimate gate's bound; the abandon path's parameters are not asked for)
+    assert [e.message for e in flight.events.of_kind(EventKind.PARAMETER)] == [
+        "ANGLE_MAX = 3000"]
     abandon = flight.events.of_kind(EventKind.ABANDON)
     assert len(abandon) == 1 and "abandon check off" in abandon[0].message
 

@@ -30,20 +30,24 @@ _MAV = forger()
 _READER = forger(245, 191)
 
 
+def vehicle_frame(msg: object) -> Frame:
+    """``msg`` as the service reads it from the vehicle's address."""
+    (decoded,) = _READER.parse_buffer(frame(_MAV, msg))
+    return Frame(decoded, VEHICLE)
+
+
 def heartbeat(armed: bool, mode: int = 4) -> Frame:
     base = M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (M.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
     msg = M.MAVLink_heartbeat_message(
         M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA, base, mode, M.MAV_STATE_ACTIVE, 3
     )
-    (decoded,) = _READER.parse_buffer(frame(_MAV, msg))
-    return Frame(decoded, VEHICLE)
+    return vehicle_frame(msg)
 
 
 def attitude(time_s: float) -> Frame:
     """A telemetry frame from the vehicle (its streams run between its heartbeats)."""
     msg = M.MAVLink_attitude_message(int(time_s * 1000), 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
-    (decoded,) = _READER.parse_buffer(frame(_MAV, msg))
-    return Frame(decoded, VEHICLE)
+    return vehicle_frame(msg)
 
 
 @contextmanager

@@ -12,15 +12,15 @@ from typing import Any
 
 import numpy as np
 import pytest
+from conftest_sitl import M
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from test_disarm import heartbeat, session_and_vehicle
+from test_disarm import heartbeat, session_and_vehicle, vehicle_frame
 from test_service_loopback import CONFIG, fly, scenario_file
 from test_service_units import known_origin, local
 from test_trust_link import LIGHT
 
 from ezcompanion.config import load_scenario
-from ezcompanion.guidance.scaling import accel_from_bank
 from ezcompanion.records import Hold
 from ezcompanion.service.demo import judge_truth
 from ezcompanion.service.events import EventKind
@@ -255,18 +255,25 @@ def test_the_clock_is_not_retaken_while_the_vehicles_samples_are_refused_otherwi
         assert t.take_refusal() is not None
 
 
-@pytest.mark.parametrize(("given_m_s2", "bound_m_s2"), [(0.0, accel_from_bank(30.0)), (3.0, 3.0)])
+@pytest.mark.parametrize(("given_m_s2", "bound_m_s2", "told_m_s2"), [
+    (0.0, 9.80665 * math.tan(math.radians(30.0)), 9.80665),  # ANGLE_MAX 30, then 45 degrees
+    (3.0, 3.0, 3.0),  # the user's
+])
 def test_the_gates_bound_is_at_least_what_the_autopilot_flies(
-    given_m_s2: float, bound_m_s2: float
+    given_m_s2: float, bound_m_s2: float, told_m_s2: float
 ) -> None:
     """At the paper's scale (accel_max 1) the bound was 2 m/s^2, and ArduCopter 4.5.1 SITL,
     braking from 5 m/s at its WPNAV_ACCEL, was seen at 2.5 to 2.8 m/s^2 (in turbulence,
-    4.1): its own telemetry refused. The bound is now at least what the autopilot's
-    defaults fly (a copter's thrust at ANGLE_MAX, 30 degrees), unless the user set one."""
+    4.1): its own telemetry refused. The bound is now at least what its autopilot flies
+    (a copter's thrust at ANGLE_MAX: 30 degrees by default, then what the vehicle says),
+    unless the user set one."""
     with session_and_vehicle(gate_accel_m_s2=given_m_s2) as (session, _):
         assert session.telemetry.accel_bound_m_s2 == (given_m_s2 or 2.0)  # 2 x accel_max
         session.on_frame(heartbeat(armed=True), 0.0)  # ArduCopter's
         assert session.telemetry.accel_bound_m_s2 == pytest.approx(bound_m_s2)
+        told = M.MAVLink_param_value_message(b"ANGLE_MAX", 4500.0, M.MAV_PARAM_TYPE_REAL32, 1, 0)
+        session.on_frame(vehicle_frame(told), 0.5)
+        assert session.telemetry.accel_bound_m_s2 == pytest.approx(told_m_s2)
 
 
 @pytest.mark.parametrize("brake_m_s2", [2.6, 2.8])

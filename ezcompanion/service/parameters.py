@@ -34,6 +34,10 @@ PARAMETER_RANGES = {
     # ArduPlane: the roll limit (degrees; 45 by default, 65 in SITL's models/plane.parm),
     # which clips that loop's roll: its docs give 0 to 90, of which 0 would be no roll at all
     "ROLL_LIMIT_DEG": (1.0, 90.0),
+    # the tilt limits, which bound what the vehicle can accelerate (the telemetry's estimate
+    # gate): ArduCopter's lean angle (cdeg; 3000 by default) and PX4's (degrees; 45)
+    "ANGLE_MAX": (1000.0, 8000.0),
+    "MPC_TILTMAX_AIR": (20.0, 89.0),
 }
 _RETRY_S = 0.5
 _TRIES = 6

@@ -694,12 +694,18 @@ class TelemetryState:
                 f"{kind} velocity changed by {dv:.2f} m/s in {abs(dt):.3f} s (bound "
                 f"{bound:g} m/s2): refused",
             )
-        if (off > within or not on_oldest) and not stepped:
+        if off > within and not stepped:
             return self._refuse(
                 Hold.GATE,
-                f"{kind} position off the path of the samples before it ({off:.3f} m from "
-                f"the last's, at most {within:.3f} m in {sample.boot_s - last.boot_s:.3f} s; "
-                f"on the path {_REPEATS_KEPT} back: {on_oldest}): refused",
+                f"{kind} position off the path of the sample before it ({off:.3f} m from "
+                f"it, at most {within:.3f} m in {sample.boot_s - last.boot_s:.3f} s): refused",
+            )
+        if not on_oldest and not stepped:  # (a reviewer: the message had named the last)
+            return self._refuse(
+                Hold.GATE,
+                f"{kind} position or velocity off the path of the sample taken "
+                f"{sample.boot_s - oldest.boot_s:.3f} s before it (a velocity changed faster "
+                f"than the bound over {len(track.taken)} samples): refused",
             )
         if stepped:  # the prediction follows the estimate's new velocity
             track.pred_vn_m_s, track.pred_ve_m_s = sample.vn_m_s, sample.ve_m_s

@@ -81,6 +81,17 @@ class Endpoint:
     baud: int = 0
 
     @property
+    def on_a_network(self) -> bool:
+        """Reachable from other machines: a network endpoint not on the loopback (a serial
+        port and 127.0.0.1 are not; a DNS name other than localhost is taken to be)."""
+        if self.kind is EndpointKind.SERIAL or self.host == "localhost":
+            return False
+        try:
+            return not ipaddress.ip_address(self.host).is_loopback
+        except ValueError:
+            return True
+
+    @property
     def pymavlink(self) -> str:
         """The connection string for ``pymavlink.mavutil.mavlink_connection``."""
         if self.kind is EndpointKind.SERIAL:

@@ -142,3 +142,15 @@ def test_the_stubs_connect_setting_takes_either_spelling() -> None:
     assert StubSettings(connect="udpout://127.0.0.1:14550").connect == "udpout:127.0.0.1:14550"
     with pytest.raises(ConfigError, match=r"^connect: udpout needs a host"):
         StubSettings(connect="udpout://:14550")
+
+
+@pytest.mark.parametrize(("text", "network"), [
+    ("udpin:0.0.0.0:14550", True),  # every interface: the service warns if unsigned
+    ("udpout:192.168.1.20:14550", True),
+    ("tcp:vehicle.local:5760", True),
+    ("udpin:127.0.0.1:14550", False),
+    ("tcp://localhost:5760", False),
+    ("/dev/ttyACM0,57600", False),
+])
+def test_an_endpoint_knows_whether_other_machines_reach_it(text: str, network: bool) -> None:
+    assert parse_endpoint(text).on_a_network is network

@@ -15,7 +15,7 @@ from ezcompanion.service.inbox import ScenarioInbox
 from ezcompanion.service.loop import GuidanceLoop, Hold, TickCommand
 from ezcompanion.service.runner import _Here
 from ezcompanion.service.setpoints import make_setpoints
-from ezcompanion.service.settings import SetpointKind, companion_settings
+from ezcompanion.service.settings import SetpointKind, companion_settings, unsigned_warning
 from ezcompanion.service.state import TelemetryState
 from ezcompanion.wire import deg_to_e7, m_to_mm, mavlink, ned_to_geodetic, open_link
 
@@ -287,6 +287,14 @@ def test_settings_errors_name_the_field() -> None:
                        match=r"^companion\.gate_accel_m_s2: must be at most 50 \(got 100"):
         companion_settings(scenario, gate_accel_m_s2=100.0)
     assert companion_settings(scenario, gate_position_m=25.0).gate_position_m == 25.0
+
+
+def test_an_unsigned_link_other_machines_reach_is_said_to_be_so() -> None:
+    scenario = load_scenario(CONFIG)
+    said = unsigned_warning(companion_settings(scenario, connect="udpin:0.0.0.0:14550"))
+    assert said is not None and said.startswith("MAVLink unsigned on udpin:0.0.0.0:14550")
+    assert unsigned_warning(companion_settings(scenario, connect="udpin:127.0.0.1:14550")) is None
+    assert unsigned_warning(companion_settings(scenario, connect="/dev/ttyACM0,57600")) is None
 
 
 def test_a_scenario_update_is_checked_and_keeps_the_turn() -> None:

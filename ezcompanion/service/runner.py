@@ -71,7 +71,12 @@ from ezcompanion.service.setpoints import (
     guided_p_needed,
     make_setpoints,
 )
-from ezcompanion.service.settings import CompanionSettings, SetpointKind, signing_key
+from ezcompanion.service.settings import (
+    CompanionSettings,
+    SetpointKind,
+    signing_key,
+    unsigned_warning,
+)
 from ezcompanion.service.state import TelemetryState
 from ezcompanion.service.ticks import EPSILON_S, TickSchedule
 from ezcompanion.service.tlog import TlogWriter
@@ -334,6 +339,8 @@ class CompanionService:
             key = signing_key(s)
             if key is not None:
                 link.enable_signing(key)
+            elif (unsigned := unsigned_warning(s)) is not None:
+                self.events.emit(EventKind.WARNING, self.clock.now_s(), unsigned)
             if self._zenoh_settings is not None and self._zenoh_settings.enabled:
                 from ezcompanion.telemetry import TelemetryPublisher
 

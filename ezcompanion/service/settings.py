@@ -45,6 +45,7 @@ from pathlib import Path
 from typing import Any
 
 from ezcompanion.config import Scenario, build_dataclass, enum_member
+from ezcompanion.endpoint import parse_endpoint
 from ezcompanion.errors import ConfigError
 from ezcompanion.wire import (
     URL_SCHEMES,
@@ -60,6 +61,7 @@ __all__ = [
     "SetpointKind",
     "companion_settings",
     "signing_key",
+    "unsigned_warning",
 ]
 
 _ON_EXIT = "hold, loiter, rtl, none or default"
@@ -225,6 +227,18 @@ def signing_key(
     if env.get(passphrase_env):
         return signing_key_from_passphrase(env[passphrase_env])
     return None
+
+
+def unsigned_warning(settings: CompanionSettings) -> str | None:
+    """What to say of a link left unsigned where other machines reach it (None on the
+    loopback or a serial port): MAVLink 1 and unsigned MAVLink 2 frames carry no proof of
+    who sent them."""
+    if not parse_endpoint(settings.connect).on_a_network:
+        return None
+    return (f"MAVLink unsigned on {settings.connect}: whoever can send from the vehicle's "
+            "address can move its position as the service reads it by the estimate gate's "
+            "tolerances (5 cm, 0.05 m/s) and end guidance; set a signing key "
+            "(companion.signing_key_file; docs/service.md, the trust table)")
 
 
 def companion_settings(scenario: Scenario, **overrides: Any) -> CompanionSettings:

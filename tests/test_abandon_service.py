@@ -124,6 +124,14 @@ def test_the_reader_asks_over_the_wire_and_takes_only_a_valid_answer() -> None:
         assert len(reader.refused) == 4 and "GUID_TIMEOUT" not in reader.values
         assert reader.take(_value("GUID_TIMEOUT", 2.0)) == "GUID_TIMEOUT"
         assert reader.values == {"GUID_TIMEOUT": 2.0} and reader.settled
+        # the first answer stands: a reviewer's forged second one (ANGLE_MAX 8000, in
+        # range, mid-engagement) had widened the estimate gate's bound tenfold
+        assert reader.take(_value("GUID_TIMEOUT", 2.0)) is None  # the same again: nothing
+        assert len(reader.refused) == 4
+        assert reader.take(_value("GUID_TIMEOUT", 4.5)) is None
+        assert reader.values == {"GUID_TIMEOUT": 2.0}
+        assert reader.refused[-1] == (
+            "GUID_TIMEOUT = 4.5 after 2.0: a second answer, the first stands")
     finally:
         peer.close()
 

@@ -240,6 +240,37 @@ def test_a_forger_cannot_silence_the_vehicle_to_take_the_clock(
         assert state is not None and (state.north_m, state.east_m) == (north, 0.0)
 
 
+@pytest.mark.parametrize(("period_ms", "gap_ms"), [(20, 280), (200, 300)])
+def test_after_a_forger_takes_the_clock_in_a_gap_every_one_of_the_vehicles_is_named(
+    period_ms: int, gap_ms: int
+) -> None:
+    """A reviewer's forger, watching the stream, waited for a gap in the vehicle's samples
+    longer than the 0.25 s the clock's retake asks for (14 lost at 50 Hz; one at 5 Hz),
+    then sent a stream stamped 3 s ahead, drifting north at 2 m/s: the clock was retaken
+    from it and its samples taken, and every one of the vehicle's, 3 s behind, was "on
+    the path" of a forged one (the path's allowance grows with the 3 s) and dropped
+    without a word: the picture 14 m off, nothing named after the retake. A sample
+    farther than 0.5 s from every taken one is no reordering: each of the vehicle's is
+    named, so guidance is held from the retake on (and ends after distrust_give_up_s)."""
+    t = known_origin(accel_bound_m_s2=9.80665 * math.tan(math.radians(30.0)))  # ArduCopter
+    speed, gap_from_ms, forged_from_ms = 5.0, 4000, 4010
+    frames = [(boot / 1000 + 0.005, False, boot)
+              for boot in range(1000, 11000, period_ms)
+              if not gap_from_ms < boot < gap_from_ms + gap_ms]  # fmt: skip
+    frames += [(boot / 1000 + 0.0051, True, boot + 3000)
+               for boot in range(forged_from_ms, 11000, 20)]  # fmt: skip
+    silent, own = 0, 0
+    for now, forged, boot in sorted(frames):
+        north = 2.0 * max(0.0, now - forged_from_ms / 1000) if forged else 0.0
+        east = speed * (boot - 1000) / 1000
+        used = t.update(local(boot, north, east, 2.0 if forged else 0.0, speed), now)
+        refusal = t.take_refusal()
+        if not forged and now > forged_from_ms / 1000 + 0.5:  # (the retake at 0.28 s)
+            own += 1
+            silent += used is None and refusal is None
+    assert own > 20 and silent == 0
+
+
 def test_the_clock_is_not_retaken_while_the_vehicles_samples_are_refused_otherwise() -> None:
     """The vehicle's own samples refused by the gate (here: its estimate 2 m off) are no
     samples ahead: they break the run that may retake the clock, so a forger's stream
@@ -274,6 +305,21 @@ def test_the_gates_bound_is_at_least_what_the_autopilot_flies(
         told = M.MAVLink_param_value_message(b"ANGLE_MAX", 4500.0, M.MAV_PARAM_TYPE_REAL32, 1, 0)
         session.on_frame(vehicle_frame(told), 0.5)
         assert session.telemetry.accel_bound_m_s2 == pytest.approx(told_m_s2)
+
+
+def test_a_planes_bound_from_its_roll_limit_is_no_more_than_a_user_may_set() -> None:
+    """ArduPlane's bound is 1.5 g tan(ROLL_LIMIT_DEG) (its turns measured up to 1.46 times
+    g tan(bank)): 14.7 m/s^2 at 45 degrees; at 80 it would be 83, where a user may set
+    gate_accel_m_s2 to 50 at most (a reviewer's forged ROLL_LIMIT_DEG 90): 50."""
+    plane = M.MAVLink_heartbeat_message(M.MAV_TYPE_FIXED_WING, M.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                                        M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 15,
+                                        M.MAV_STATE_ACTIVE, 3)  # fmt: skip
+    told = M.MAVLink_param_value_message(b"ROLL_LIMIT_DEG", 80.0, M.MAV_PARAM_TYPE_REAL32, 1, 0)
+    with session_and_vehicle() as (session, _):
+        session.on_frame(vehicle_frame(plane), 0.0)
+        assert session.telemetry.accel_bound_m_s2 == pytest.approx(1.5 * 9.80665)
+        session.on_frame(vehicle_frame(told), 0.5)
+        assert session.telemetry.accel_bound_m_s2 == 50.0
 
 
 @pytest.mark.parametrize("brake_m_s2", [2.6, 2.8])

@@ -8,7 +8,9 @@ abandon"), so the service asks the vehicle for the value rather than trusting a 
 that a user may have changed: PARAM_REQUEST_READ by name, a few times, at discovery.
 
 A reply counts only from the locked vehicle (the session filters by id and address), with
-the name asked for, a finite value within the parameter's documented range. Until one
+the name asked for, a finite value within the parameter's documented range, and only the
+first: a later, different value is refused and said (a parameter a ground station changes
+in flight is read again by the next run of the companion, not in the middle of one). Until one
 arrives, or if none does, the profile's default stands (see
 :mod:`ezcompanion.service.autopilots`).
 """
@@ -96,6 +98,12 @@ class ParameterReader:
         if name not in self._wanted:
             return None
         value = float(msg.param_value)
+        if name in self.values:  # the first answer stands: a second one, different, is
+            if value != self.values[name]:  # refused (a reviewer's forged ANGLE_MAX 8000,
+                self.refused.append(  # mid-engagement, had widened the gate's bound 10x)
+                    f"{name} = {value!r} after {self.values[name]!r}: a second answer, "
+                    "the first stands")
+            return None
         low, high = PARAMETER_RANGES[name]
         if not (math.isfinite(value) and low <= value <= high):
             self.refused.append(f"{name} = {value!r} is outside [{low:g}, {high:g}]")

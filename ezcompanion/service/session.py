@@ -58,7 +58,7 @@ from ezcompanion.records import EventKind, Hold
 from ezcompanion.service.autopilots import AutopilotProfile, autopilot_profile
 from ezcompanion.service.events import EventLog
 from ezcompanion.service.parameters import ParameterReader
-from ezcompanion.service.settings import CompanionSettings, SetpointKind
+from ezcompanion.service.settings import GATE_ACCEL_MAX_M_S2, CompanionSettings, SetpointKind
 from ezcompanion.service.state import TelemetryState
 from ezcompanion.service.statustext import StatusTextAssembler
 from ezcompanion.service.streams import POSITIONS, StreamRequests
@@ -268,9 +268,9 @@ class VehicleSession(StreamRequests):
     def _bound_the_gate(self, profile: AutopilotProfile) -> None:
         """The estimate gate's acceleration bound: the user's, else twice the scenario's
         accel_max and at least what the vehicle's autopilot flies (its tilt limit)."""
-        if not self.settings.gate_accel_m_s2:
-            self.telemetry.accel_bound_m_s2 = max(self._gate_accel_least_m_s2,
-                                                  profile.manoeuvre_accel_m_s2)  # fmt: skip
+        if not self.settings.gate_accel_m_s2:  # (and no more than a user may set)
+            self.telemetry.accel_bound_m_s2 = min(GATE_ACCEL_MAX_M_S2, max(
+                self._gate_accel_least_m_s2, profile.manoeuvre_accel_m_s2))  # fmt: skip
 
     @property
     def profile(self) -> AutopilotProfile | None:

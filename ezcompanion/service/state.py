@@ -49,7 +49,8 @@ Refused, and counted (a refused sample changes nothing):
 
 - a field non-finite or out of range;
 - a sample not newer than the last taken of its kind: a repeat of one of the last taken,
-  or one on the path of the taken sample nearest its stamp (reordering), silently; off that path,
+  or one on the path of the taken sample nearest its stamp and within ``_REORDER_S`` of it
+  (reordering), silently; off that path or farther,
   as a second source of positions (``Hold.GATE``); a time stamp going back by more than
   ``_REBOOT_BACKSTEP_S`` raises ``Hold.GATE``;
 - a frozen estimate (the same position and velocity again, to ``_FROZEN_M``, while the
@@ -173,6 +174,9 @@ _CONFIRM_S = 0.25
 # offset afresh (it came from a sample that waited)
 _REBASE_SAMPLES = 5
 _REBASE_S = 0.25
+# a sample stamped behind the newest taken is reordering (silent) only within this of a
+# taken one: networks reorder by milliseconds, a second route lags by a fraction of a second
+_REORDER_S = 0.5
 # taken samples remembered: a repeat of one arriving late is known as a repeat, a sample
 # behind the newest is judged against the nearest of them, and a new one against the
 # oldest too
@@ -742,9 +746,15 @@ class TelemetryState:
         estimate's step is then no step); off it, it is a second source of positions: the
         vehicle's own samples behind a forger's that runs ahead of them (a reviewer's at
         200 Hz, 6 ms ahead, the vehicle's 50 Hz a quarter of those taken, had steered the
-        track 15 m without a word): refused, named."""
+        track 15 m without a word): refused, named. So is one farther than ``_REORDER_S``
+        from every taken sample, on a path or not (the path's allowance grows with the
+        time between: a reviewer's forger retook the clock in a gap of the vehicle's
+        samples, and every one of the vehicle's, 3 s behind its stream, was then "on the
+        path" of a forged one and dropped without a word)."""
         nearest = min(track.taken, key=lambda p: abs(p.boot_s - sample.boot_s))
-        if _on_path(nearest, sample, self.accel_bound_m_s2):
+        if abs(nearest.boot_s - sample.boot_s) <= _REORDER_S and _on_path(
+            nearest, sample, self.accel_bound_m_s2
+        ):
             track.step_run.clear()
             return False  # reordering
         return self._refuse(

@@ -19,9 +19,6 @@ from sitl_stub.vehicle import FollowCourse, VehicleState
 __all__ = ["CommandHandlers"]
 
 _R = mav
-# the tilt limits the autopilots answer with by default (ArduCopter 4.5.1, PX4 v1.16)
-_COPTER_ANGLE_MAX_CDEG = 3000.0
-_PX4_TILT_DEG = 45.0
 
 
 class CommandHandlers:
@@ -204,19 +201,17 @@ class CommandHandlers:
         """The parameters the stub answers for: its setpoint timeout, under the imitated
         autopilot's name (ArduCopter GUID_TIMEOUT, PX4 COM_OF_LOSS_T), and ArduCopter's
         velocity shaping (WPNAV_ACCEL in cm/s/s, PSC_JERK_XY in m/s/s/s) where it is
-        modelled; the tilt limit, the autopilot's default (ArduCopter ANGLE_MAX in cdeg, PX4
-        MPC_TILTMAX_AIR in degrees: the stub flies within them, never near them);
-        ArduPlane's heading loop gain (GUIDED_P, cd/rad) and roll limit (ROLL_LIMIT_DEG)
-        where it is (its course command has no timeout)."""
+        modelled; ArduPlane's heading loop gain (GUIDED_P, cd/rad) and roll limit
+        (ROLL_LIMIT_DEG) where it is (its course command has no timeout)."""
         timeout = self.config.timeout_s("setpoint")
         if self.spec.profile is Profile.PX4:
-            return {"COM_OF_LOSS_T": timeout, "MPC_TILTMAX_AIR": _PX4_TILT_DEG}
+            return {"COM_OF_LOSS_T": timeout}
         if self.spec.profile is Profile.COPTER:
             shaping = self.config.velocity_shaping()
             if shaping is None:
-                return {"GUID_TIMEOUT": timeout, "ANGLE_MAX": _COPTER_ANGLE_MAX_CDEG}
+                return {"GUID_TIMEOUT": timeout}
             return {"GUID_TIMEOUT": timeout, "WPNAV_ACCEL": 100.0 * shaping.accel_max_m_s2,
-                    "PSC_JERK_XY": shaping.jerk_max_m_s3, "ANGLE_MAX": _COPTER_ANGLE_MAX_CDEG}
+                    "PSC_JERK_XY": shaping.jerk_max_m_s3}
         gain = self.config.heading_roll_gain
         if gain is None:
             return {}

@@ -31,8 +31,8 @@ def test_the_service_reads_the_vehicles_timeout_and_checks_every_setpoint_agains
     config = scenario_file(tmp_path, 2, sitl_stub={"setpoint_timeout_s": 1.25})
     flight = fly(config, tmp_path, abandon_check=True, max_time_s=40.0, lockstep=True)
     read = flight.events.of_kind(EventKind.PARAMETER)
-    assert sorted((e.data["name"], e.data["value"]) for e in read) == [("ANGLE_MAX", 3000.0),
-        ("GUID_TIMEOUT", 1.25), ("PSC_JERK_XY", 5.0), ("WPNAV_ACCEL", 250.0)]  # fmt: skip
+    assert sorted((e.data["name"], e.data["value"]) for e in read) == [
+        ("GUID_TIMEOUT", 1.25), ("PSC_JERK_XY", 5.0), ("WPNAV_ACCEL", 250.0)]
     abandon = flight.events.of_kind(EventKind.ABANDON)
     assert "GUID_TIMEOUT, WPNAV_ACCEL, PSC_JERK_XY as read" in abandon[0].message
     # the timeout, then the braking as late as the shaping starts it (2.5 / 5 + 0.1 s)
@@ -77,14 +77,49 @@ def test_the_abandon_path_from_the_vehicles_parameters_covers_where_the_copter_s
     assert flown >= 0.9 * (straight + stop)  # and not much more than needed
 
 
-def test_without_the_check_only_the_tilt_limit_is_asked(tmp_path: Path) -> None:
+def test_without_the_check_nothing_is_asked(tmp_path: Path) -> None:
     config = scenario_file(tmp_path, 1)
     flight = fly(config, tmp_path, max_time_s=40.0, lockstep=True)
-    # (the estimate gate's bound; the abandon path's parameters are not asked for)
-    assert [e.message for e in flight.events.of_kind(EventKind.PARAMETER)] == [
-        "ANGLE_MAX = 3000"]
+    assert not flight.events.of_kind(EventKind.PARAMETER)
     abandon = flight.events.of_kind(EventKind.ABANDON)
     assert len(abandon) == 1 and "abandon check off" in abandon[0].message
+
+
+@pytest.mark.parametrize("first", ["vehicle", "forger"])
+def test_two_answers_to_one_parameter_are_neither_taken(first: str) -> None:
+    """A reviewer's forger answered ANGLE_MAX before the vehicle (a flood after the request
+    always does) and, under "the first answer stands", its value was the one kept and the
+    vehicle's refused. Two different answers are two sources: neither is taken, the
+    profile's default stands, and the refusal is said."""
+    reader, peer, _ = _reader_and_peer()
+    try:
+        reader.ask(("GUID_TIMEOUT",), (1, 1), 0.0)
+        reader.periodic(0.0)
+        answers = [2.0, 4.5] if first == "vehicle" else [4.5, 2.0]
+        assert reader.take(_value("GUID_TIMEOUT", answers[0]), 0.01) == "GUID_TIMEOUT"
+        assert reader.take(_value("GUID_TIMEOUT", answers[1]), 0.03) is None
+        assert reader.values == {} and reader.settled
+        assert reader.refused == [f"GUID_TIMEOUT answered {answers[0]!r} and {answers[1]!r}: "
+                                  "neither taken, the default stands"]  # fmt: skip
+        assert reader.take(_value("GUID_TIMEOUT", answers[0]), 0.04) is None  # still in doubt
+        assert reader.values == {}
+    finally:
+        peer.close()
+
+
+def test_an_answer_after_the_reader_stopped_listening_is_not_taken() -> None:
+    """The vehicle's answers lost, the tries ran out: a reviewer's forged first answer in
+    mid-flight had been taken."""
+    reader, peer, _ = _reader_and_peer()
+    try:
+        reader.ask(("GUID_TIMEOUT",), (1, 1), 0.0)
+        for k in range(7):  # six requests half a second apart, unanswered, then no more
+            reader.periodic(0.5 * k)
+        assert reader.settled and reader.values == {}
+        assert reader.take(_value("GUID_TIMEOUT", 5.0), 30.0) is None  # in mid-flight
+        assert reader.values == {}
+    finally:
+        peer.close()
 
 
 def _reader_and_peer() -> tuple[ParameterReader, socket.socket, list[bytes]]:
@@ -118,20 +153,14 @@ def test_the_reader_asks_over_the_wire_and_takes_only_a_valid_answer() -> None:
         assert request.param_id == "GUID_TIMEOUT" and request.param_index == -1
         assert (request.target_system, request.target_component) == (1, 1)
         assert not reader.settled
-        assert reader.take(_value("WPNAV_SPEED", 500.0)) is None  # not asked for
+        assert reader.take(_value("WPNAV_SPEED", 500.0), 0.1) is None  # not asked for
         for bad in (math.nan, math.inf, 0.0, 30.0):  # GUID_TIMEOUT is 0.1 to 5 s
-            assert reader.take(_value("GUID_TIMEOUT", bad)) is None
+            assert reader.take(_value("GUID_TIMEOUT", bad), 0.1) is None
         assert len(reader.refused) == 4 and "GUID_TIMEOUT" not in reader.values
-        assert reader.take(_value("GUID_TIMEOUT", 2.0)) == "GUID_TIMEOUT"
+        assert reader.take(_value("GUID_TIMEOUT", 2.0), 0.1) == "GUID_TIMEOUT"
         assert reader.values == {"GUID_TIMEOUT": 2.0} and reader.settled
-        # the first answer stands: a reviewer's forged second one (ANGLE_MAX 8000, in
-        # range, mid-engagement) had widened the estimate gate's bound tenfold
-        assert reader.take(_value("GUID_TIMEOUT", 2.0)) is None  # the same again: nothing
-        assert len(reader.refused) == 4
-        assert reader.take(_value("GUID_TIMEOUT", 4.5)) is None
-        assert reader.values == {"GUID_TIMEOUT": 2.0}
-        assert reader.refused[-1] == (
-            "GUID_TIMEOUT = 4.5 after 2.0: a second answer, the first stands")
+        assert reader.take(_value("GUID_TIMEOUT", 2.0), 0.2) is None  # the same again
+        assert reader.values == {"GUID_TIMEOUT": 2.0} and len(reader.refused) == 4
     finally:
         peer.close()
 

@@ -75,12 +75,12 @@ class AutopilotProfile:
     # degrees); pi / 2: none
     roll_limit_rad: float = 0.5 * math.pi
     roll_limit_parameter: str | None = None
-    # the tilt (a plane's bank) the autopilot flies at most (rad), and the parameter that
-    # sets it, in degrees times ``tilt_parameter_deg``: the telemetry's estimate gate takes
-    # at least what it allows as its bound (``manoeuvre_accel_m_s2``)
+    # the tilt (a plane's bank) the autopilot flies at most by default (rad): the telemetry's
+    # estimate gate takes at least what it allows as its bound (``manoeuvre_accel_m_s2``).
+    # Its default, not the vehicle's answer: a parameter's reply carries no proof of who
+    # sent it on an unsigned link, and a reviewer's forged ANGLE_MAX had widened the bound
+    # tenfold (a vehicle set to tilt further needs companion.gate_accel_m_s2)
     tilt_limit_rad: float
-    tilt_parameter: str | None = None
-    tilt_parameter_deg: float = 1.0
     # ... times this: what was measured beyond g tan(the tilt flown)
     manoeuvre_margin: float = 1.0
 
@@ -94,8 +94,7 @@ class AutopilotProfile:
         4.5.1 SITL's horizontal acceleration in GUIDED_CHANGE_HEADING turns was 1.0 to 1.46
         times g tan(the bank it flew), up to 36 m/s^2 at 68.5 degrees (ROLL_LIMIT_DEG 65)
         where the companion's own turns reached 8.2 m/s^2 (accel_max 4.5)."""
-        return self.manoeuvre_margin * GRAVITY_M_S2 * math.tan(
-            min(self.tilt_limit_rad, _TILT_MOST_RAD))
+        return self.manoeuvre_margin * GRAVITY_M_S2 * math.tan(self.tilt_limit_rad)
 
     @property
     def steering_parameter_names(self) -> tuple[str, ...]:
@@ -103,14 +102,6 @@ class AutopilotProfile:
         check is on): the heading loop's gain and roll limit."""
         return tuple(n for n in (self.heading_gain_parameter, self.roll_limit_parameter)
                      if n is not None)
-
-    def asked_parameter_names(self, *, abandon_check: bool) -> tuple[str, ...]:
-        """What the service asks the vehicle for at discovery: the steering parameters and
-        the tilt limit (the estimate gate's bound), and with the abandon check on, the
-        parameters of the abandon path too."""
-        names = self.parameter_names if abandon_check else self.steering_parameter_names
-        tilt = () if self.tilt_parameter is None else (self.tilt_parameter,)
-        return tuple(dict.fromkeys(names + tilt))
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
@@ -135,10 +126,6 @@ class AutopilotProfile:
         limit = self.roll_limit_parameter
         if limit is not None and limit in values:  # degrees
             profile = replace(profile, roll_limit_rad=math.radians(values[limit]))
-        tilt = self.tilt_parameter
-        if tilt is not None and tilt in values:
-            profile = replace(profile, tilt_limit_rad=math.radians(
-                values[tilt] * self.tilt_parameter_deg))
         name = self.timeout_parameter
         if name is not None and name in values:
             profile = replace(profile, abandon_hold_s=values[name] + self.timeout_overshoot_s)
@@ -151,9 +138,6 @@ class AutopilotProfile:
         return profile
 
 
-# a tilt limit read from the vehicle is taken up to this (tan grows without bound)
-_TILT_MOST_RAD = math.radians(80.0)
-
 # ArduPlane's GUIDED_P by default: 5000 cd/rad, a roll of 50 degrees per radian of course error
 GUIDED_P_DEFAULT_RAD_PER_RAD = math.radians(50.0)
 
@@ -161,19 +145,19 @@ ARDUCOPTER = AutopilotProfile(
     name="ArduCopter", response_lag_s=0.6, abandon_turn_s=0.0, abandon_hold_s=3.0,
     abandon_brake_m_s2=2.5, timeout_parameter="GUID_TIMEOUT", brake_delay_s=0.6,
     shaping_parameters=("WPNAV_ACCEL", "PSC_JERK_XY"), tracking_lag_s=0.1,
-    tilt_limit_rad=math.radians(30.0), tilt_parameter="ANGLE_MAX", tilt_parameter_deg=0.01,
+    tilt_limit_rad=math.radians(30.0),  # ANGLE_MAX 3000 cdeg
 )  # fmt: skip
 PX4_COPTER = AutopilotProfile(
     name="PX4", response_lag_s=0.3, setpoint_lead_s=1.2, abandon_turn_s=0.0, abandon_hold_s=1.15,
     abandon_brake_m_s2=3.0, timeout_parameter="COM_OF_LOSS_T", timeout_overshoot_s=0.15,
-    tilt_limit_rad=math.radians(45.0), tilt_parameter="MPC_TILTMAX_AIR",
+    tilt_limit_rad=math.radians(45.0),  # MPC_TILTMAX_AIR
 )  # fmt: skip
 ARDUPLANE = AutopilotProfile(
     name="ArduPlane", response_lag_s=1.0, turn_ratio=0.73, abandon_turn_s=6.0, abandon_hold_s=4.0,
     abandon_brake_m_s2=0.0, heading_roll_gain=GUIDED_P_DEFAULT_RAD_PER_RAD,
     heading_gain_parameter="GUIDED_P", roll_limit_rad=math.radians(45.0),
     roll_limit_parameter="ROLL_LIMIT_DEG", tilt_limit_rad=math.radians(45.0),
-    tilt_parameter="ROLL_LIMIT_DEG", manoeuvre_margin=1.5,
+    manoeuvre_margin=1.5,  # (ROLL_LIMIT_DEG's default)
 )  # fmt: skip
 
 

@@ -8,11 +8,13 @@ abandon"), so the service asks the vehicle for the value rather than trusting a 
 that a user may have changed: PARAM_REQUEST_READ by name, a few times, at discovery.
 
 A reply counts only from the locked vehicle (the session filters by id and address), with
-the name asked for, a finite value within the parameter's documented range, and only the
-first: a later, different value is refused and said (a parameter a ground station changes
-in flight is read again by the next run of the companion, not in the middle of one). Until one
-arrives, or if none does, the profile's default stands (see
-:mod:`ezcompanion.service.autopilots`).
+the name asked for, a finite value within the parameter's documented range, within
+``_RETRY_S`` of a request (not after the tries ran out, nor in mid-flight), and only where
+no other value came for the same name: two different answers are two sources, and neither
+is taken (the profile's default stands, and the refusal is said). A parameter a ground
+station changes in flight is read again by the next run of the companion, not in the
+middle of one. What remains: on an unsigned link, a forged answer that arrives while the
+vehicle's own is lost is taken.
 """
 
 from __future__ import annotations
@@ -36,10 +38,6 @@ PARAMETER_RANGES = {
     # ArduPlane: the roll limit (degrees; 45 by default, 65 in SITL's models/plane.parm),
     # which clips that loop's roll: its docs give 0 to 90, of which 0 would be no roll at all
     "ROLL_LIMIT_DEG": (1.0, 90.0),
-    # the tilt limits, which bound what the vehicle can accelerate (the telemetry's estimate
-    # gate): ArduCopter's lean angle (cdeg; 3000 by default) and PX4's (degrees; 45)
-    "ANGLE_MAX": (1000.0, 8000.0),
-    "MPC_TILTMAX_AIR": (20.0, 89.0),
 }
 _RETRY_S = 0.5
 _TRIES = 6
@@ -57,6 +55,8 @@ class ParameterReader:
         self._next_s = math.inf
         self.values: dict[str, float] = {}
         self.refused: list[str] = []  # replies out of range, in words
+        self._doubted: set[str] = set()  # answered twice, differently: neither taken
+        self._listen_until_s = -math.inf  # answers count until _RETRY_S after a request
 
     def ask(self, names: tuple[str, ...], target: tuple[int, int], now: float) -> None:
         """Start asking ``target`` for ``names`` (kept: answers already heard)."""
@@ -67,20 +67,20 @@ class ParameterReader:
 
     @property
     def settled(self) -> bool:
-        """Every name asked for is answered, or the tries ran out."""
-        missing = any(n not in self.values for n in self._wanted)
+        """Every name asked for is answered (or in doubt), or the tries ran out."""
+        missing = any(n not in self.values and n not in self._doubted for n in self._wanted)
         return not missing or (self._tries >= _TRIES and self._next_s == math.inf)
 
     def periodic(self, now: float) -> None:
         """Ask again for what is still unanswered, every half second, six times at most."""
-        missing = [n for n in self._wanted if n not in self.values]
+        missing = [n for n in self._wanted if n not in self.values and n not in self._doubted]
         if now < self._next_s or self._target is None or not missing:
             return
         if self._tries >= _TRIES:
             self._next_s = math.inf
             return
         self._tries += 1
-        self._next_s = now + _RETRY_S
+        self._next_s = self._listen_until_s = now + _RETRY_S
         for name in missing:
             self._send(
                 self._link.mav.param_request_read_encode(
@@ -88,21 +88,24 @@ class ParameterReader:
                 )
             )
 
-    def take(self, msg: Message) -> str | None:
-        """A PARAM_VALUE from the vehicle: the name taken, or None (not asked for, or out
-        of range: then the reason is kept in ``refused``)."""
+    def take(self, msg: Message, now: float) -> str | None:
+        """A PARAM_VALUE from the vehicle at ``now``: the name taken, or None (not asked
+        for, not within ``_RETRY_S`` of a request, in doubt, or out of range: then the
+        reason is kept in ``refused``)."""
         name = msg.param_id
         if isinstance(name, bytes):
             name = name.decode("ascii", "replace")
         name = str(name).rstrip("\x00")
-        if name not in self._wanted:
-            return None
+        if name not in self._wanted or name in self._doubted or now > self._listen_until_s:
+            return None  # (a reviewer's forged answer mid-flight, after the tries had run
+            # out unanswered, had been taken as the first)
         value = float(msg.param_value)
-        if name in self.values:  # the first answer stands: a second one, different, is
-            if value != self.values[name]:  # refused (a reviewer's forged ANGLE_MAX 8000,
-                self.refused.append(  # mid-engagement, had widened the gate's bound 10x)
-                    f"{name} = {value!r} after {self.values[name]!r}: a second answer, "
-                    "the first stands")
+        if name in self.values:  # answered already: the same again is nothing; another
+            if value != self.values[name]:  # value is a second source, and neither is
+                self.refused.append(  # taken (the profile's default stands)
+                    f"{name} answered {self.values.pop(name)!r} and {value!r}: neither taken, "
+                    "the default stands")
+                self._doubted.add(name)
             return None
         low, high = PARAMETER_RANGES[name]
         if not (math.isfinite(value) and low <= value <= high):

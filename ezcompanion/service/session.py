@@ -58,7 +58,7 @@ from ezcompanion.records import EventKind, Hold
 from ezcompanion.service.autopilots import AutopilotProfile, autopilot_profile
 from ezcompanion.service.events import EventLog
 from ezcompanion.service.parameters import ParameterReader
-from ezcompanion.service.settings import GATE_ACCEL_MAX_M_S2, CompanionSettings, SetpointKind
+from ezcompanion.service.settings import CompanionSettings, SetpointKind
 from ezcompanion.service.state import TelemetryState
 from ezcompanion.service.statustext import StatusTextAssembler
 from ezcompanion.service.streams import POSITIONS, StreamRequests
@@ -113,11 +113,10 @@ class VehicleSession(StreamRequests):
         self.events = events
         self._link = link
         self._send = send
-        self._gate_accel_least_m_s2 = 2.0 * scenario.guidance.accel_max_m_s2
         self.telemetry = TelemetryState(
             origin=scenario.origin,
             adopt_origin=not scenario.origin_given,
-            accel_bound_m_s2=settings.gate_accel_m_s2 or self._gate_accel_least_m_s2,
+            accel_bound_m_s2=settings.gate_accel_m_s2 or 2.0 * scenario.guidance.accel_max_m_s2,
             gate_position_m=settings.gate_position_m,
             stale_after_s=settings.stale_after_s,
         )
@@ -255,22 +254,13 @@ class VehicleSession(StreamRequests):
 
     def _on_param(self, msg: Message, now: float) -> None:
         refused = len(self.parameters.refused)
-        name = self.parameters.take(msg)
+        name = self.parameters.take(msg, now)
         if name is not None:
             value = self.parameters.values[name]
             self.events.emit(EventKind.PARAMETER, now, f"{name} = {value:g}", name=name,
                              value=value)  # fmt: skip
-            if self.profile is not None:
-                self._bound_the_gate(self.profile)
         elif len(self.parameters.refused) > refused:
             self.alarms.say("parameter", now, f"{self.parameters.refused[-1]}: refused")
-
-    def _bound_the_gate(self, profile: AutopilotProfile) -> None:
-        """The estimate gate's acceleration bound: the user's, else twice the scenario's
-        accel_max and at least what the vehicle's autopilot flies (its tilt limit)."""
-        if not self.settings.gate_accel_m_s2:  # (and no more than a user may set)
-            self.telemetry.accel_bound_m_s2 = min(GATE_ACCEL_MAX_M_S2, max(
-                self._gate_accel_least_m_s2, profile.manoeuvre_accel_m_s2))  # fmt: skip
 
     @property
     def profile(self) -> AutopilotProfile | None:
@@ -341,8 +331,11 @@ class VehicleSession(StreamRequests):
             # its global positions are compared with its local ones as it maps them
             self.telemetry.projection = Projection.of_autopilot(int(msg.autopilot))
             profile = autopilot_profile(msg)
-            self._bound_the_gate(profile)
-            names = profile.asked_parameter_names(abandon_check=self.settings.abandon_check)
+            if not self.settings.gate_accel_m_s2:  # at least what its autopilot flies
+                self.telemetry.accel_bound_m_s2 = max(self.telemetry.accel_bound_m_s2,
+                                                      profile.manoeuvre_accel_m_s2)  # fmt: skip
+            names = (profile.parameter_names if self.settings.abandon_check
+                     else profile.steering_parameter_names)  # fmt: skip
             if names:
                 self.parameters.ask(names, source, now)
             self.events.emit(

@@ -45,7 +45,8 @@ What the law uses, and why:
   (an ``alarm``); a forger's run cannot last so while the vehicle's own samples, not
   ahead, arrive between (taken or not).
 
-Refused, and counted (a refused sample changes nothing):
+Refused, and counted (a refused sample changes nothing the law reads; the gate's
+prediction goes on through it, below):
 
 - a field non-finite or out of range;
 - a sample not newer than the last taken of its kind: a repeat of one of the last taken,
@@ -177,10 +178,13 @@ _REBASE_S = 0.25
 # a sample stamped behind the newest taken is reordering (silent) only within this of a
 # taken one: networks reorder by milliseconds, a second route lags by a fraction of a second
 _REORDER_S = 0.5
-# taken samples remembered: a repeat of one arriving late is known as a repeat, a sample
-# behind the newest is judged against the nearest of them, and a new one against the
-# oldest too
+# taken samples remembered: a sample behind the newest is judged against the nearest of
+# them, and a new one against the oldest too
 _REPEATS_KEPT = 8
+# ... and for this long (vehicle time), so that a repeat of one arriving late by another
+# route is known as a repeat, silently (a reviewer's second route lagging 0.7 to 2 s had
+# its every repeat named a second source once _REORDER_S came in)
+_REPEATS_S = 5.0
 
 
 @dataclass
@@ -211,8 +215,11 @@ class _Track:
     # samples off the path of the last taken but each on the path of the one before it,
     # with our clock: an estimate that stepped (a reset), taken after _STEP_RUN_S
     step_run: list[tuple[float, _Position]] = field(default_factory=list)
-    # the last few taken: a repeat of any of them (two routes, one late) is no second source
+    # the last few taken
     taken: deque[_Position] = field(default_factory=lambda: deque(maxlen=_REPEATS_KEPT))
+    # those of the last _REPEATS_S, by stamp: a repeat of any of them (two routes, one
+    # late) is no second source
+    history: dict[float, _Position] = field(default_factory=dict)
     # a track begun after a lost link is used only once its samples have come for
     # _CONFIRM_S of our clock (its first sample was taken with no gate): when it began
     unconfirmed_since_s: float | None = None
@@ -229,8 +236,15 @@ class _Track:
             sample.boot_s,
             unconfirmed_since_s=confirm_from_s,
         )
-        track.taken.append(sample)
+        track.remember(sample)
         return track
+
+    def remember(self, sample: _Position) -> None:
+        """A sample taken: among the last few, and in the history of the last _REPEATS_S."""
+        self.taken.append(sample)
+        self.history[sample.boot_s] = sample
+        while next(iter(self.history)) < sample.boot_s - _REPEATS_S:  # (oldest first)
+            del self.history[next(iter(self.history))]
 
 
 @dataclass
@@ -634,7 +648,8 @@ class TelemetryState:
                     f"{kind} position time went back {last.boot_s - sample.boot_s:.1f} s "
                     "(a reboot or a forgery): refused",
                 )
-            if any(p.boot_s == sample.boot_s and _same_motion(p, sample) for p in track.taken):
+            before = track.history.get(sample.boot_s)
+            if before is not None and _same_motion(before, sample):
                 return False  # a sample taken already, again (a second route, later)
             return self._behind(kind, track, sample, now_s)
         # A position that stands still while the velocity says it moves is frozen (a stale
@@ -733,7 +748,7 @@ class TelemetryState:
         if progress:
             track.moved = sample
         track.last = sample
-        track.taken.append(sample)
+        track.remember(sample)
         begun = track.unconfirmed_since_s
         if begun is not None and now_s - begun >= _CONFIRM_S:
             track.unconfirmed_since_s = None

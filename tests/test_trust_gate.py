@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from test_disarm import heartbeat, session_and_vehicle, vehicle_frame
 from test_service_loopback import CONFIG, fly, scenario_file
-from test_service_units import known_origin, local
+from test_service_units import ORIGIN, known_origin, local
 from test_trust_link import LIGHT
 
 from ezcompanion.config import load_scenario
@@ -612,6 +612,35 @@ def test_a_second_route_lagging_by_seconds_repeats_and_is_no_second_source(lag_s
         if refusal is not None:
             refusals.append(refusal[1])
     assert not refusals and taken == 500, refusals[:2]
+
+
+@pytest.mark.parametrize("lag_s", [1.4, 4.5])
+def test_late_copies_of_skipped_global_positions_are_skipped_again(lag_s: float) -> None:
+    """A reviewer: local and global positions at 50 Hz by two routes, the second lagging by
+    seconds. Global positions skipped while the local one is fresh were never taken, so a
+    late copy of one was no known repeat: 671 to 761 named a second source in 20 s. Those
+    skipped in the last 5 s are remembered: a copy is skipped again."""
+    t = known_origin(accel_bound_m_s2=9.80665 * math.tan(math.radians(30.0)))
+    arrivals = []
+    for k in range(500):  # 10 s, 5 m/s on a circle of 50 m
+        boot = 1000 + 20 * k
+        angle = 0.1 * boot / 1000
+        north, east = 50.0 * math.sin(angle), 50.0 * (1.0 - math.cos(angle))
+        vn, ve = 5.0 * math.cos(angle), 5.0 * math.sin(angle)
+        lat, lon, _ = ned_to_geodetic(north, east, -20.0, origin_lat_deg=ORIGIN.lat_deg,
+                                      origin_lon_deg=ORIGIN.lon_deg, origin_alt_m=ORIGIN.alt_m)
+        frames = [local(boot, north, east, vn, ve), mavlink.MAVLink_global_position_int_message(
+            boot, deg_to_e7(lat), deg_to_e7(lon), m_to_mm(ORIGIN.alt_m + 20.0), 20000,
+            round(vn * 100), round(ve * 100), 0, 0)]  # fmt: skip
+        arrivals += [(boot / 1000 + 0.005 + 0.001 * i, f) for i, f in enumerate(frames)]
+        arrivals += [(boot / 1000 + lag_s + 0.001 * i, f) for i, f in enumerate(frames)]
+    refusals = []
+    for at, frame in sorted(arrivals, key=lambda a: a[0]):
+        t.update(frame, at)
+        refusal = t.take_refusal()
+        if refusal is not None:
+            refusals.append(refusal[1])
+    assert t.skipped > 400 and not refusals, refusals[:2]
 
 
 @pytest.mark.parametrize("jump_m", [1.0, 3.0, 50.0])

@@ -118,6 +118,29 @@ def test_position_spoof_at_the_target_is_refused_and_ends_guidance(tmp_path: Pat
     assert_honest(flight)
 
 
+def test_a_forged_second_answer_to_a_parameter_ends_guidance_named(tmp_path: Path) -> None:
+    """With the abandon check on, the service reads GUID_TIMEOUT at discovery. A forger's
+    different answer from the vehicle's address, in mid-flight (reviewers' forged answers
+    had won the race at discovery, or put back the profile's default): the parameters are
+    in doubt, and guidance ends, named, braking."""
+    mav = forger()
+
+    def attack(service: Any, relay: Relay, clock: Clock) -> None:
+        assert wait_for(service, EventKind.ENGAGED)
+        time.sleep(1.0 / SPEEDUP)
+        msg = M.MAVLink_param_value_message(b"GUID_TIMEOUT", 0.5, M.MAV_PARAM_TYPE_REAL32, 1, 0)
+        relay.inject(frame(mav, msg))
+
+    flight = relayed_flight(attack, tmp_path, max_time_s=20.0, abandon_check=True)
+    read = [e.message for e in flight.events.of_kind(EventKind.PARAMETER)]
+    assert "GUID_TIMEOUT = 3" in read, read
+    aborted = flight.events.of_kind(EventKind.ABORTED)
+    assert [e.data["cause"] for e in aborted] == ["parameter"], aborted
+    assert "GUID_TIMEOUT answered 3.0, then 0.5" in aborted[0].message
+    assert not flight.outcome.intercepted
+    assert_honest(flight)
+
+
 def test_one_position_at_the_target_stamped_ahead_is_refused_not_an_intercept(
     tmp_path: Path,
 ) -> None:

@@ -8,13 +8,16 @@ abandon"), so the service asks the vehicle for the value rather than trusting a 
 that a user may have changed: PARAM_REQUEST_READ by name, a few times, at discovery.
 
 A reply counts only from the locked vehicle (the session filters by id and address), with
-the name asked for, a finite value within the parameter's documented range, within
-``_RETRY_S`` of a request (not after the tries ran out, nor in mid-flight), and only where
-no other value came for the same name: two different answers are two sources, and neither
-is taken (the profile's default stands, and the refusal is said). A parameter a ground
-station changes in flight is read again by the next run of the companion, not in the
-middle of one. What remains: on an unsigned link, a forged answer that arrives while the
-vehicle's own is lost is taken.
+the name asked for, a finite value within the parameter's documented range, and only while
+the reader still asks for it (a first answer after the tries ran out unanswered, in
+mid-flight, is refused: a reviewer's forged one had been taken). A second answer with a
+different value, at any time, is a second source of the vehicle's parameters, or one
+changed in flight: either way the safety argument's inputs are in doubt, and guidance ends
+(or never starts), named (``conflicts``). Reviewers had broken the gentler rules: under
+"the first answer stands" a forger answering before the vehicle won; under "two answers,
+neither taken" one forged answer put back the profile's default, a shorter timeout than
+the vehicle's. What remains: on an unsigned link, a forger whose answer alone arrives
+(the vehicle's lost) is taken.
 """
 
 from __future__ import annotations
@@ -54,9 +57,8 @@ class ParameterReader:
         self._tries = 0
         self._next_s = math.inf
         self.values: dict[str, float] = {}
-        self.refused: list[str] = []  # replies out of range, in words
-        self._doubted: set[str] = set()  # answered twice, differently: neither taken
-        self._listen_until_s = -math.inf  # answers count until _RETRY_S after a request
+        self.refused: list[str] = []  # replies not taken, in words
+        self.conflicts: list[str] = []  # a name answered twice, differently, in words
 
     def ask(self, names: tuple[str, ...], target: tuple[int, int], now: float) -> None:
         """Start asking ``target`` for ``names`` (kept: answers already heard)."""
@@ -67,20 +69,26 @@ class ParameterReader:
 
     @property
     def settled(self) -> bool:
-        """Every name asked for is answered (or in doubt), or the tries ran out."""
-        missing = any(n not in self.values and n not in self._doubted for n in self._wanted)
-        return not missing or (self._tries >= _TRIES and self._next_s == math.inf)
+        """Every name asked for is answered, or the tries ran out."""
+        return not self._missing() or self._given_up
+
+    @property
+    def _given_up(self) -> bool:
+        return self._tries >= _TRIES and self._next_s == math.inf
+
+    def _missing(self) -> list[str]:
+        return [n for n in self._wanted if n not in self.values]
 
     def periodic(self, now: float) -> None:
         """Ask again for what is still unanswered, every half second, six times at most."""
-        missing = [n for n in self._wanted if n not in self.values and n not in self._doubted]
+        missing = self._missing()
         if now < self._next_s or self._target is None or not missing:
             return
         if self._tries >= _TRIES:
             self._next_s = math.inf
             return
         self._tries += 1
-        self._next_s = self._listen_until_s = now + _RETRY_S
+        self._next_s = now + _RETRY_S
         for name in missing:
             self._send(
                 self._link.mav.param_request_read_encode(
@@ -88,28 +96,30 @@ class ParameterReader:
                 )
             )
 
-    def take(self, msg: Message, now: float) -> str | None:
-        """A PARAM_VALUE from the vehicle at ``now``: the name taken, or None (not asked
-        for, not within ``_RETRY_S`` of a request, in doubt, or out of range: then the
-        reason is kept in ``refused``)."""
+    def take(self, msg: Message) -> str | None:
+        """A PARAM_VALUE from the vehicle: the name taken, or None (not asked for; the same
+        value again; out of range or too late, said in ``refused``; a different value for a
+        name answered already, said in ``conflicts``)."""
         name = msg.param_id
         if isinstance(name, bytes):
             name = name.decode("ascii", "replace")
         name = str(name).rstrip("\x00")
-        if name not in self._wanted or name in self._doubted or now > self._listen_until_s:
-            return None  # (a reviewer's forged answer mid-flight, after the tries had run
-            # out unanswered, had been taken as the first)
-        value = float(msg.param_value)
-        if name in self.values:  # answered already: the same again is nothing; another
-            if value != self.values[name]:  # value is a second source, and neither is
-                self.refused.append(  # taken (the profile's default stands)
-                    f"{name} answered {self.values.pop(name)!r} and {value!r}: neither taken, "
-                    "the default stands")
-                self._doubted.add(name)
+        if name not in self._wanted:
             return None
+        value = float(msg.param_value)
         low, high = PARAMETER_RANGES[name]
         if not (math.isfinite(value) and low <= value <= high):
             self.refused.append(f"{name} = {value!r} is outside [{low:g}, {high:g}]")
+            return None
+        before = self.values.get(name)
+        if before is not None:
+            if value != before:
+                self.conflicts.append(f"{name} answered {before!r}, then {value!r}: a second "
+                                      "source of the vehicle's parameters, or one changed in "
+                                      "flight")  # fmt: skip
+            return None
+        if self._given_up:
+            self.refused.append(f"{name} = {value!r} after the tries ran out: refused")
             return None
         self.values[name] = value
         return name

@@ -514,6 +514,9 @@ class CompanionService:
         if session.disarmed is not None and self.phase is not Phase.DONE:
             self._end_disarmed(now, session.disarmed)
             return
+        if session.parameters.conflicts and self.phase is not Phase.DONE:
+            self._end_in_doubt(now, session.parameters.conflicts[0])
+            return
         if session.disarm_pending and self.phase is Phase.GUIDING:
             # a pause, as when the vehicle leaves its guided mode (not a failsafe, which
             # would hold off the ones a forged heartbeat's trouble raises next)
@@ -619,6 +622,18 @@ class CompanionService:
             why = (f"the vehicle reports itself disarmed since {at_s:.1f} s (landed, its "
                    "pilot or a failsafe): guidance ended")
         self.engagement.abort(now, cause, why=why, brake=False)
+        self.phase = Phase.DONE
+
+    def _end_in_doubt(self, now: float, conflict: str) -> None:
+        """A parameter the abandon check or the setpoints are shaped by was answered twice,
+        differently (a second source on the vehicle's address, or changed in flight): the
+        safety argument's inputs are in doubt. Not guided, or guidance ended (braking)."""
+        why = (f"{conflict}: the parameters the abandon check and the setpoints are shaped "
+               "by are in doubt")
+        if self.engagement.setpoints_sent == 0:
+            self._not_guided(now, f"{why}; not guided", "parameter")
+        else:
+            self.engagement.abort(now, Hold.PARAMETER, why=f"{why}; guidance ended")
         self.phase = Phase.DONE
 
     def _place_fixed(self, now: float) -> bool:

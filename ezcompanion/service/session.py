@@ -254,13 +254,14 @@ class VehicleSession(StreamRequests):
 
     def _on_param(self, msg: Message, now: float) -> None:
         refused = len(self.parameters.refused)
-        name = self.parameters.take(msg, now)
+        name = self.parameters.take(msg)
         if name is not None:
             value = self.parameters.values[name]
             self.events.emit(EventKind.PARAMETER, now, f"{name} = {value:g}", name=name,
                              value=value)  # fmt: skip
         elif len(self.parameters.refused) > refused:
             self.alarms.say("parameter", now, f"{self.parameters.refused[-1]}: refused")
+        # (a conflict ends guidance: the runner, _follow_session)
 
     @property
     def profile(self) -> AutopilotProfile | None:

@@ -49,9 +49,10 @@ Refused, and counted (a refused sample changes nothing the law reads; the gate's
 prediction goes on through it, below):
 
 - a field non-finite or out of range;
-- a sample not newer than the last taken of its kind: a repeat of one of the last taken,
-  or one on the path of the taken sample nearest its stamp and within ``_REORDER_S`` of it
-  (reordering), silently; off that path or farther,
+- a sample not newer than the last taken of its kind: a repeat of one taken (or, a global
+  position, skipped) in the last ``_REPEATS_S``, or one on the path of the taken sample
+  nearest its stamp and no more than ``_REORDER_S`` behind the newest (reordering),
+  silently; off that path or farther,
   as a second source of positions (``Hold.GATE``); a time stamp going back by more than
   ``_REBOOT_BACKSTEP_S`` raises ``Hold.GATE``;
 - a frozen estimate (the same position and velocity again, to ``_FROZEN_M``, while the
@@ -175,15 +176,15 @@ _CONFIRM_S = 0.25
 # offset afresh (it came from a sample that waited)
 _REBASE_SAMPLES = 5
 _REBASE_S = 0.25
-# a sample stamped behind the newest taken is reordering (silent) only within this of a
-# taken one: networks reorder by milliseconds, a second route lags by a fraction of a second
+# a sample stamped behind the newest taken is reordering (silent) only within this of it:
+# networks reorder by milliseconds (a second route's repeats, later by seconds, are known)
 _REORDER_S = 0.5
-# taken samples remembered: a sample behind the newest is judged against the nearest of
-# them, and a new one against the oldest too
+# taken samples remembered: a new one is judged against the oldest of them too
 _REPEATS_KEPT = 8
 # ... and for this long (vehicle time), so that a repeat of one arriving late by another
-# route is known as a repeat, silently (a reviewer's second route lagging 0.7 to 2 s had
-# its every repeat named a second source once _REORDER_S came in)
+# route is known as a repeat, silently, and a sample behind the newest is judged against
+# the nearest of them (a reviewer's second route lagging 0.7 to 2 s had its every repeat
+# named a second source once _REORDER_S came in)
 _REPEATS_S = 5.0
 
 
@@ -368,6 +369,10 @@ class TelemetryState:
     _refusal: tuple[Hold, str] | None = None
     # the newest skipped global position: (lat, lon, alt as sent, boot_s, speed_m_s)
     _skipped_global: tuple[tuple[int, int, int], float, float] | None = None
+    # the global positions skipped in the last _REPEATS_S, by stamp: a copy of one arriving
+    # late by a second route is skipped again (a reviewer's, 1.4 s behind, had been named a
+    # second source)
+    _skipped_seen: dict[float, tuple[int, ...]] = field(default_factory=dict)
 
     def update(self, msg: Message, now_s: float, kind: str | None = None) -> str | None:
         """Take one message (``kind``: its type, if the caller has it already); returns its
@@ -401,6 +406,7 @@ class TelemetryState:
         start; a restarted vehicle's clock may have gone back). The origin and its latch
         stay: a vehicle that comes back in another frame is still refused."""
         self._tracks.clear()
+        self._skipped_seen.clear()
         self._clock = _VehicleClock()
         self._attitude_s = self._attitude_boot_s = -math.inf
         self._refusal = None
@@ -475,6 +481,9 @@ class TelemetryState:
         track = self._tracks.get("global")
         raw = (msg.lat, msg.lon, msg.alt)
         speed_m_s = math.hypot(cm_s_to_m_s(msg.vx), cm_s_to_m_s(msg.vy))
+        motion = (*raw, msg.vx, msg.vy)
+        if self._skipped_seen.get(boot_s) == motion:
+            return None  # skipped already, and again (a second route, later)
         if (
             track is not None
             and 0.0 < boot_s - track.pred_boot_s < self.cross_check_period_s
@@ -483,6 +492,10 @@ class TelemetryState:
             self.skipped += 1
             if self._skipped_global is None or self._skipped_global[0] != raw:
                 self._skipped_global = (raw, boot_s, speed_m_s)
+            seen = self._skipped_seen  # (remembered as the taken ones are, _REPEATS_S)
+            seen[boot_s] = motion
+            while next(iter(seen)) < boot_s - _REPEATS_S:
+                del seen[next(iter(seen))]
             return None  # the local position is fresh: this one is not needed
         anchor = self._skipped_global
         if anchor is not None and anchor[0] == raw:
@@ -761,13 +774,14 @@ class TelemetryState:
         estimate's step is then no step); off it, it is a second source of positions: the
         vehicle's own samples behind a forger's that runs ahead of them (a reviewer's at
         200 Hz, 6 ms ahead, the vehicle's 50 Hz a quarter of those taken, had steered the
-        track 15 m without a word): refused, named. So is one farther than ``_REORDER_S``
-        from every taken sample, on a path or not (the path's allowance grows with the
+        track 15 m without a word): refused, named. So is one more than ``_REORDER_S``
+        behind the newest taken, on a path or not (the path's allowance grows with the
         time between: a reviewer's forger retook the clock in a gap of the vehicle's
         samples, and every one of the vehicle's, 3 s behind its stream, was then "on the
-        path" of a forged one and dropped without a word)."""
-        nearest = min(track.taken, key=lambda p: abs(p.boot_s - sample.boot_s))
-        if abs(nearest.boot_s - sample.boot_s) <= _REORDER_S and _on_path(
+        path" of a forged one and dropped without a word). (Repeats, later by seconds,
+        were recognised before: ``_REPEATS_S``.)"""
+        nearest = min(track.history.values(), key=lambda p: abs(p.boot_s - sample.boot_s))
+        if track.last.boot_s - sample.boot_s <= _REORDER_S and _on_path(
             nearest, sample, self.accel_bound_m_s2
         ):
             track.step_run.clear()

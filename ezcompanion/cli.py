@@ -30,6 +30,7 @@ from ezcompanion.commands import (
     output_directory,
     run_compile,
     run_demo,
+    run_gate_check,
     run_reference_demo,
     run_scale,
     run_service,
@@ -155,6 +156,25 @@ def _parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     scale.add_argument("--out", type=Path, required=True, help="the scaled scenario file")
 
+    gate = commands.add_parser(
+        "gate-check",
+        help="put a recorded flight's positions through the telemetry's estimate gate: would "
+        "the companion take this autopilot's telemetry? (exit 0: no sample refused, named)",
+    )
+    gate.add_argument("tlog", type=Path, help="a telemetry log (.tlog) of the autopilot")
+    gate.add_argument(
+        "--gate-accel-m-s2", type=number_within(0.0, 50.0, unit=" m/s^2"),
+        help="the gate's acceleration bound (default: what the service takes for the "
+        "autopilot the log's heartbeat names)",
+    )  # fmt: skip
+    gate.add_argument(
+        "--accel-max-m-s2", type=number_within(0.0, 1000.0, unit=" m/s^2"),
+        help="the scenario's accel_max (the bound is at least twice it)",
+    )  # fmt: skip
+    gate.add_argument(
+        "--gate-position-m", type=number_within(0.0, 25.0, unit=" m"), default=0.5,
+        help="the gate's position allowance (companion.gate_position_m; default 0.5)",
+    )  # fmt: skip
     commands.add_parser(
         "compile",
         help="compile the service's guidance kernel into numba's cache (once after an install "
@@ -224,6 +244,10 @@ def _dispatch(args: argparse.Namespace) -> int:
         return code
     if args.command == "compile":
         return run_compile()
+    if args.command == "gate-check":
+        return run_gate_check(args.tlog, accel_bound_m_s2=args.gate_accel_m_s2,
+                              accel_max_m_s2=args.accel_max_m_s2,
+                              gate_position_m=args.gate_position_m)  # fmt: skip
     if args.command == "simulate":
         return run_simulate(
             args.config,

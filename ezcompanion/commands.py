@@ -110,6 +110,24 @@ _COMPILE_SCENARIO = {
 }  # fmt: skip
 
 
+def run_gate_check(tlog: Path, *, accel_bound_m_s2: float | None,
+                   accel_max_m_s2: float | None, gate_position_m: float) -> int:  # fmt: skip
+    """Print what the estimate gate makes of the positions in ``tlog``; OK if it refused
+    none by name, FAILED if it did, BAD_INPUT if the log holds no autopilot or position."""
+    from ezcompanion.service.gate_check import check_tlog
+
+    if not tlog.is_file():
+        raise FileNotFoundError(f"{tlog}: no such telemetry log")
+    report = check_tlog(tlog, accel_bound_m_s2=accel_bound_m_s2, accel_max_m_s2=accel_max_m_s2,
+                        gate_position_m=gate_position_m)  # fmt: skip
+    print("\n".join(report.lines()))
+    if not report.used:
+        print(f"{tlog}: no position of the autopilot's with its origin (GPS_GLOBAL_ORIGIN) in "
+              "the log: nothing checked", file=sys.stderr)  # fmt: skip
+        return ExitCode.BAD_INPUT
+    return ExitCode.OK if report.clean else ExitCode.FAILED
+
+
 def run_simulate(
     config: Path,
     *,

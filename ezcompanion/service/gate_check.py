@@ -1,0 +1,129 @@
+"""A recorded flight's telemetry put through the estimate gate, offline: would the
+companion have taken this autopilot's positions?
+
+``ezcompanion gate-check FLIGHT.tlog`` reads a telemetry log (the companion's own
+``--tlog``, or MAVProxy's, Mission Planner's, QGroundControl's), finds the autopilot by its
+first heartbeat, and feeds its LOCAL_POSITION_NED, GLOBAL_POSITION_INT and
+GPS_GLOBAL_ORIGIN, in order, with the times they were logged, to the same
+:class:`~ezcompanion.service.state.TelemetryState` the service runs, under the bound the
+service would use for that autopilot (or the one given). Nothing else decides what the
+gate takes, so the refusals it prints are the ones the service would have met (at the
+stream rates the log holds: ask the autopilot for the companion's, 50 Hz, when recording).
+This is how the tolerances were measured against ArduCopter, ArduPlane and PX4 SITL
+(docs/field.md).
+"""
+
+from __future__ import annotations
+
+import re
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ezcompanion.config import GeoOrigin
+from ezcompanion.service.autopilots import autopilot_profile
+from ezcompanion.service.state import TelemetryState
+from ezcompanion.wire import Projection, e7_to_deg, mavlink, mm_to_m
+from ezcompanion.wire.logs import read_tlog
+
+__all__ = ["GateReport", "check_tlog"]
+
+_FED = ("LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "GPS_GLOBAL_ORIGIN")
+_EXAMPLES = 3
+
+
+@dataclass
+class GateReport:
+    """What the gate made of a log's positions."""
+
+    vehicle: tuple[int, int] | None = None  # (system, component) of the autopilot
+    autopilot: str = ""
+    accel_bound_m_s2: float = 0.0
+    used: Counter[str] = field(default_factory=Counter)
+    refused: Counter[str] = field(default_factory=Counter)
+    skipped: int = 0
+    # each reason (numbers masked), how often, and its first few in full with their times
+    reasons: Counter[str] = field(default_factory=Counter)
+    examples: dict[str, list[str]] = field(default_factory=dict)
+
+    @property
+    def clean(self) -> bool:
+        """Positions were read and none refused by name (the refusals that hold guidance;
+        a position out of range, before a fix, or a frozen estimate is dropped without
+        one)."""
+        return bool(self.used) and not self.reasons
+
+    def lines(self) -> list[str]:
+        """The report in words, one finding a line."""
+        if self.vehicle is None:
+            return ["no autopilot heartbeat in the log: nothing checked"]
+        out = [f"vehicle {self.vehicle[0]}/{self.vehicle[1]} ({self.autopilot}), acceleration "
+               f"bound {self.accel_bound_m_s2:.2f} m/s^2",
+               "used: " + _counts(self.used) + f"; skipped {self.skipped} global positions "
+               "(the local one fresh)",
+               "refused: " + (_counts(self.refused) or "none") + " (without an alarm where "
+               "none is named below: out of range, before a fix, frozen or repeated)",
+               f"named: {self.reasons.total()} (each holds guidance 0.5 s; for 3 s without a "
+               "break, they end it)"]  # fmt: skip
+        for reason, count in self.reasons.most_common():
+            out.append(f"  {count} x {reason}")
+            out += [f"      {example}" for example in self.examples[reason]]
+        return out
+
+
+def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
+               accel_max_m_s2: float | None = None,
+               gate_position_m: float = 0.5) -> GateReport:  # fmt: skip
+    """The gate's verdict on the positions in the tlog at ``path``. The bound: the one
+    given, else what the service would take for the autopilot found (its tilt limit's, and
+    at least twice ``accel_max_m_s2`` where given)."""
+    report = GateReport()
+    state: TelemetryState | None = None
+    first_s: float | None = None
+    for logged_s, msg in read_tlog(path):
+        kind = msg.get_type()
+        source = (msg.get_srcSystem(), msg.get_srcComponent())
+        if report.vehicle is None:
+            if kind != "HEARTBEAT" or msg.type in (
+                mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER
+            ) or msg.autopilot == mavlink.MAV_AUTOPILOT_INVALID:  # fmt: skip
+                continue
+            profile = autopilot_profile(msg)
+            bound = accel_bound_m_s2 or max(profile.manoeuvre_accel_m_s2,
+                                            2.0 * (accel_max_m_s2 or 0.0))  # fmt: skip
+            report.vehicle, report.autopilot, report.accel_bound_m_s2 = (
+                source, profile.name, bound)
+            projection = Projection.of_autopilot(int(msg.autopilot))
+            continue
+        if source != report.vehicle or kind not in _FED:
+            continue
+        if state is None:  # the scenario's origin is the vehicle's own, when it tells it
+            if kind != "GPS_GLOBAL_ORIGIN":
+                continue
+            origin = GeoOrigin(lat_deg=e7_to_deg(msg.latitude), lon_deg=e7_to_deg(msg.longitude),
+                               alt_m=mm_to_m(msg.altitude))  # fmt: skip
+            state = TelemetryState(
+                origin=origin, accel_bound_m_s2=report.accel_bound_m_s2,
+                projection=projection, gate_position_m=gate_position_m,
+            )  # fmt: skip
+            first_s = logged_s
+        assert first_s is not None
+        now_s = logged_s - first_s
+        used = state.update(msg, now_s, kind)
+        if used is not None:
+            report.used[used] += 1
+        refusal = state.take_refusal()
+        if refusal is not None:
+            reason = re.sub(r"-?\d+(\.\d+)?", "#", refusal[1])
+            report.reasons[reason] += 1
+            seen = report.examples.setdefault(reason, [])
+            if len(seen) < _EXAMPLES:
+                seen.append(f"at {now_s:.2f} s: {refusal[1]}")
+    if state is not None:
+        report.refused.update(state.refused)
+        report.skipped = state.skipped
+    return report
+
+
+def _counts(counter: Counter[str]) -> str:
+    return ", ".join(f"{kind} {count}" for kind, count in sorted(counter.items()))

@@ -108,6 +108,23 @@ def test_a_second_different_answer_is_a_conflict_whenever_it_comes(late_s: float
         peer.close()
 
 
+def test_an_answer_before_the_request_went_out_is_refused() -> None:
+    """A reviewer's forger put PARAM_VALUEs in the datagram of the heartbeat that found the
+    vehicle: read before the reader's first request went out, they were taken, nothing was
+    left to ask, and the vehicle was never asked (GUID_TIMEOUT 0.1 s for its 5)."""
+    reader, peer, sent = _reader_and_peer()
+    try:
+        reader.ask(("GUID_TIMEOUT",), (1, 1), 0.0)
+        assert reader.take(_value("GUID_TIMEOUT", 0.1)) is None
+        assert reader.refused == ["GUID_TIMEOUT = 0.1 before it was asked for: refused"]
+        reader.periodic(0.0)
+        assert len(sent) == 1  # asked all the same
+        assert reader.take(_value("GUID_TIMEOUT", 5.0)) == "GUID_TIMEOUT"
+        assert reader.values == {"GUID_TIMEOUT": 5.0} and not reader.conflicts
+    finally:
+        peer.close()
+
+
 def test_a_first_answer_after_the_tries_ran_out_is_refused() -> None:
     """The vehicle's answers lost, the tries ran out: a reviewer's forged first answer in
     mid-flight had been taken."""

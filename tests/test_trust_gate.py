@@ -614,6 +614,31 @@ def test_a_second_route_lagging_by_seconds_repeats_and_is_no_second_source(lag_s
     assert not refusals and taken == 500, refusals[:2]
 
 
+@pytest.mark.parametrize("lag_s", [0.6, 2.0])
+def test_a_sample_lost_on_the_fast_route_and_late_on_the_slow_one_is_reordering(
+    lag_s: float
+) -> None:
+    """A reviewer: two routes, the fast one losing 5% of the samples, the other carrying
+    them all seconds late; a sample lost on the first arrives only by the second, behind
+    the newest by the lag and no repeat of one taken: 53 named in 20 s (guidance ended)
+    while a sample more than 0.5 s behind the newest was no reordering. It lies between two
+    taken samples, on their path: reordering, silently."""
+    t = known_origin()
+    arrivals = []
+    for k in range(500):  # 10 s at 50 Hz, north at 1 m/s
+        boot, sent = 1000 + 20 * k, 1.0 + 0.02 * k
+        if k % 20 != 7:  # lost on the fast route
+            arrivals.append((sent + 0.005, boot, 0.02 * k))
+        arrivals.append((sent + lag_s, boot, 0.02 * k))
+    refusals = []
+    for at, boot, north in sorted(arrivals):
+        t.update(local(boot, north, 0.0), at)
+        refusal = t.take_refusal()
+        if refusal is not None:
+            refusals.append(refusal[1])
+    assert not refusals, refusals[:2]
+
+
 @pytest.mark.parametrize("lag_s", [1.4, 4.5])
 def test_late_copies_of_skipped_global_positions_are_skipped_again(lag_s: float) -> None:
     """A reviewer: local and global positions at 50 Hz by two routes, the second lagging by

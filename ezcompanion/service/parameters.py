@@ -9,15 +9,17 @@ that a user may have changed: PARAM_REQUEST_READ by name, a few times, at discov
 
 A reply counts only from the locked vehicle (the session filters by id and address), with
 the name asked for, a finite value within the parameter's documented range, and only while
-the reader still asks for it (a first answer after the tries ran out unanswered, in
-mid-flight, is refused: a reviewer's forged one had been taken). A second answer with a
+the reader asks for it: after its first request for the name went out (a reviewer's forged
+answer, sent with the heartbeat that found the vehicle, had been taken before, and the
+vehicle never asked) and before the tries ran out unanswered (in mid-flight: a forged
+first answer had been taken). A second answer with a
 different value, at any time, is a second source of the vehicle's parameters, or one
 changed in flight: either way the safety argument's inputs are in doubt, and guidance ends
 (or never starts), named (``conflicts``). Reviewers had broken the gentler rules: under
 "the first answer stands" a forger answering before the vehicle won; under "two answers,
 neither taken" one forged answer put back the profile's default, a shorter timeout than
 the vehicle's. What remains: on an unsigned link, a forger whose answer alone arrives
-(the vehicle's lost) is taken.
+(the vehicle's lost, or a firmware that lacks the name) is taken.
 """
 
 from __future__ import annotations
@@ -59,6 +61,7 @@ class ParameterReader:
         self.values: dict[str, float] = {}
         self.refused: list[str] = []  # replies not taken, in words
         self.conflicts: list[str] = []  # a name answered twice, differently, in words
+        self._asked: set[str] = set()  # names a request has gone out for
 
     def ask(self, names: tuple[str, ...], target: tuple[int, int], now: float) -> None:
         """Start asking ``target`` for ``names`` (kept: answers already heard)."""
@@ -89,6 +92,7 @@ class ParameterReader:
             return
         self._tries += 1
         self._next_s = now + _RETRY_S
+        self._asked.update(missing)
         for name in missing:
             self._send(
                 self._link.mav.param_request_read_encode(
@@ -121,5 +125,9 @@ class ParameterReader:
         if self._given_up:
             self.refused.append(f"{name} = {value!r} after the tries ran out: refused")
             return None
+        if name not in self._asked:  # (a reviewer's forged answer, in the datagram of the
+            self.refused.append(  # heartbeat that found the vehicle, was taken before any
+                f"{name} = {value!r} before it was asked for: refused")  # request went out,
+            return None  # and the vehicle never asked)
         self.values[name] = value
         return name

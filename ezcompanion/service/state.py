@@ -51,8 +51,7 @@ prediction goes on through it, below):
 - a field non-finite or out of range;
 - a sample not newer than the last taken of its kind: a repeat of one taken (or, a global
   position, skipped) in the last ``_REPEATS_S``, or one on the path of the taken sample
-  nearest its stamp and no more than ``_REORDER_S`` behind the newest (reordering),
-  silently; off that path or farther,
+  nearest its stamp, within ``_REORDER_S`` of it (reordering), silently; off that path or farther,
   as a second source of positions (``Hold.GATE``); a time stamp going back by more than
   ``_REBOOT_BACKSTEP_S`` raises ``Hold.GATE``;
 - a frozen estimate (the same position and velocity again, to ``_FROZEN_M``, while the
@@ -176,9 +175,11 @@ _CONFIRM_S = 0.25
 # offset afresh (it came from a sample that waited)
 _REBASE_SAMPLES = 5
 _REBASE_S = 0.25
-# a sample stamped behind the newest taken is reordering (silent) only within this of it:
-# networks reorder by milliseconds (a second route's repeats, later by seconds, are known)
-_REORDER_S = 0.5
+# a sample stamped behind the newest taken is reordering (silent) only within this of a
+# taken one (networks reorder by milliseconds; a second route's repeats, later by seconds,
+# are known by _REPEATS_S): less than _REBASE_S, so that the vehicle's samples after a gap
+# long enough for the clock's retake are farther than this from every one taken
+_REORDER_S = 0.2
 # taken samples remembered: a new one is judged against the oldest of them too
 _REPEATS_KEPT = 8
 # ... and for this long (vehicle time), so that a repeat of one arriving late by another
@@ -774,14 +775,15 @@ class TelemetryState:
         estimate's step is then no step); off it, it is a second source of positions: the
         vehicle's own samples behind a forger's that runs ahead of them (a reviewer's at
         200 Hz, 6 ms ahead, the vehicle's 50 Hz a quarter of those taken, had steered the
-        track 15 m without a word): refused, named. So is one more than ``_REORDER_S``
-        behind the newest taken, on a path or not (the path's allowance grows with the
-        time between: a reviewer's forger retook the clock in a gap of the vehicle's
-        samples, and every one of the vehicle's, 3 s behind its stream, was then "on the
-        path" of a forged one and dropped without a word). (Repeats, later by seconds,
-        were recognised before: ``_REPEATS_S``.)"""
+        track 15 m without a word): refused, named. So is one farther than ``_REORDER_S``
+        from every sample taken in the last ``_REPEATS_S``, on a path or not (the path's
+        allowance grows with the time between: a reviewer's forger retook the clock in a
+        gap of the vehicle's samples, and every one of the vehicle's, 3 s behind its
+        stream, was then "on the path" of a forged one and dropped without a word). (A
+        sample lost on a fast route and arriving by a slow one seconds later lies between
+        two taken: reordering. Repeats were recognised before: ``_REPEATS_S``.)"""
         nearest = min(track.history.values(), key=lambda p: abs(p.boot_s - sample.boot_s))
-        if track.last.boot_s - sample.boot_s <= _REORDER_S and _on_path(
+        if abs(nearest.boot_s - sample.boot_s) <= _REORDER_S and _on_path(
             nearest, sample, self.accel_bound_m_s2
         ):
             track.step_run.clear()

@@ -10,9 +10,9 @@ companion sends. The rest of the project works in SI units and radians (see
 One idea per module: ``dialect`` (pymavlink loaded as MAVLink 2, ``ardupilotmega``),
 ``units`` (wire units, geodetic conversions on WGS84), ``projection`` (each autopilot's own
 map from latitude/longitude to its local frame), ``signing``, ``link`` (the connection),
-``logs`` (a telemetry log read back) and ``commands`` (setpoints and modes). Importing the package sets ``MAVLINK20=1`` for the
-process before pymavlink is loaded, as pymavlink chooses its wire version from that
-variable.
+``logs`` (a telemetry log read back) and ``commands`` (setpoints and modes). Importing the
+package sets ``MAVLINK20=1`` for the process before pymavlink is loaded, as pymavlink
+chooses its wire version from that variable.
 """
 
 from __future__ import annotations

@@ -171,6 +171,8 @@ def _parser() -> argparse.ArgumentParser:
         "--accel-max-m-s2", type=number_within(0.0, 1000.0, unit=" m/s^2"),
         help="the scenario's accel_max (the bound is at least twice it)",
     )  # fmt: skip
+    gate.add_argument("--system-id", type=int, help="the autopilot's system id (default: the "
+                      "first autopilot heard)")  # fmt: skip
     gate.add_argument(
         "--gate-position-m", type=number_within(0.0, 25.0, unit=" m"), default=0.5,
         help="the gate's position allowance (companion.gate_position_m; default 0.5)",
@@ -247,7 +249,8 @@ def _dispatch(args: argparse.Namespace) -> int:
     if args.command == "gate-check":
         return run_gate_check(args.tlog, accel_bound_m_s2=args.gate_accel_m_s2,
                               accel_max_m_s2=args.accel_max_m_s2,
-                              gate_position_m=args.gate_position_m)  # fmt: skip
+                              gate_position_m=args.gate_position_m,
+                              system_id=args.system_id)  # fmt: skip
     if args.command == "simulate":
         return run_simulate(
             args.config,

@@ -125,6 +125,25 @@ def test_an_answer_before_the_request_went_out_is_refused() -> None:
         peer.close()
 
 
+def test_the_vehicle_found_again_is_asked_afresh() -> None:
+    """A reviewer: the link lost while the reader asked, the tries ran out meanwhile, and
+    the vehicle's answer after it was found again was refused as too late (the abandon
+    check then ran on the default). Found again, what is unanswered is asked afresh."""
+    reader, peer, sent = _reader_and_peer()
+    try:
+        reader.ask(("GUID_TIMEOUT",), (1, 1), 0.0)
+        for k in range(8):  # six requests, unanswered (the link down), then no more
+            reader.periodic(0.5 * k)
+        assert len(sent) == 6 and reader.settled
+        reader.ask_again(10.0)  # the vehicle found again
+        reader.periodic(10.0)
+        assert len(sent) == 7 and not reader.settled
+        assert reader.take(_value("GUID_TIMEOUT", 5.0)) == "GUID_TIMEOUT"
+        assert reader.values == {"GUID_TIMEOUT": 5.0} and reader.settled
+    finally:
+        peer.close()
+
+
 def test_a_first_answer_after_the_tries_ran_out_is_refused() -> None:
     """The vehicle's answers lost, the tries ran out: a reviewer's forged first answer in
     mid-flight had been taken."""

@@ -22,23 +22,32 @@ from ezcompanion.wire import deg_to_e7, m_to_mm
 _START_S = 1.7e9  # a log's wall clock
 
 
-def _log(path: Path, *, jump_at: int | None = None, autopilot: bool = True) -> Path:
+def _log(path: Path, *, jump_at: int | None = None, autopilot: bool = True,
+         step_back_at: int | None = None, reboot_at: int | None = None) -> Path:
     vehicle, station = forger(1, 1), forger(255, 190)
     with TlogWriter(path) as log:
         log.write(frame(station, M.MAVLink_heartbeat_message(
             M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3)), _START_S)  # fmt: skip
+        beat = M.MAVLink_heartbeat_message(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                                           0, 4, 4, 3)  # fmt: skip
         if autopilot:
-            beat = M.MAVLink_heartbeat_message(M.MAV_TYPE_QUADROTOR,
-                                               M.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 4, 4, 3)
             log.write(frame(vehicle, beat), _START_S)
         log.write(frame(vehicle, M.MAVLink_gps_global_origin_message(
             deg_to_e7(ORIGIN.lat_deg), deg_to_e7(ORIGIN.lon_deg), m_to_mm(ORIGIN.alt_m), 0)),
             _START_S + 0.01)  # fmt: skip
-        for k in range(250):  # 5 s at 50 Hz, north at 5 m/s
+        clock_s, boot_ms = _START_S + 0.02, 1000
+        for k in range(250):  # 5 s at 50 Hz, north at 5 m/s, a heartbeat a second
+            if k == step_back_at:
+                clock_s -= 1.0  # the logger's wall clock set back (NTP)
+            if k == reboot_at:  # 5 s unheard, and back from a reboot, its clock afresh
+                clock_s, boot_ms = clock_s + 5.0, 500 - 20 * k
+            if autopilot and k % 50 == 49:
+                log.write(frame(vehicle, beat), clock_s)
             east = 3.0 if jump_at is not None and k >= jump_at else 0.0
-            msg = M.MAVLink_local_position_ned_message(1000 + 20 * k, 0.1 * k, east, -20.0,
+            msg = M.MAVLink_local_position_ned_message(boot_ms + 20 * k, 0.1 * k, east, -20.0,
                                                        5.0, 0.0, 0.0)  # fmt: skip
-            log.write(frame(vehicle, msg), _START_S + 0.02 + 0.02 * k)
+            log.write(frame(vehicle, msg), clock_s)
+            clock_s += 0.02
     return path
 
 
@@ -50,7 +59,7 @@ def test_a_clean_flight_passes(tmp_path: Path, capsys: pytest.CaptureFixture[str
     assert main(["gate-check", str(log)]) == ExitCode.OK
     out = capsys.readouterr().out
     assert "vehicle 1/1 (ArduCopter), acceleration bound 5.66 m/s^2" in out
-    assert "refused: none" in out and "named: 0" in out
+    assert "refused: none" in out and "named: 0" in out and "3 s): 0 times" in out
 
 
 def test_a_jump_is_named_and_fails(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -72,3 +81,20 @@ def test_a_log_with_no_autopilot_or_no_file_says_so(
     assert "no autopilot heartbeat in the log" in capsys.readouterr().out
     assert main(["gate-check", str(tmp_path / "none.tlog")]) == ExitCode.IO_ERROR
     assert "none.tlog: no such telemetry log" in capsys.readouterr().err
+
+
+def test_a_clock_set_back_a_lost_link_and_an_odd_file_name_are_read_as_the_service_would(
+    tmp_path: Path,
+) -> None:
+    """A reviewer: the logger's wall clock stepping back 1 s gave 75 refusals "ahead" (the
+    service's clock never goes back); a log of a vehicle unheard for 20 s and rebooted gave
+    156 (the service judges the positions afresh after a lost link); and a log under a
+    /bin/ path, or named .log, was opened by its name's rules (run as a program)."""
+    report = check_tlog(_log(tmp_path / "stepback.tlog", step_back_at=120))
+    assert report.clean and report.used["LOCAL_POSITION_NED"] == 250
+    report = check_tlog(_log(tmp_path / "reboot.tlog", reboot_at=120))
+    assert report.clean and report.lost == 1
+    odd = tmp_path / "bin" / "flight.log"
+    odd.parent.mkdir()
+    odd.write_bytes(_log(tmp_path / "plain.tlog").read_bytes())
+    assert check_tlog(odd).used["LOCAL_POSITION_NED"] == 250

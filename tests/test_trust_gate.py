@@ -25,6 +25,7 @@ from ezcompanion.records import Hold
 from ezcompanion.service.demo import judge_truth
 from ezcompanion.service.events import EventKind
 from ezcompanion.service.loop import GuidanceLoop
+from ezcompanion.service.session import gate_bound_m_s2
 from ezcompanion.wire import deg_to_e7, m_to_mm, mavlink, ned_to_geodetic
 
 DT_S = 0.02  # 50 Hz
@@ -303,6 +304,13 @@ def test_the_gates_bound_is_at_least_what_the_autopilot_flies(
         told = M.MAVLink_param_value_message(b"ANGLE_MAX", 8000.0, M.MAV_PARAM_TYPE_REAL32, 1, 0)
         session.on_frame(vehicle_frame(told), 0.5)
         assert session.telemetry.accel_bound_m_s2 == pytest.approx(bound_m_s2)
+
+
+def test_the_gates_bound_is_never_wider_than_a_user_may_set() -> None:
+    """A reviewer: with gate_accel_m_s2 at most 50, a scenario's accel_max of 400 still made
+    the bound 800 (twice it), and a forger's velocity turned 0.8 m/s was taken."""
+    assert gate_bound_m_s2(0.0, 400.0) == 50.0
+    assert gate_bound_m_s2(0.0, 1.0) == 2.0 and gate_bound_m_s2(3.0, 400.0) == 3.0
 
 
 def test_a_planes_bound_is_its_measured_turn_at_its_default_roll_limit() -> None:

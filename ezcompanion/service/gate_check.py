@@ -15,6 +15,7 @@ This is how the tolerances were measured against ArduCopter, ArduPlane and PX4 S
 
 from __future__ import annotations
 
+import math
 import re
 from collections import Counter
 from dataclasses import dataclass, field
@@ -22,6 +23,8 @@ from pathlib import Path
 
 from ezcompanion.config import GeoOrigin
 from ezcompanion.service.autopilots import autopilot_profile
+from ezcompanion.service.session import gate_bound_m_s2
+from ezcompanion.service.settings import CompanionSettings
 from ezcompanion.service.state import TelemetryState
 from ezcompanion.wire import Projection, e7_to_deg, mavlink, mm_to_m
 from ezcompanion.wire.logs import read_tlog
@@ -30,6 +33,9 @@ __all__ = ["GateReport", "check_tlog"]
 
 _FED = ("LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "GPS_GLOBAL_ORIGIN")
 _EXAMPLES = 3
+# the service's default: no heartbeat of the vehicle's for this long is a lost link, after
+# which its positions are judged afresh (TelemetryState.forget_motion)
+_LINK_LOST_S = CompanionSettings.link_lost_after_s
 
 
 @dataclass
@@ -42,6 +48,7 @@ class GateReport:
     used: Counter[str] = field(default_factory=Counter)
     refused: Counter[str] = field(default_factory=Counter)
     skipped: int = 0
+    lost: int = 0  # links lost (no heartbeat for _LINK_LOST_S): positions judged afresh
     # each reason (numbers masked), how often, and its first few in full with their times
     reasons: Counter[str] = field(default_factory=Counter)
     examples: dict[str, list[str]] = field(default_factory=dict)
@@ -60,7 +67,8 @@ class GateReport:
         out = [f"vehicle {self.vehicle[0]}/{self.vehicle[1]} ({self.autopilot}), acceleration "
                f"bound {self.accel_bound_m_s2:.2f} m/s^2",
                "used: " + _counts(self.used) + f"; skipped {self.skipped} global positions "
-               "(the local one fresh)",
+               f"(the local one fresh); link lost (no heartbeat for {_LINK_LOST_S:g} s): "
+               f"{self.lost} times",
                "refused: " + (_counts(self.refused) or "none") + " (without an alarm where "
                "none is named below: out of range, before a fix, frozen or repeated)",
                f"named: {self.reasons.total()} (each holds guidance 0.5 s; for 3 s without a "
@@ -72,30 +80,52 @@ class GateReport:
 
 
 def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
-               accel_max_m_s2: float | None = None,
-               gate_position_m: float = 0.5) -> GateReport:  # fmt: skip
-    """The gate's verdict on the positions in the tlog at ``path``. The bound: the one
-    given, else what the service would take for the autopilot found (its tilt limit's, and
-    at least twice ``accel_max_m_s2`` where given)."""
+               accel_max_m_s2: float | None = None, gate_position_m: float = 0.5,
+               system_id: int | None = None) -> GateReport:  # fmt: skip
+    """The gate's verdict on the positions in the tlog at ``path``, of the first autopilot
+    heard (of ``system_id``, if given). The bound: the one given, else what the service
+    would take for that autopilot (its tilt limit's, and at least twice ``accel_max_m_s2``
+    where given). As the service: a heartbeat after ``_LINK_LOST_S`` without one is a link
+    found again, the positions judged afresh; and the log's times (the logger's wall clock)
+    are taken as never going back (the service's clock is monotonic)."""
     report = GateReport()
     state: TelemetryState | None = None
     first_s: float | None = None
+    shift_s = 0.0  # what the logger's clock stepped back by, in all
+    last_s = -math.inf
+    heartbeat_s = -math.inf
+    lost = False
     for logged_s, msg in read_tlog(path):
+        if logged_s + shift_s < last_s:
+            shift_s = last_s - logged_s
+        last_s = logged_s + shift_s
         kind = msg.get_type()
         source = (msg.get_srcSystem(), msg.get_srcComponent())
         if report.vehicle is None:
             if kind != "HEARTBEAT" or msg.type in (
                 mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER
-            ) or msg.autopilot == mavlink.MAV_AUTOPILOT_INVALID:  # fmt: skip
+            ) or msg.autopilot == mavlink.MAV_AUTOPILOT_INVALID or (
+                system_id is not None and source[0] != system_id
+            ):  # fmt: skip
                 continue
             profile = autopilot_profile(msg)
-            bound = accel_bound_m_s2 or max(profile.manoeuvre_accel_m_s2,
-                                            2.0 * (accel_max_m_s2 or 0.0))  # fmt: skip
-            report.vehicle, report.autopilot, report.accel_bound_m_s2 = (
-                source, profile.name, bound)
+            report.vehicle, report.autopilot = source, profile.name
+            report.accel_bound_m_s2 = gate_bound_m_s2(accel_bound_m_s2 or 0.0,
+                                                      accel_max_m_s2 or 0.0, profile)  # fmt: skip
             projection = Projection.of_autopilot(int(msg.autopilot))
+            heartbeat_s = last_s
             continue
-        if source != report.vehicle or kind not in _FED:
+        if source != report.vehicle:
+            continue
+        if last_s - heartbeat_s > _LINK_LOST_S and not lost:
+            lost = True  # as the service: the link lost, what the vehicle did meanwhile
+            report.lost += 1  # unknown; nothing taken until it is found again
+            if state is not None:
+                state.forget_motion()
+        if kind == "HEARTBEAT":
+            lost, heartbeat_s = False, last_s
+            continue
+        if kind not in _FED or lost:
             continue
         if state is None:  # the scenario's origin is the vehicle's own, when it tells it
             if kind != "GPS_GLOBAL_ORIGIN":
@@ -106,9 +136,9 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
                 origin=origin, accel_bound_m_s2=report.accel_bound_m_s2,
                 projection=projection, gate_position_m=gate_position_m,
             )  # fmt: skip
-            first_s = logged_s
+            first_s = last_s
         assert first_s is not None
-        now_s = logged_s - first_s
+        now_s = last_s - first_s
         used = state.update(msg, now_s, kind)
         if used is not None:
             report.used[used] += 1

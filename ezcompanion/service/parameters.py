@@ -70,6 +70,18 @@ class ParameterReader:
         self._tries = 0
         self._next_s = now
 
+    def ask_again(self, now: float) -> None:
+        """Ask afresh for what is still unanswered (the vehicle found again after a lost
+        link): the tries start over, and answers count again."""
+        if self._target is not None and self.unanswered:
+            self._tries = 0
+            self._next_s = now
+
+    @property
+    def unanswered(self) -> list[str]:
+        """The names asked for and not answered yet."""
+        return self._missing()
+
     @property
     def settled(self) -> bool:
         """Every name asked for is answered, or the tries ran out."""

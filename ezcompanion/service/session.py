@@ -58,7 +58,7 @@ from ezcompanion.records import EventKind, Hold
 from ezcompanion.service.autopilots import AutopilotProfile, autopilot_profile
 from ezcompanion.service.events import EventLog
 from ezcompanion.service.parameters import ParameterReader
-from ezcompanion.service.settings import CompanionSettings, SetpointKind
+from ezcompanion.service.settings import GATE_ACCEL_MAX_M_S2, CompanionSettings, SetpointKind
 from ezcompanion.service.state import TelemetryState
 from ezcompanion.service.statustext import StatusTextAssembler
 from ezcompanion.service.streams import POSITIONS, StreamRequests
@@ -75,7 +75,7 @@ from ezcompanion.wire import (
     mode_name,
 )
 
-__all__ = ["POSITIONS", "VehicleSession"]
+__all__ = ["POSITIONS", "VehicleSession", "gate_bound_m_s2"]
 
 _ENGAGE_RETRY_S = 1.0
 # after a mode request's accepted ack, its heartbeat is asked for this much later: PX4
@@ -98,6 +98,18 @@ _REBOOT_SILENCE_S = 1.5
 _REBOOT_SILENCE_PERIODS = 3.0
 
 
+def gate_bound_m_s2(given_m_s2: float, accel_max_m_s2: float,
+                    profile: AutopilotProfile | None = None) -> float:  # fmt: skip
+    """The estimate gate's acceleration bound: the user's (``gate_accel_m_s2``), else twice
+    the scenario's ``accel_max`` and at least what the vehicle's autopilot flies by default
+    (``profile``, once known); never more than a user may set (a scenario's accel_max of
+    400 had made it 800, the gate off in all but name)."""
+    if given_m_s2:
+        return given_m_s2
+    least = 0.0 if profile is None else profile.manoeuvre_accel_m_s2
+    return min(GATE_ACCEL_MAX_M_S2, max(2.0 * accel_max_m_s2, least))
+
+
 class VehicleSession(StreamRequests):
     """What the service knows of the vehicle, from the frames it hears."""
 
@@ -110,13 +122,15 @@ class VehicleSession(StreamRequests):
         send: Callable[[Message], object],
     ) -> None:
         self.settings = settings
+        self._accel_max_m_s2 = scenario.guidance.accel_max_m_s2
         self.events = events
         self._link = link
         self._send = send
         self.telemetry = TelemetryState(
             origin=scenario.origin,
             adopt_origin=not scenario.origin_given,
-            accel_bound_m_s2=settings.gate_accel_m_s2 or 2.0 * scenario.guidance.accel_max_m_s2,
+            accel_bound_m_s2=gate_bound_m_s2(settings.gate_accel_m_s2,
+                                             scenario.guidance.accel_max_m_s2),
             gate_position_m=settings.gate_position_m,
             stale_after_s=settings.stale_after_s,
         )
@@ -332,9 +346,8 @@ class VehicleSession(StreamRequests):
             # its global positions are compared with its local ones as it maps them
             self.telemetry.projection = Projection.of_autopilot(int(msg.autopilot))
             profile = autopilot_profile(msg)
-            if not self.settings.gate_accel_m_s2:  # at least what its autopilot flies
-                self.telemetry.accel_bound_m_s2 = max(self.telemetry.accel_bound_m_s2,
-                                                      profile.manoeuvre_accel_m_s2)  # fmt: skip
+            self.telemetry.accel_bound_m_s2 = gate_bound_m_s2(
+                self.settings.gate_accel_m_s2, self._accel_max_m_s2, profile)
             names = (profile.parameter_names if self.settings.abandon_check
                      else profile.steering_parameter_names)  # fmt: skip
             if names:
@@ -347,6 +360,9 @@ class VehicleSession(StreamRequests):
                 system=source[0],
                 component=source[1],
             )
+        elif self.parameters.unanswered:  # found again, after a lost link:
+            self.parameters.ask_again(now)  # what is still unanswered, afresh (a reviewer's
+            # link lost while asking: the vehicle's later answer was refused as too late)
         self._judge.lock(msg)
         self._take_heartbeat(msg, now)
 

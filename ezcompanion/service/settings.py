@@ -55,6 +55,7 @@ from ezcompanion.wire import (
 )
 
 __all__ = [
+    "GATE_ACCEL_MAX_M_S2",
     "SIGNING_ENV",
     "CompanionSettings",
     "OnExit",
@@ -67,7 +68,7 @@ __all__ = [
 _ON_EXIT = "hold, loiter, rtl, none or default"
 # the estimate gate's widest settings (see CompanionSettings.__post_init__)
 _GATE_POSITION_MAX_M = 25.0
-_GATE_ACCEL_MAX_M_S2 = 50.0
+GATE_ACCEL_MAX_M_S2 = 50.0
 
 #: Environment variables a signing key may come from (hex key, passphrase).
 SIGNING_ENV = ("EZCOMPANION_SIGNING_KEY", "EZCOMPANION_SIGNING_PASSPHRASE")
@@ -156,7 +157,7 @@ class CompanionSettings:
         # its estimate and resets onto the GPS (EK3_GLITCH_RAD's default), an acceleration
         # bound above 5 g, which no multirotor or small plane reaches.
         for name, most in (("gate_position_m", _GATE_POSITION_MAX_M),
-                           ("gate_accel_m_s2", _GATE_ACCEL_MAX_M_S2)):  # fmt: skip
+                           ("gate_accel_m_s2", GATE_ACCEL_MAX_M_S2)):  # fmt: skip
             if getattr(self, name) > most:
                 raise ConfigError(name, getattr(self, name), f"must be at most {most:g}")
         if not 1.0 <= self.loop_rate_hz <= 1000.0:

@@ -136,6 +136,10 @@ def test_the_vehicle_found_again_is_asked_afresh() -> None:
             reader.periodic(0.5 * k)
         assert len(sent) == 6 and reader.settled
         reader.ask_again(10.0)  # the vehicle found again
+        # an answer before the re-lock's own request (a reviewer's, in the datagram of the
+        # heartbeat that re-locked) is refused as before the first
+        assert reader.take(_value("GUID_TIMEOUT", 0.1)) is None
+        assert reader.refused[-1] == "GUID_TIMEOUT = 0.1 before it was asked for: refused"
         reader.periodic(10.0)
         assert len(sent) == 7 and not reader.settled
         assert reader.take(_value("GUID_TIMEOUT", 5.0)) == "GUID_TIMEOUT"

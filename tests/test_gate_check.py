@@ -23,7 +23,8 @@ _START_S = 1.7e9  # a log's wall clock
 
 
 def _log(path: Path, *, jump_at: int | None = None, autopilot: bool = True,
-         step_back_at: int | None = None, reboot_at: int | None = None) -> Path:
+         step_back_at: int | None = None, reboot_at: int | None = None,
+         attitude_ahead_ms: int | None = None) -> Path:
     vehicle, station = forger(1, 1), forger(255, 190)
     with TlogWriter(path) as log:
         log.write(frame(station, M.MAVLink_heartbeat_message(
@@ -47,6 +48,10 @@ def _log(path: Path, *, jump_at: int | None = None, autopilot: bool = True,
             msg = M.MAVLink_local_position_ned_message(boot_ms + 20 * k, 0.1 * k, east, -20.0,
                                                        5.0, 0.0, 0.0)  # fmt: skip
             log.write(frame(vehicle, msg), clock_s)
+            if attitude_ahead_ms is not None:
+                attitude = M.MAVLink_attitude_message(boot_ms + 20 * k + attitude_ahead_ms,
+                                                      0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # fmt: skip
+                log.write(frame(vehicle, attitude), clock_s + 0.001)
             clock_s += 0.02
     return path
 
@@ -98,3 +103,12 @@ def test_a_clock_set_back_a_lost_link_and_an_odd_file_name_are_read_as_the_servi
     odd.parent.mkdir()
     odd.write_bytes(_log(tmp_path / "plain.tlog").read_bytes())
     assert check_tlog(odd).used["LOCAL_POSITION_NED"] == 250
+
+
+def test_attitudes_stamped_ahead_are_named_as_the_service_names_them(tmp_path: Path) -> None:
+    """A reviewer: a log whose ATTITUDE was stamped 0.3 s ahead of the positions read clean,
+    where the service's TelemetryState named every one (gate-check fed it positions only)."""
+    assert check_tlog(_log(tmp_path / "attitude.tlog", attitude_ahead_ms=5)).clean
+    report = check_tlog(_log(tmp_path / "ahead.tlog", attitude_ahead_ms=300))
+    assert not report.clean
+    assert any(reason.startswith("attitude sample stamped") for reason in report.reasons)

@@ -647,6 +647,24 @@ def test_a_sample_lost_on_the_fast_route_and_late_on_the_slow_one_is_reordering(
     assert not refusals, refusals[:2]
 
 
+@pytest.mark.parametrize("jitter_ms", [0, 10])
+def test_a_5_hz_stream_reordered_by_one_is_reordering(jitter_ms: int) -> None:
+    """A reviewer: at 5 Hz, neighbours 0.2 s apart sat on the reordering window's edge, and
+    4 to 6 of 20 samples reordered by one place were named a second source."""
+    t = known_origin()
+    arrivals = []
+    for k in range(100):  # 20 s at 5 Hz, north at 1 m/s, every tenth late by one place
+        boot = 1000 + 200 * k + (jitter_ms if k % 2 else -jitter_ms)
+        arrivals.append((boot / 1000 + (0.25 if k % 10 == 5 else 0.005), boot, boot / 1000))
+    refusals = []
+    for at, boot, north in sorted(arrivals):
+        t.update(local(boot, north, 0.0), at)
+        refusal = t.take_refusal()
+        if refusal is not None:
+            refusals.append(refusal[1])
+    assert not refusals, refusals[:2]
+
+
 @pytest.mark.parametrize("lag_s", [1.4, 4.5])
 def test_late_copies_of_skipped_global_positions_are_skipped_again(lag_s: float) -> None:
     """A reviewer: local and global positions at 50 Hz by two routes, the second lagging by

@@ -31,7 +31,9 @@ from ezcompanion.wire.logs import read_tlog
 
 __all__ = ["GateReport", "check_tlog"]
 
-_FED = ("LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "GPS_GLOBAL_ORIGIN")
+# what the service's TelemetryState judges (ATTITUDE too: a stamp ahead of the clock, or
+# going back, is named; a reviewer's log of attitudes 0.3 s ahead read clean)
+_FED = ("LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "GPS_GLOBAL_ORIGIN", "ATTITUDE")
 _EXAMPLES = 3
 # the service's default: no heartbeat of the vehicle's for this long is a lost link, after
 # which its positions are judged afresh (TelemetryState.forget_motion)
@@ -107,7 +109,7 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
             ) or msg.autopilot == mavlink.MAV_AUTOPILOT_INVALID or (
                 system_id is not None and source[0] != system_id
             ):  # fmt: skip
-                continue
+                continue  # (as the service's session: a ground station's is no vehicle's)
             profile = autopilot_profile(msg)
             report.vehicle, report.autopilot = source, profile.name
             report.accel_bound_m_s2 = gate_bound_m_s2(accel_bound_m_s2 or 0.0,
@@ -123,7 +125,8 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
             if state is not None:
                 state.forget_motion()
         if kind == "HEARTBEAT":
-            lost, heartbeat_s = False, last_s
+            if msg.type not in (mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER):
+                lost, heartbeat_s = False, last_s
             continue
         if kind not in _FED or lost:
             continue

@@ -76,6 +76,9 @@ class ParameterReader:
         if self._target is not None and self.unanswered:
             self._tries = 0
             self._next_s = now
+            # (an answer counts only after this re-lock's own request: a reviewer's forged
+            # answer, in the datagram of the heartbeat that re-locked, had been taken)
+            self._asked.difference_update(self.unanswered)
 
     @property
     def unanswered(self) -> list[str]:

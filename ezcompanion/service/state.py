@@ -179,7 +179,7 @@ _REBASE_S = 0.25
 # taken one (networks reorder by milliseconds; a second route's repeats, later by seconds,
 # are known by _REPEATS_S): less than _REBASE_S, so that the vehicle's samples after a gap
 # long enough for the clock's retake are farther than this from every one taken
-_REORDER_S = 0.2
+_REORDER_S = 0.22  # (a 5 Hz stream's neighbours, 0.2 s and a little jitter, are within)
 # taken samples remembered: a new one is judged against the oldest of them too
 _REPEATS_KEPT = 8
 # ... and for this long (vehicle time), so that a repeat of one arriving late by another

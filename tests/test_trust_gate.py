@@ -46,6 +46,18 @@ def fly_track(
     return used, (north, east, course)
 
 
+def feed(t: Any, arrivals: list[tuple[float, Any]]) -> tuple[list[str], int]:
+    """Each (arrival time, frame) in the order of arrival: the refusals named, and how many
+    frames were taken."""
+    refusals, taken = [], 0
+    for at, frame in sorted(arrivals, key=lambda a: a[0]):
+        taken += t.update(frame, at) is not None
+        refusal = t.take_refusal()
+        if refusal is not None:
+            refusals.append(refusal[1])
+    return refusals, taken
+
+
 @settings(max_examples=40, deadline=None)
 @given(st.lists(st.floats(-1.0, 1.0), min_size=5, max_size=200))
 def test_a_smooth_track_within_the_bound_always_passes(turn_rates: list[float]) -> None:
@@ -584,19 +596,13 @@ def test_two_routes_one_lossy_are_not_a_second_source() -> None:
     arrives on the second after the first's next, behind the newest taken and no repeat of
     one taken; refused as a second source 48 times in 10 s. Behind samples are a second
     source only beyond 30% of those taken in the second."""
-    t = known_origin()
     arrivals = []
     for k in range(500):  # 10 s at 50 Hz
         boot, north, sent = 1000 + 20 * k, 0.02 * k, 1.0 + 0.02 * k
         if k % 10 != 5:
-            arrivals.append((sent + 0.002, boot, north))
-        arrivals.append((sent + 0.030, boot, north))
-    refusals = []
-    for at, boot, north in sorted(arrivals):
-        t.update(local(boot, north, 0.0), at)
-        refusal = t.take_refusal()
-        if refusal is not None:
-            refusals.append(refusal[1])
+            arrivals.append((sent + 0.002, local(boot, north, 0.0)))
+        arrivals.append((sent + 0.030, local(boot, north, 0.0)))
+    refusals, _ = feed(known_origin(), arrivals)
     assert not refusals, refusals[:2]
 
 
@@ -606,19 +612,13 @@ def test_a_second_route_lagging_by_seconds_repeats_and_is_no_second_source(lag_s
     buffers), at 50 Hz: once a sample stamped more than 0.5 s from every taken one became a
     second source, 967 of 1,000 repeats were named. A repeat of any sample taken in the last
     5 s is a repeat, silently."""
-    t = known_origin()
     arrivals = []
     for k in range(500):  # 10 s at 50 Hz, 5 m/s on a circle of 20 m (1.25 m/s^2)
         boot, sent, angle = 1000 + 20 * k, 1.0 + 0.02 * k, 0.02 * k * 0.25
-        sample = (boot, 20.0 * math.sin(angle), 20.0 - 20.0 * math.cos(angle),
-                  5.0 * math.cos(angle), 5.0 * math.sin(angle))  # fmt: skip
+        sample = local(boot, 20.0 * math.sin(angle), 20.0 - 20.0 * math.cos(angle),
+                       5.0 * math.cos(angle), 5.0 * math.sin(angle))  # fmt: skip
         arrivals += [(sent + 0.005, sample), (sent + lag_s, sample)]
-    refusals, taken = [], 0
-    for at, (boot, north, east, vn, ve) in sorted(arrivals):
-        taken += t.update(local(boot, north, east, vn, ve), at) is not None
-        refusal = t.take_refusal()
-        if refusal is not None:
-            refusals.append(refusal[1])
+    refusals, taken = feed(known_origin(), arrivals)
     assert not refusals and taken == 500, refusals[:2]
 
 
@@ -631,19 +631,13 @@ def test_a_sample_lost_on_the_fast_route_and_late_on_the_slow_one_is_reordering(
     the newest by the lag and no repeat of one taken: 53 named in 20 s (guidance ended)
     while a sample more than 0.5 s behind the newest was no reordering. It lies between two
     taken samples, on their path: reordering, silently."""
-    t = known_origin()
     arrivals = []
     for k in range(500):  # 10 s at 50 Hz, north at 1 m/s
         boot, sent = 1000 + 20 * k, 1.0 + 0.02 * k
         if k % 20 != 7:  # lost on the fast route
-            arrivals.append((sent + 0.005, boot, 0.02 * k))
-        arrivals.append((sent + lag_s, boot, 0.02 * k))
-    refusals = []
-    for at, boot, north in sorted(arrivals):
-        t.update(local(boot, north, 0.0), at)
-        refusal = t.take_refusal()
-        if refusal is not None:
-            refusals.append(refusal[1])
+            arrivals.append((sent + 0.005, local(boot, 0.02 * k, 0.0)))
+        arrivals.append((sent + lag_s, local(boot, 0.02 * k, 0.0)))
+    refusals, _ = feed(known_origin(), arrivals)
     assert not refusals, refusals[:2]
 
 
@@ -651,17 +645,12 @@ def test_a_sample_lost_on_the_fast_route_and_late_on_the_slow_one_is_reordering(
 def test_a_5_hz_stream_reordered_by_one_is_reordering(jitter_ms: int) -> None:
     """A reviewer: at 5 Hz, neighbours 0.2 s apart sat on the reordering window's edge, and
     4 to 6 of 20 samples reordered by one place were named a second source."""
-    t = known_origin()
     arrivals = []
     for k in range(100):  # 20 s at 5 Hz, north at 1 m/s, every tenth late by one place
         boot = 1000 + 200 * k + (jitter_ms if k % 2 else -jitter_ms)
-        arrivals.append((boot / 1000 + (0.25 if k % 10 == 5 else 0.005), boot, boot / 1000))
-    refusals = []
-    for at, boot, north in sorted(arrivals):
-        t.update(local(boot, north, 0.0), at)
-        refusal = t.take_refusal()
-        if refusal is not None:
-            refusals.append(refusal[1])
+        arrivals.append((boot / 1000 + (0.25 if k % 10 == 5 else 0.005),
+                         local(boot, boot / 1000, 0.0)))  # fmt: skip
+    refusals, _ = feed(known_origin(), arrivals)
     assert not refusals, refusals[:2]
 
 
@@ -685,12 +674,7 @@ def test_late_copies_of_skipped_global_positions_are_skipped_again(lag_s: float)
             round(vn * 100), round(ve * 100), 0, 0)]  # fmt: skip
         arrivals += [(boot / 1000 + 0.005 + 0.001 * i, f) for i, f in enumerate(frames)]
         arrivals += [(boot / 1000 + lag_s + 0.001 * i, f) for i, f in enumerate(frames)]
-    refusals = []
-    for at, frame in sorted(arrivals, key=lambda a: a[0]):
-        t.update(frame, at)
-        refusal = t.take_refusal()
-        if refusal is not None:
-            refusals.append(refusal[1])
+    refusals, _ = feed(t, arrivals)
     assert t.skipped > 400 and not refusals, refusals[:2]
 
 

@@ -26,7 +26,7 @@ from ezcompanion.service.autopilots import autopilot_profile
 from ezcompanion.service.session import gate_bound_m_s2
 from ezcompanion.service.settings import CompanionSettings
 from ezcompanion.service.state import TelemetryState
-from ezcompanion.wire import Projection, e7_to_deg, mavlink, mm_to_m
+from ezcompanion.wire import Message, Projection, e7_to_deg, mavlink, mm_to_m
 from ezcompanion.wire.logs import read_tlog
 
 __all__ = ["GateReport", "check_tlog"]
@@ -87,9 +87,10 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
     """The gate's verdict on the positions in the tlog at ``path``, of the first autopilot
     heard (of ``system_id``, if given). The bound: the one given, else what the service
     would take for that autopilot (its tilt limit's, and at least twice ``accel_max_m_s2``
-    where given). As the service: a heartbeat after ``_LINK_LOST_S`` without one is a link
-    found again, the positions judged afresh; and the log's times (the logger's wall clock)
-    are taken as never going back (the service's clock is monotonic)."""
+    where given). As the service: ``_LINK_LOST_S`` without an autopilot heartbeat is a
+    lost link, nothing is taken until the next, and the positions are judged afresh after
+    it; and the log's times (the logger's wall clock) are taken as never going back (the
+    service's clock is monotonic)."""
     report = GateReport()
     state: TelemetryState | None = None
     first_s: float | None = None
@@ -104,12 +105,10 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
         kind = msg.get_type()
         source = (msg.get_srcSystem(), msg.get_srcComponent())
         if report.vehicle is None:
-            if kind != "HEARTBEAT" or msg.type in (
-                mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER
-            ) or msg.autopilot == mavlink.MAV_AUTOPILOT_INVALID or (
+            if kind != "HEARTBEAT" or not _an_autopilots(msg) or (
                 system_id is not None and source[0] != system_id
             ):  # fmt: skip
-                continue  # (as the service's session: a ground station's is no vehicle's)
+                continue
             profile = autopilot_profile(msg)
             report.vehicle, report.autopilot = source, profile.name
             report.accel_bound_m_s2 = gate_bound_m_s2(accel_bound_m_s2 or 0.0,
@@ -125,7 +124,7 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
             if state is not None:
                 state.forget_motion()
         if kind == "HEARTBEAT":
-            if msg.type not in (mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER):
+            if _an_autopilots(msg):
                 lost, heartbeat_s = False, last_s
             continue
         if kind not in _FED or lost:
@@ -156,6 +155,13 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
         report.refused.update(state.refused)
         report.skipped = state.skipped
     return report
+
+
+def _an_autopilots(heartbeat: Message) -> bool:
+    """An autopilot's heartbeat, as the service's session takes one (a ground station's or
+    a companion's is no vehicle's)."""
+    return heartbeat.type not in (mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER) and (
+        heartbeat.autopilot != mavlink.MAV_AUTOPILOT_INVALID)
 
 
 def _counts(counter: Counter[str]) -> str:

@@ -365,6 +365,36 @@ def test_a_copter_braking_as_its_autopilot_does_is_taken(brake_m_s2: float) -> N
         assert all(u == "LOCAL_POSITION_NED" for u in used), used
 
 
+def _attitude(boot_ms: int, yaw: float, rate: float = 0.0) -> Any:
+    return mavlink.MAVLink_attitude_message(boot_ms, 0.0, 0.0, yaw, 0.0, 0.0, rate)
+
+
+def test_a_forged_yaw_is_named_and_a_yaw_reset_is_taken_again() -> None:
+    """A reviewer: an ATTITUDE 90 degrees off, stamped 1 to 99 ms after each of the
+    vehicle's, was taken and read by 894 of 895 ticks (the yaw stands in for the course at
+    rest). A yaw keeps to its rate's path within 12 degrees (and what 10 rad/s^2 allows
+    over the gap); an estimate whose yaw reset (ArduCopter's in-flight alignment: 20
+    degrees) is taken again, named, once it has kept to its new path for 0.25 s."""
+    t = known_origin()
+    named = []
+    for k in range(100):  # 2 s at 50 Hz, turning at 0.5 rad/s, a forged yaw between each
+        boot = 1000 + 20 * k
+        assert t.update(_attitude(boot, 0.01 * k, 0.5), 1.0 + 0.02 * k) == "ATTITUDE"
+        assert t.take_refusal() is None
+        assert t.update(_attitude(boot + 5, 0.01 * k + 1.57, 0.5), 1.005 + 0.02 * k) is None
+        named.append(t.take_refusal())
+    assert all(r is not None and r[1].startswith("attitude yaw") for r in named)
+    used, whys = [], []
+    for k in range(100, 150):  # the estimate's yaw reset by 20 degrees, turning on
+        boot, yaw = 1000 + 20 * k, 0.01 * k + math.radians(20.0)
+        used.append(t.update(_attitude(boot, yaw, 0.5), 1.0 + 0.02 * k))
+        refusal = t.take_refusal()
+        whys.append("" if refusal is None else refusal[1])
+    first = used.index("ATTITUDE")
+    assert 12 <= first <= 14 and all(u == "ATTITUDE" for u in used[first:]), used
+    assert whys[first].startswith("attitude yaw stepped 20.0 deg"), whys[first]
+
+
 def test_a_late_repeat_of_a_sample_taken_is_no_second_source() -> None:
     """A reviewer: two routes to the vehicle (mavlink-router, MAVProxy: no de-duplication by
     default) deliver each sample twice, one copy late, after the next sample; a late copy

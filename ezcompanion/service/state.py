@@ -75,6 +75,9 @@ prediction goes on through it, below):
   taken again once its samples have kept to the new path for ``_STEP_RUN_S``.
 - after a lost link or the latch, a new source is used once its samples have come for
   ``_CONFIRM_S``.
+- an attitude whose yaw leaves the path of the last taken (their rates, trapezoid) by more
+  than ``_YAW_STEP_RAD`` and what ``_YAW_ACCEL_RAD_S2`` allows over the gap (``Hold.GATE``);
+  a yaw reset is taken again, named, as a position's step is.
 - local and global disagreeing (``Hold.DISAGREE``): when both are fresh, each new sample is
   compared with the other source propagated to its time stamp.
 
@@ -180,6 +183,13 @@ _REBASE_S = 0.25
 # are known by _REPEATS_S): less than _REBASE_S, so that the vehicle's samples after a gap
 # long enough for the clock's retake are farther than this from every one taken
 _REORDER_S = 0.22  # (a 5 Hz stream's neighbours, 0.2 s and a little jitter, are within)
+# an attitude's yaw may leave the path of the one before it (their rates, trapezoid) by
+# this, and what this yaw acceleration allows over the time between (s^2 / 2): ArduPlane's
+# and PX4 SIH's yaw kept to it within 7 degrees over 0.1 s in hard turns, ArduCopter's
+# within 0.09 degrees a sample at the p99 (20 at its in-flight yaw alignment: a reset)
+_YAW_STEP_RAD = math.radians(12.0)
+_YAW_ACCEL_RAD_S2 = 10.0
+_YAW_GAP_S = 0.1  # ... over at most this (a 10 Hz stream's period)
 # taken samples remembered: a new one is judged against the oldest of them too
 _REPEATS_KEPT = 8
 # ... and for this long (vehicle time), so that a repeat of one arriving late by another
@@ -361,6 +371,10 @@ class TelemetryState:
     _tracks: dict[str, _Track] = field(default_factory=dict)
     _clock: _VehicleClock = field(default_factory=_VehicleClock)
     _yaw_rad: float = 0.0
+    _yaw_rate_rad_s: float = 0.0
+    # attitudes off the yaw path of the last taken, each on the path of the one before
+    # (our clock, (stamp, yaw, rate)): an estimate whose yaw reset, taken after _STEP_RUN_S
+    _yaw_run: list[tuple[float, tuple[float, float, float]]] = field(default_factory=list)
     _attitude_s: float = -math.inf
     _attitude_boot_s: float = -math.inf
     _local_offset: tuple[float, float, float] | None = None  # vehicle origin in ours
@@ -410,6 +424,7 @@ class TelemetryState:
         self._skipped_seen.clear()
         self._clock = _VehicleClock()
         self._attitude_s = self._attitude_boot_s = -math.inf
+        self._yaw_run.clear()
         self._refusal = None
         self._relinked = True
 
@@ -548,11 +563,45 @@ class TelemetryState:
             return False  # duplicated or reordered
         if not self._stamp_ok("attitude", boot_s, now_s, position=False):
             return False
-        self._yaw_rad, self._attitude_boot_s = msg.yaw, boot_s
+        rate = float(msg.yawspeed) if is_finite(msg.yawspeed) else 0.0
+        if last > -math.inf and not self._on_yaw_path(msg.yaw, rate, boot_s, now_s):
+            return False
+        self._yaw_rad, self._attitude_boot_s, self._yaw_rate_rad_s = msg.yaw, boot_s, rate
         # (only positions, which pass the gate, move the vehicle's clock: a forger's
         # attitudes, each a little ahead, would otherwise age every genuine position)
         self._attitude_s = self._sent_s(boot_s, now_s)
         return True
+
+    def _on_yaw_path(self, yaw: float, rate: float, boot_s: float, now_s: float) -> bool:
+        """The yaw keeps to the path of the last taken (their rates, trapezoid), within
+        ``_YAW_STEP_RAD`` and what ``_YAW_ACCEL_RAD_S2`` allows over the time between; an
+        estimate whose yaw reset is taken again, named, once its samples have kept to the
+        new path for ``_STEP_RUN_S`` with none on the old (as a position's step). Else
+        refused, named: a reviewer's forged yaw of +90 degrees, stamped after each of the
+        vehicle's, had been read by 894 of 895 ticks."""
+        last = (self._attitude_boot_s, self._yaw_rad, self._yaw_rate_rad_s)
+        off, allowed = _yaw_off(last, (boot_s, yaw, rate))
+        run = self._yaw_run
+        if off <= allowed:
+            run.clear()
+            return True
+        if run:  # a run of samples, each on the path of the one before
+            run_off, run_allowed = _yaw_off(run[-1][1], (boot_s, yaw, rate))
+            if run_off > run_allowed:
+                run.clear()
+        run.append((now_s, (boot_s, yaw, rate)))
+        del run[:-64]
+        if len(run) >= 2 and now_s - run[0][0] >= _STEP_RUN_S:
+            run.clear()
+            self._refusal = (Hold.GATE, f"attitude yaw stepped {math.degrees(off):.1f} deg "
+                             f"(the estimate reset): its samples kept to the new path for "
+                             f"{_STEP_RUN_S:g} s, none to the old: taken")  # fmt: skip
+            return True
+        return self._refuse(
+            Hold.GATE,
+            f"attitude yaw {math.degrees(off):.1f} deg off the path of the one before (at most "
+            f"{math.degrees(allowed):.1f} deg in {boot_s - last[0]:.3f} s): refused",
+        )
 
     def _on_vfr_hud(self, msg: Message, now_s: float) -> bool:
         # Only checked: ground speed and heading come from the position messages (vx, vy) and
@@ -859,6 +908,17 @@ def _on_path(before: _Position, sample: _Position, bound: float) -> bool:
     dv = math.hypot(sample.vn_m_s - before.vn_m_s, sample.ve_m_s - before.ve_m_s)
     return off <= within and dv <= bound * abs(sample.boot_s - before.boot_s) + (
         _GATE_VELOCITY_M_S)
+
+
+def _yaw_off(before: tuple[float, float, float],
+             sample: tuple[float, float, float]) -> tuple[float, float]:  # fmt: skip
+    """How far a yaw (stamp, yaw, rate) lies from the path of the one ``before`` it
+    (trapezoid of the two rates), and how far it may."""
+    dt = sample[0] - before[0]
+    predicted = before[1] + 0.5 * (before[2] + sample[2]) * dt
+    gap = min(abs(dt), _YAW_GAP_S)  # (no more: a yaw refused for longer is not taken for
+    return abs(float(wrap_pi(sample[1] - predicted))), (  # being old, but as a step)
+        _YAW_STEP_RAD + 0.5 * _YAW_ACCEL_RAD_S2 * gap * gap)
 
 
 def _same_estimate(a: _Position, b: _Position) -> bool:

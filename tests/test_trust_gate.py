@@ -372,7 +372,7 @@ def _attitude(boot_ms: int, yaw: float, rate: float = 0.0) -> Any:
 def test_a_forged_yaw_is_named_and_a_yaw_reset_is_taken_again() -> None:
     """A reviewer: an ATTITUDE 90 degrees off, stamped 1 to 99 ms after each of the
     vehicle's, was taken and read by 894 of 895 ticks (the yaw stands in for the course at
-    rest). A yaw keeps to its rate's path within 12 degrees (and what 10 rad/s^2 allows
+    rest). A yaw keeps to its rate's path within 3 degrees (and what 10 rad/s^2 allows
     over the gap); an estimate whose yaw reset (ArduCopter's in-flight alignment: 20
     degrees) is taken again, named, once it has kept to its new path for 0.25 s."""
     t = known_origin()
@@ -384,8 +384,16 @@ def test_a_forged_yaw_is_named_and_a_yaw_reset_is_taken_again() -> None:
         assert t.update(_attitude(boot + 5, 0.01 * k + 1.57, 0.5), 1.005 + 0.02 * k) is None
         named.append(t.take_refusal())
     assert all(r is not None and r[1].startswith("attitude yaw") for r in named)
+    # a reviewer's next forger set its yaw rate to carry a yaw 90 degrees off onto the
+    # path (and a second sample, a whole turn on, back onto the vehicle's): a rate that
+    # changed faster than 10 rad/s^2 allows, or beyond 360 deg/s, is off the path
+    for k, rate in ((100, 2.0 * 1.57 / 0.001 - 0.5), (101, 6.0)):
+        boot = 1000 + 20 * k
+        assert t.update(_attitude(boot, 0.01 * k, 0.5), 1.0 + 0.02 * k) == "ATTITUDE"
+        assert t.update(_attitude(boot + 1, 0.01 * k + 1.57, rate), 1.005 + 0.02 * k) is None
+        assert t.take_refusal() is not None
     used, whys = [], []
-    for k in range(100, 150):  # the estimate's yaw reset by 20 degrees, turning on
+    for k in range(102, 152):  # the estimate's yaw reset by 20 degrees, turning on
         boot, yaw = 1000 + 20 * k, 0.01 * k + math.radians(20.0)
         used.append(t.update(_attitude(boot, yaw, 0.5), 1.0 + 0.02 * k))
         refusal = t.take_refusal()

@@ -75,9 +75,10 @@ prediction goes on through it, below):
   taken again once its samples have kept to the new path for ``_STEP_RUN_S``.
 - after a lost link or the latch, a new source is used once its samples have come for
   ``_CONFIRM_S``.
-- an attitude whose yaw leaves the path of the last taken (their rates, trapezoid) by more
-  than ``_YAW_STEP_RAD`` and what ``_YAW_ACCEL_RAD_S2`` allows over the gap (``Hold.GATE``);
-  a yaw reset is taken again, named, as a position's step is.
+- an attitude whose yaw leaves the path of the last taken (their Euler yaw rates,
+  trapezoid) by more than ``_YAW_STEP_RAD`` and what ``_YAW_ACCEL_RAD_S2`` allows over the
+  gap, or whose rate changed faster than that or beyond ``_YAW_RATE_MAX_RAD_S``
+  (``Hold.GATE``); a yaw reset is taken again, named, as a position's step is.
 - local and global disagreeing (``Hold.DISAGREE``): when both are fresh, each new sample is
   compared with the other source propagated to its time stamp.
 
@@ -183,13 +184,19 @@ _REBASE_S = 0.25
 # are known by _REPEATS_S): less than _REBASE_S, so that the vehicle's samples after a gap
 # long enough for the clock's retake are farther than this from every one taken
 _REORDER_S = 0.22  # (a 5 Hz stream's neighbours, 0.2 s and a little jitter, are within)
-# an attitude's yaw may leave the path of the one before it (their rates, trapezoid) by
-# this, and what this yaw acceleration allows over the time between (s^2 / 2): ArduPlane's
-# and PX4 SIH's yaw kept to it within 7 degrees over 0.1 s in hard turns, ArduCopter's
-# within 0.09 degrees a sample at the p99 (20 at its in-flight yaw alignment: a reset)
-_YAW_STEP_RAD = math.radians(12.0)
+# an attitude's yaw may leave the path of the one before it (their Euler yaw rates,
+# trapezoid) by this, and what this yaw acceleration allows over the time between (s^2 /
+# 2): ArduCopter's, ArduPlane's and PX4 SIH's yaw kept to it within 0.41 degrees in the
+# SITL recordings (20 at ArduCopter's in-flight yaw alignment: a reset)
+_YAW_STEP_RAD = math.radians(3.0)
 _YAW_ACCEL_RAD_S2 = 10.0
-_YAW_GAP_S = 0.1  # ... over at most this (a 10 Hz stream's period)
+_YAW_GAP_S = 0.2  # ... over at most this (a 5 Hz stream's period; at 50 Hz a forger gets 3.1 deg)
+# the yaw's rate (from the body rates, as the Euler angle turns) changes by at most the
+# acceleration over the time between, and this (ArduCopter and PX4 SIH: 6.6 rad/s^2 at
+# most; their per-sample changes 0.13 and 0.65 rad/s); it is at most this in all (a
+# copter's fastest yaw, ArduCopter ACRO and PX4 MC_YAWRATE_MAX, about 200 deg/s)
+_YAW_RATE_SLACK_RAD_S = 0.2
+_YAW_RATE_MAX_RAD_S = 2.0 * math.pi
 # taken samples remembered: a new one is judged against the oldest of them too
 _REPEATS_KEPT = 8
 # ... and for this long (vehicle time), so that a repeat of one arriving late by another
@@ -563,7 +570,13 @@ class TelemetryState:
             return False  # duplicated or reordered
         if not self._stamp_ok("attitude", boot_s, now_s, position=False):
             return False
-        rate = float(msg.yawspeed) if is_finite(msg.yawspeed) else 0.0
+        rate = _euler_yaw_rate(msg)
+        if rate is None:
+            return False  # a field non-finite
+        if abs(rate) > _YAW_RATE_MAX_RAD_S:
+            most = math.degrees(_YAW_RATE_MAX_RAD_S)
+            return self._refuse(Hold.GATE, f"attitude yaw rate {math.degrees(rate):.0f} "
+                                f"deg/s (at most {most:.0f}): refused")  # fmt: skip
         if last > -math.inf and not self._on_yaw_path(msg.yaw, rate, boot_s, now_s):
             return False
         self._yaw_rad, self._attitude_boot_s, self._yaw_rate_rad_s = msg.yaw, boot_s, rate
@@ -589,6 +602,7 @@ class TelemetryState:
             run_off, run_allowed = _yaw_off(run[-1][1], (boot_s, yaw, rate))
             if run_off > run_allowed:
                 run.clear()
+        off = min(off, math.pi)  # (for the message: a rate beyond its change is "off")
         run.append((now_s, (boot_s, yaw, rate)))
         del run[:-64]
         if len(run) >= 2 and now_s - run[0][0] >= _STEP_RUN_S:
@@ -913,12 +927,27 @@ def _on_path(before: _Position, sample: _Position, bound: float) -> bool:
 def _yaw_off(before: tuple[float, float, float],
              sample: tuple[float, float, float]) -> tuple[float, float]:  # fmt: skip
     """How far a yaw (stamp, yaw, rate) lies from the path of the one ``before`` it
-    (trapezoid of the two rates), and how far it may."""
+    (trapezoid of the two rates), and how far it may; a rate that changed faster than
+    ``_YAW_ACCEL_RAD_S2`` allows is off the path whatever the yaw (a reviewer's forger set
+    its rate to carry a yaw 90 degrees off, or a whole turn, onto the path)."""
     dt = sample[0] - before[0]
-    predicted = before[1] + 0.5 * (before[2] + sample[2]) * dt
     gap = min(abs(dt), _YAW_GAP_S)  # (no more: a yaw refused for longer is not taken for
-    return abs(float(wrap_pi(sample[1] - predicted))), (  # being old, but as a step)
-        _YAW_STEP_RAD + 0.5 * _YAW_ACCEL_RAD_S2 * gap * gap)
+    allowed = _YAW_STEP_RAD + 0.5 * _YAW_ACCEL_RAD_S2 * gap * gap  # being old, but as a step)
+    if abs(sample[2] - before[2]) > _YAW_ACCEL_RAD_S2 * abs(dt) + _YAW_RATE_SLACK_RAD_S:
+        return math.inf, allowed
+    predicted = before[1] + 0.5 * (before[2] + sample[2]) * dt
+    return abs(float(wrap_pi(sample[1] - predicted))), allowed
+
+
+def _euler_yaw_rate(msg: Message) -> float | None:
+    """The rate of ATTITUDE's yaw angle (rad/s): (q sin(roll) + r cos(roll)) / cos(pitch)
+    from its body rates, not ``yawspeed`` alone (the body rate: in a plane's banked turn
+    the yaw turns faster than it, and a reviewer's 80-degree bank was refused); None if a
+    field is not finite."""
+    roll, pitch, q, r = msg.roll, msg.pitch, msg.pitchspeed, msg.yawspeed
+    if not is_finite(roll, pitch, q, r) or abs(pitch) >= 0.5 * math.pi - 1e-3:
+        return None
+    return float((q * math.sin(roll) + r * math.cos(roll)) / math.cos(pitch))
 
 
 def _same_estimate(a: _Position, b: _Position) -> bool:

@@ -403,6 +403,26 @@ def test_a_forged_yaw_is_named_and_a_yaw_reset_is_taken_again() -> None:
     assert whys[first].startswith("attitude yaw stepped 20.0 deg"), whys[first]
 
 
+def test_a_forged_yaw_walking_ahead_of_the_vehicles_has_every_one_of_theirs_named() -> None:
+    """A reviewer: a forger stamped 60 ms ahead of the vehicle, walking its yaw 2.9 degrees a
+    sample (within the path's 3), was taken, and every one of the vehicle's, behind it,
+    was dropped as "reordered": 90 degrees off, nothing named. An attitude behind the
+    newest taken, off the path of the nearest taken, is a second source, named (each
+    holds guidance 0.5 s, and 3 s of them end it)."""
+    t = known_origin()
+    for k in range(50):
+        assert t.update(_attitude(1000 + 20 * k, 0.0), 1.0 + 0.02 * k) == "ATTITUDE"
+    named = []
+    for k in range(50, 150):  # 2 s: the vehicle's at 50 Hz, the forger's 60 ms ahead
+        boot, now = 1000 + 20 * k, 1.0 + 0.02 * k
+        walked = math.radians(min(90.0, 2.9 * (k - 49)))
+        t.update(_attitude(boot + 60, walked), now - 0.001)
+        t.take_refusal()
+        t.update(_attitude(boot, 0.0), now)
+        named.append(t.take_refusal() is not None)
+    assert all(named[5:]), named  # from 0.1 s on, every one of the vehicle's
+
+
 def test_a_late_repeat_of_a_sample_taken_is_no_second_source() -> None:
     """A reviewer: two routes to the vehicle (mavlink-router, MAVProxy: no de-duplication by
     default) deliver each sample twice, one copy late, after the next sample; a late copy

@@ -78,7 +78,9 @@ prediction goes on through it, below):
 - an attitude whose yaw leaves the path of the last taken (their Euler yaw rates,
   trapezoid) by more than ``_YAW_STEP_RAD`` and what ``_YAW_ACCEL_RAD_S2`` allows over the
   gap, or whose rate changed faster than that or beyond ``_YAW_RATE_MAX_RAD_S``
-  (``Hold.GATE``); a yaw reset is taken again, named, as a position's step is.
+  (``Hold.GATE``); a yaw reset is taken again, named, as a position's step is; an
+  attitude behind the newest taken is judged as a position behind is (reordering within
+  ``_REORDER_S`` on the path of the nearest taken; else a second source, named).
 - local and global disagreeing (``Hold.DISAGREE``): when both are fresh, each new sample is
   compared with the other source propagated to its time stamp.
 
@@ -382,6 +384,9 @@ class TelemetryState:
     # attitudes off the yaw path of the last taken, each on the path of the one before
     # (our clock, (stamp, yaw, rate)): an estimate whose yaw reset, taken after _STEP_RUN_S
     _yaw_run: list[tuple[float, tuple[float, float, float]]] = field(default_factory=list)
+    # the attitudes taken last (stamp, yaw, rate): one behind the newest is judged by them
+    _yaw_taken: deque[tuple[float, float, float]] = field(
+        default_factory=lambda: deque(maxlen=64))
     _attitude_s: float = -math.inf
     _attitude_boot_s: float = -math.inf
     _local_offset: tuple[float, float, float] | None = None  # vehicle origin in ours
@@ -432,6 +437,7 @@ class TelemetryState:
         self._clock = _VehicleClock()
         self._attitude_s = self._attitude_boot_s = -math.inf
         self._yaw_run.clear()
+        self._yaw_taken.clear()
         self._refusal = None
         self._relinked = True
 
@@ -560,6 +566,9 @@ class TelemetryState:
             return False
         boot_s = ms_to_s(msg.time_boot_ms)
         last = self._attitude_boot_s
+        rate = _euler_yaw_rate(msg)
+        if rate is None:
+            return False  # a field non-finite
         if boot_s <= last:
             if boot_s < last - _REBOOT_BACKSTEP_S:  # as a position's: only a lost link
                 return self._refuse(  # starts the vehicle's time afresh
@@ -567,12 +576,9 @@ class TelemetryState:
                     f"attitude time went back {last - boot_s:.1f} s (a reboot or a forgery): "
                     "refused",
                 )
-            return False  # duplicated or reordered
+            return self._attitude_behind((boot_s, msg.yaw, rate))
         if not self._stamp_ok("attitude", boot_s, now_s, position=False):
             return False
-        rate = _euler_yaw_rate(msg)
-        if rate is None:
-            return False  # a field non-finite
         if abs(rate) > _YAW_RATE_MAX_RAD_S:
             most = math.degrees(_YAW_RATE_MAX_RAD_S)
             return self._refuse(Hold.GATE, f"attitude yaw rate {math.degrees(rate):.0f} "
@@ -580,10 +586,33 @@ class TelemetryState:
         if last > -math.inf and not self._on_yaw_path(msg.yaw, rate, boot_s, now_s):
             return False
         self._yaw_rad, self._attitude_boot_s, self._yaw_rate_rad_s = msg.yaw, boot_s, rate
+        self._yaw_taken.append((boot_s, msg.yaw, rate))
         # (only positions, which pass the gate, move the vehicle's clock: a forger's
         # attitudes, each a little ahead, would otherwise age every genuine position)
         self._attitude_s = self._sent_s(boot_s, now_s)
         return True
+
+    def _attitude_behind(self, sample: tuple[float, float, float]) -> bool:
+        """An attitude stamped behind the newest taken: a repeat of one taken, or one on the
+        path of the taken one nearest its stamp and within ``_REORDER_S`` of it, is dropped
+        without a word; else it is a second source of attitudes, named (a reviewer's forger,
+        stamped 30 to 99 ms ahead of the vehicle's and walking its yaw 2.9 degrees a sample,
+        had every one of the vehicle's dropped as "reordered": 90 degrees off, nothing
+        named). False either way."""
+        taken = self._yaw_taken
+        if not taken or sample in taken:
+            return False
+        nearest = min(taken, key=lambda a: abs(a[0] - sample[0]))
+        off, allowed = _yaw_off(nearest, sample)
+        if abs(nearest[0] - sample[0]) <= _REORDER_S and off <= allowed:
+            self._yaw_run.clear()  # reordering: the old path goes on
+            return False
+        return self._refuse(
+            Hold.GATE,
+            f"attitude stamped {self._attitude_boot_s - sample[0]:.3f} s behind the newest "
+            f"taken, {math.degrees(min(off, math.pi)):.1f} deg off the path it took: a second "
+            "source of attitudes, refused",
+        )
 
     def _on_yaw_path(self, yaw: float, rate: float, boot_s: float, now_s: float) -> bool:
         """The yaw keeps to the path of the last taken (their rates, trapezoid), within

@@ -26,7 +26,7 @@ from ezcompanion.service.autopilots import autopilot_profile
 from ezcompanion.service.session import gate_bound_m_s2
 from ezcompanion.service.settings import CompanionSettings
 from ezcompanion.service.state import TelemetryState
-from ezcompanion.wire import Message, Projection, e7_to_deg, mavlink, mm_to_m
+from ezcompanion.wire import Projection, e7_to_deg, is_autopilot_heartbeat, mm_to_m
 from ezcompanion.wire.logs import read_tlog
 
 __all__ = ["GateReport", "check_tlog"]
@@ -105,7 +105,7 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
         kind = msg.get_type()
         source = (msg.get_srcSystem(), msg.get_srcComponent())
         if report.vehicle is None:
-            if kind != "HEARTBEAT" or not _an_autopilots(msg) or (
+            if kind != "HEARTBEAT" or not is_autopilot_heartbeat(msg) or (
                 system_id is not None and source[0] != system_id
             ):  # fmt: skip
                 continue
@@ -124,7 +124,7 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
             if state is not None:
                 state.forget_motion()
         if kind == "HEARTBEAT":
-            if _an_autopilots(msg):
+            if is_autopilot_heartbeat(msg):
                 lost, heartbeat_s = False, last_s
             continue
         if kind not in _FED or lost:
@@ -155,13 +155,6 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
         report.refused.update(state.refused)
         report.skipped = state.skipped
     return report
-
-
-def _an_autopilots(heartbeat: Message) -> bool:
-    """An autopilot's heartbeat, as the service's session takes one (a ground station's or
-    a companion's is no vehicle's)."""
-    return heartbeat.type not in (mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER) and (
-        heartbeat.autopilot != mavlink.MAV_AUTOPILOT_INVALID)
 
 
 def _counts(counter: Counter[str]) -> str:

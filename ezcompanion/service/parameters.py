@@ -83,23 +83,21 @@ class ParameterReader:
     @property
     def unanswered(self) -> list[str]:
         """The names asked for and not answered yet."""
-        return self._missing()
+        return [n for n in self._wanted if n not in self.values]
 
     @property
     def settled(self) -> bool:
         """Every name asked for is answered, or the tries ran out."""
-        return not self._missing() or self._given_up
+        return not self.unanswered or self._given_up
 
     @property
     def _given_up(self) -> bool:
         return self._tries >= _TRIES and self._next_s == math.inf
 
-    def _missing(self) -> list[str]:
-        return [n for n in self._wanted if n not in self.values]
 
     def periodic(self, now: float) -> None:
         """Ask again for what is still unanswered, every half second, six times at most."""
-        missing = self._missing()
+        missing = self.unanswered
         if now < self._next_s or self._target is None or not missing:
             return
         if self._tries >= _TRIES:

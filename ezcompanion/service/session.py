@@ -70,6 +70,7 @@ from ezcompanion.wire import (
     Message,
     Projection,
     guided_mode,
+    is_autopilot_heartbeat,
     is_fixed_wing,
     mavlink,
     mode_name,
@@ -296,9 +297,7 @@ class VehicleSession(StreamRequests):
 
     def _on_heartbeat(self, frame: Frame, now: float) -> None:
         msg = frame.message
-        if msg.type in (mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER) or (
-            msg.autopilot == mavlink.MAV_AUTOPILOT_INVALID
-        ):
+        if not is_autopilot_heartbeat(msg):
             return
         source = (msg.get_srcSystem(), msg.get_srcComponent())
         if not self.locked:  # discovering (at start, or after a lost link)

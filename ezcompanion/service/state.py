@@ -99,6 +99,7 @@ import math
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any, TypeVar
 
 from ezcompanion.config import GeoOrigin
 from ezcompanion.frames import wrap_pi
@@ -115,6 +116,8 @@ from ezcompanion.wire import (
 )
 
 __all__ = ["CROSS_CHECK_PERIOD_S", "TelemetryState", "VehicleState", "filtered_course_rate"]
+
+T = TypeVar("T")
 
 # While the local position is fresh, global positions are taken this often (vehicle time):
 # the cross-check's rate. 10 Hz: a local sample is compared with a global one at most
@@ -264,8 +267,7 @@ class _Track:
         """A sample taken: among the last few, and in the history of the last _REPEATS_S."""
         self.taken.append(sample)
         self.history[sample.boot_s] = sample
-        while next(iter(self.history)) < sample.boot_s - _REPEATS_S:  # (oldest first)
-            del self.history[next(iter(self.history))]
+        _forget_before(self.history, sample.boot_s - _REPEATS_S)
 
 
 @dataclass
@@ -380,7 +382,6 @@ class TelemetryState:
     _tracks: dict[str, _Track] = field(default_factory=dict)
     _clock: _VehicleClock = field(default_factory=_VehicleClock)
     _yaw_rad: float = 0.0
-    _yaw_rate_rad_s: float = 0.0
     # attitudes off the yaw path of the last taken, each on the path of the one before
     # (our clock, (stamp, yaw, rate)): an estimate whose yaw reset, taken after _STEP_RUN_S
     _yaw_run: list[tuple[float, tuple[float, float, float]]] = field(default_factory=list)
@@ -523,8 +524,7 @@ class TelemetryState:
                 self._skipped_global = (raw, boot_s, speed_m_s)
             seen = self._skipped_seen  # (remembered as the taken ones are, _REPEATS_S)
             seen[boot_s] = motion
-            while next(iter(seen)) < boot_s - _REPEATS_S:
-                del seen[next(iter(seen))]
+            _forget_before(seen, boot_s - _REPEATS_S)
             return None  # the local position is fresh: this one is not needed
         anchor = self._skipped_global
         if anchor is not None and anchor[0] == raw:
@@ -585,7 +585,7 @@ class TelemetryState:
                                 f"deg/s (at most {most:.0f}): refused")  # fmt: skip
         if last > -math.inf and not self._on_yaw_path(msg.yaw, rate, boot_s, now_s):
             return False
-        self._yaw_rad, self._attitude_boot_s, self._yaw_rate_rad_s = msg.yaw, boot_s, rate
+        self._yaw_rad, self._attitude_boot_s = msg.yaw, boot_s
         self._yaw_taken.append((boot_s, msg.yaw, rate))
         # (only positions, which pass the gate, move the vehicle's clock: a forger's
         # attitudes, each a little ahead, would otherwise age every genuine position)
@@ -604,7 +604,7 @@ class TelemetryState:
             return False
         nearest = min(taken, key=lambda a: abs(a[0] - sample[0]))
         off, allowed = _yaw_off(nearest, sample)
-        if abs(nearest[0] - sample[0]) <= _REORDER_S and off <= allowed:
+        if abs(nearest[0] - sample[0]) <= _REORDER_S and off <= allowed:  # (on its path)
             self._yaw_run.clear()  # reordering: the old path goes on
             return False
         return self._refuse(
@@ -621,20 +621,15 @@ class TelemetryState:
         new path for ``_STEP_RUN_S`` with none on the old (as a position's step). Else
         refused, named: a reviewer's forged yaw of +90 degrees, stamped after each of the
         vehicle's, had been read by 894 of 895 ticks."""
-        last = (self._attitude_boot_s, self._yaw_rad, self._yaw_rate_rad_s)
+        last = self._yaw_taken[-1]
         off, allowed = _yaw_off(last, (boot_s, yaw, rate))
         run = self._yaw_run
         if off <= allowed:
             run.clear()
             return True
-        if run:  # a run of samples, each on the path of the one before
-            run_off, run_allowed = _yaw_off(run[-1][1], (boot_s, yaw, rate))
-            if run_off > run_allowed:
-                run.clear()
+        follows = bool(run) and _yaw_on_path(run[-1][1], (boot_s, yaw, rate))
         off = min(off, math.pi)  # (for the message: a rate beyond its change is "off")
-        run.append((now_s, (boot_s, yaw, rate)))
-        del run[:-64]
-        if len(run) >= 2 and now_s - run[0][0] >= _STEP_RUN_S:
+        if _run_lasted(run, now_s, (boot_s, yaw, rate), follows):
             run.clear()
             self._refusal = (Hold.GATE, f"attitude yaw stepped {math.degrees(off):.1f} deg "
                              f"(the estimate reset): its samples kept to the new path for "
@@ -919,11 +914,25 @@ def _stepped(track: _Track, sample: _Position, now_s: float, bound: float) -> bo
     path of the one before it (velocity too) that has lasted ``_STEP_RUN_S`` of our clock:
     the estimate stepped. Else it starts or extends the run; False."""
     run = track.step_run
-    if run and not _on_path(run[-1][1], sample, bound):
+    return _run_lasted(run, now_s, sample, bool(run) and _on_path(run[-1][1], sample, bound))
+
+
+def _run_lasted(run: list[tuple[float, T]], now_s: float, sample: T, follows: bool) -> bool:
+    """Extend ``run`` (our clock, sample) with ``sample``, which ``follows`` the run's last
+    (on its path; if not, the run starts afresh with it): True once the run has lasted
+    ``_STEP_RUN_S`` of our clock, an estimate that stepped (a reset)."""
+    if not follows:
         run.clear()
     run.append((now_s, sample))
     del run[:-64]
-    return now_s - run[0][0] >= _STEP_RUN_S and len(run) >= 2
+    return len(run) >= 2 and now_s - run[0][0] >= _STEP_RUN_S
+
+
+def _forget_before(by_stamp: dict[float, Any], oldest_s: float) -> None:
+    """Drop the entries of ``by_stamp`` (in the order of their stamps) older than
+    ``oldest_s``."""
+    while next(iter(by_stamp)) < oldest_s:
+        del by_stamp[next(iter(by_stamp))]
 
 
 def _off_path(last: _Position, sample: _Position, bound: float) -> tuple[float, float]:
@@ -966,6 +975,11 @@ def _yaw_off(before: tuple[float, float, float],
         return math.inf, allowed
     predicted = before[1] + 0.5 * (before[2] + sample[2]) * dt
     return abs(float(wrap_pi(sample[1] - predicted))), allowed
+
+
+def _yaw_on_path(before: tuple[float, float, float], sample: tuple[float, float, float]) -> bool:
+    off, allowed = _yaw_off(before, sample)
+    return off <= allowed
 
 
 def _euler_yaw_rate(msg: Message) -> float | None:

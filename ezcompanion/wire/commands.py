@@ -163,6 +163,12 @@ def is_ground_vehicle(heartbeat: Message) -> bool:
     return bool(heartbeat.type in (mavlink.MAV_TYPE_GROUND_ROVER, mavlink.MAV_TYPE_SURFACE_BOAT))
 
 
+def is_autopilot_heartbeat(heartbeat: Message) -> bool:
+    """An autopilot's heartbeat (a ground station's or a companion's is no vehicle's)."""
+    return heartbeat.type not in (mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER) and (
+        heartbeat.autopilot != mavlink.MAV_AUTOPILOT_INVALID)
+
+
 def is_fixed_wing(heartbeat: Message) -> bool:
     """The vehicle flies on wings (it cannot stop, and turns by banking)."""
     return bool(heartbeat.type in (mavlink.MAV_TYPE_FIXED_WING, mavlink.MAV_TYPE_FLAPPING_WING))

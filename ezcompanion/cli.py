@@ -70,8 +70,9 @@ def _parser() -> argparse.ArgumentParser:
         "--connect",
         type=endpoint,
         metavar="URL",
-        help="MAVLink endpoint, pymavlink or MAVSDK form: udpin:0.0.0.0:14550 (the default), "
-        "udp://:14540, tcp://127.0.0.1:5760, serial:///dev/ttyACM0:57600, /dev/ttyACM0,57600",
+        help="MAVLink endpoint, pymavlink or MAVSDK form: udpin:127.0.0.1:14550 (the default), "
+        "udp://:14540, tcp://127.0.0.1:5760, serial:///dev/ttyACM0:57600, /dev/ttyACM0,57600; "
+        "one other machines reach needs a signing key or --allow-unsigned",
     )
     run.add_argument("--law", choices=LAWS, help="override the scenario's law")
     run.add_argument(
@@ -100,6 +101,13 @@ def _parser() -> argparse.ArgumentParser:
         help="MAVLink 2 signing key: a file holding 64 hex digits (or set "
         "EZCOMPANION_SIGNING_KEY or EZCOMPANION_SIGNING_PASSPHRASE; never the key itself "
         "on the command line, where ps shows it)",
+    )
+    run.add_argument(
+        "--allow-unsigned",
+        action="store_true",
+        default=None,
+        help="run with no signing key where other machines reach --connect (a warning; "
+        "companion.allow_unsigned). Without it the service refuses to start there",
     )
     run.add_argument("--tlog", type=Path, help="record every frame in and out to this .tlog")
     run.add_argument("--track", type=Path, help="write the companion's view to this CSV")
@@ -270,6 +278,7 @@ def _dispatch(args: argparse.Namespace) -> int:
             on_exit=args.on_exit,
             setpoint=args.setpoint,
             signing_key_file=str(args.signing_key_file) if args.signing_key_file else None,
+            allow_unsigned=args.allow_unsigned,
             tlog=str(args.tlog) if args.tlog else None,
             speedup=args.speedup,
             lockstep=args.lockstep,

@@ -77,6 +77,21 @@ def test_a_bad_flag_is_one_line_and_exit_2(
     assert flag in line and said in line
 
 
+def test_an_unsigned_network_endpoint_is_refused_in_one_line_before_any_socket(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Every interface, no key: exit 2 naming connect, at once (no vehicle waited for)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    argv = ["run", "--config", str(SCENARIO), "--connect", f"udpin:0.0.0.0:{port}",
+            "--max-time", "0.5", "--no-telemetry"]  # fmt: skip
+    assert main(argv) == ExitCode.BAD_INPUT
+    line = one_line(capsys)
+    assert line.startswith("ezcompanion: error: connect: is reachable from other machines")
+    assert line.endswith(f"(got 'udpin:0.0.0.0:{port}')") and "--allow-unsigned" in line
+
+
 @pytest.mark.parametrize(
     ("argv", "flag"),
     [

@@ -86,7 +86,7 @@ CHECKS: dict[str, Check] = {
     # README.md
     "make demo": Check.PARSE,
     "make test": Check.PARSE,
-    "ezcompanion run --config config/paper_scenario1.yaml --connect udpin:0.0.0.0:14550 "
+    "ezcompanion run --config config/paper_scenario1.yaml --connect udpin:127.0.0.1:14550 "
     "--engage": Check.PARSE,  # also docs/service.md
     "ezcompanion simulate config/paper_scenario1.yaml --law paper --out out/sim/run.csv "
     "--plot out/sim/fig.png": Check.RUN,

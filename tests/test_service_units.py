@@ -15,7 +15,12 @@ from ezcompanion.service.inbox import ScenarioInbox
 from ezcompanion.service.loop import GuidanceLoop, Hold, TickCommand
 from ezcompanion.service.runner import _Here
 from ezcompanion.service.setpoints import make_setpoints
-from ezcompanion.service.settings import SetpointKind, companion_settings, unsigned_warning
+from ezcompanion.service.settings import (
+    SetpointKind,
+    companion_settings,
+    refuse_unsigned,
+    unsigned_warning,
+)
 from ezcompanion.service.state import TelemetryState
 from ezcompanion.wire import deg_to_e7, m_to_mm, mavlink, ned_to_geodetic, open_link
 
@@ -289,12 +294,42 @@ def test_settings_errors_name_the_field() -> None:
     assert companion_settings(scenario, gate_position_m=25.0).gate_position_m == 25.0
 
 
-def test_an_unsigned_link_other_machines_reach_is_said_to_be_so() -> None:
+@pytest.mark.parametrize(
+    "connect", ["udpin:0.0.0.0:14550", "udpout:192.168.1.5:14550", "tcpin:0.0.0.0:5760",
+                "tcp:fc.local:5760"],
+)  # fmt: skip
+def test_an_unsigned_link_other_machines_reach_is_refused_unless_allowed(connect: str) -> None:
     scenario = load_scenario(CONFIG)
-    said = unsigned_warning(companion_settings(scenario, connect="udpin:0.0.0.0:14550"))
-    assert said is not None and said.startswith("MAVLink unsigned on udpin:0.0.0.0:14550")
-    assert unsigned_warning(companion_settings(scenario, connect="udpin:127.0.0.1:14550")) is None
-    assert unsigned_warning(companion_settings(scenario, connect="/dev/ttyACM0,57600")) is None
+    with pytest.raises(ConfigError) as refused:
+        refuse_unsigned(companion_settings(scenario, connect=connect))
+    line = str(refused.value)
+    assert line.startswith("connect: is reachable from other machines and no "
+                           "signing key is set") and f"(got {connect!r})" in line  # fmt: skip
+    assert "\n" not in line and "--allow-unsigned" in line and "signing" in line
+    allowed = companion_settings(scenario, connect=connect, allow_unsigned=True)
+    refuse_unsigned(allowed)  # the user's choice: flies, and says so
+    said = unsigned_warning(allowed)
+    assert said is not None and said.startswith(f"MAVLink unsigned on {connect} "
+                                                "(companion.allow_unsigned)")  # fmt: skip
+
+
+@pytest.mark.parametrize("connect", ["udpin:127.0.0.1:14550", "udpout:127.0.0.1:14551",
+                                     "tcp:localhost:5760", "/dev/ttyACM0,57600"])  # fmt: skip
+def test_an_unsigned_link_on_the_loopback_or_a_serial_port_is_neither_refused_nor_warned(
+    connect: str,
+) -> None:
+    settings = companion_settings(load_scenario(CONFIG), connect=connect)
+    refuse_unsigned(settings)
+    assert unsigned_warning(settings) is None
+
+
+def test_the_default_endpoint_is_the_loopback_and_allow_unsigned_is_checked() -> None:
+    scenario = load_scenario(CONFIG)
+    settings = companion_settings(scenario)
+    assert settings.connect == "udpin:127.0.0.1:14550" and not settings.allow_unsigned
+    refuse_unsigned(settings)
+    with pytest.raises(ConfigError, match=r"^companion\.allow_unsigned: must be true or false"):
+        companion_settings(scenario, allow_unsigned="yes")
 
 
 def test_a_scenario_update_is_checked_and_keeps_the_turn() -> None:

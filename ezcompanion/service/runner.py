@@ -74,6 +74,7 @@ from ezcompanion.service.setpoints import (
 from ezcompanion.service.settings import (
     CompanionSettings,
     SetpointKind,
+    refuse_unsigned,
     signing_key,
     unsigned_warning,
 )
@@ -328,6 +329,9 @@ class CompanionService:
         """Guide until interception, ``stop()`` or ``max_time_s`` of clock time after the
         engagement started (or, with no engagement yet, after ``run`` started)."""
         s = self.settings
+        key = signing_key(s)
+        if key is None:
+            refuse_unsigned(s)  # before any socket opens
         link = open_link(s.connect, system_id=s.system_id, component_id=s.component_id)
         with contextlib.ExitStack() as stack:
             stack.enter_context(link)
@@ -336,7 +340,6 @@ class CompanionService:
                 self.engagement.track = stack.enter_context(
                     TrackWriter(self._track_csv, self.loop.controller.zones.names)
                 )
-            key = signing_key(s)
             if key is not None:
                 link.enable_signing(key)
             elif (unsigned := unsigned_warning(s)) is not None:

@@ -3,7 +3,7 @@
 Layout (every key optional)::
 
     companion:
-      connect: udpin:0.0.0.0:14550   # pymavlink URL; udpout:, tcp:, tcpin:, /dev/ttyACM0,57600
+      connect: udpin:127.0.0.1:14550 # pymavlink URL; udpout:, tcp:, tcpin:, /dev/ttyACM0,57600
       system_id: 1                   # ours; the usual companion shares the vehicle's system
       component_id: 191              # MAV_COMP_ID_ONBOARD_COMPUTER
       target_system: 0               # the vehicle; 0 = the first autopilot heard
@@ -27,6 +27,8 @@ Layout (every key optional)::
       signing_key_hex: null          # 64 hex digits: sign, refuse unsigned input
       signing_key_file: null         # or a file holding the 64 hex digits (mode 600)
       signing_passphrase: null       # or a passphrase (key = SHA-256 of it, as MAVProxy)
+      allow_unsigned: false          # run unsigned where other machines reach `connect`
+                                     # (a warning); false: refuse to start there unsigned
 
 The key may also come from the environment: EZCOMPANION_SIGNING_KEY (64 hex digits) or
 EZCOMPANION_SIGNING_PASSPHRASE; never from a command-line value, which ``ps`` shows.
@@ -61,6 +63,7 @@ __all__ = [
     "OnExit",
     "SetpointKind",
     "companion_settings",
+    "refuse_unsigned",
     "signing_key",
     "unsigned_warning",
 ]
@@ -96,7 +99,7 @@ class OnExit(StrEnum):
 class CompanionSettings:
     """Validated companion settings (SI units)."""
 
-    connect: str = "udpin:0.0.0.0:14550"
+    connect: str = "udpin:127.0.0.1:14550"
     system_id: int = 1
     component_id: int = 191
     target_system: int = 0
@@ -116,6 +119,7 @@ class CompanionSettings:
     signing_key_hex: str | None = None
     signing_key_file: str | None = None
     signing_passphrase: str | None = None
+    allow_unsigned: bool = False
     tlog: str | None = None
     speedup: float = 1.0
 
@@ -172,7 +176,7 @@ class CompanionSettings:
             raise ConfigError("abandon_check", self.abandon_check, "must be true or false")
         if not isinstance(self.on_exit, OnExit):
             raise ConfigError("on_exit", self.on_exit, f"must be one of {_ON_EXIT}")
-        for name in ("engage", "accept_soft_heading_loop"):
+        for name in ("engage", "accept_soft_heading_loop", "allow_unsigned"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(name, getattr(self, name), "must be true or false")
         given = [
@@ -230,16 +234,38 @@ def signing_key(
     return None
 
 
+def _unsigned_risk(connect: str) -> str:
+    return (f"whoever can send from the vehicle's address on {connect} can move its position "
+            "as the service reads it by the estimate gate's tolerances (5 cm across the "
+            "track; docs/service.md, the trust table) and end guidance")
+
+
+def refuse_unsigned(settings: CompanionSettings) -> None:
+    """Refuse to run a link with no signing key where other machines reach it (not the
+    loopback, not a serial port) unless ``allow_unsigned`` says the user accepts it:
+    MAVLink 1 and unsigned MAVLink 2 frames carry no proof of who sent them. ConfigError
+    naming ``connect`` and its value; called once the key is known (settings, file or
+    environment) and before the link opens."""
+    if settings.allow_unsigned or not parse_endpoint(settings.connect).on_a_network:
+        return
+    raise ConfigError(
+        "connect", settings.connect,
+        "is reachable from other machines and no signing key is set: a sender on the "
+        "vehicle's address could move the position the service reads by the estimate "
+        "gate's tolerances and end guidance. Set a signing key (--signing-key-file or "
+        "EZCOMPANION_SIGNING_KEY), listen on 127.0.0.1, or accept the risk with "
+        "--allow-unsigned (companion.allow_unsigned: true)",
+    )  # fmt: skip
+
+
 def unsigned_warning(settings: CompanionSettings) -> str | None:
-    """What to say of a link left unsigned where other machines reach it (None on the
-    loopback or a serial port): MAVLink 1 and unsigned MAVLink 2 frames carry no proof of
-    who sent them."""
+    """What to say of a link left unsigned where other machines reach it, with the user's
+    ``allow_unsigned`` (None on the loopback or a serial port)."""
     if not parse_endpoint(settings.connect).on_a_network:
         return None
-    return (f"MAVLink unsigned on {settings.connect}: whoever can send from the vehicle's "
-            "address can move its position as the service reads it by the estimate gate's "
-            "tolerances (5 cm across the track; docs/service.md, the trust table) and end "
-            "guidance; set a signing key (companion.signing_key_file)")
+    return (f"MAVLink unsigned on {settings.connect} (companion.allow_unsigned): "
+            f"{_unsigned_risk(settings.connect)}; set a signing key "
+            "(companion.signing_key_file)")
 
 
 def companion_settings(scenario: Scenario, **overrides: Any) -> CompanionSettings:

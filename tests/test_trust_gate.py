@@ -403,24 +403,123 @@ def test_a_forged_yaw_is_named_and_a_yaw_reset_is_taken_again() -> None:
     assert whys[first].startswith("attitude yaw stepped 20.0 deg"), whys[first]
 
 
-def test_a_forged_yaw_walking_ahead_of_the_vehicles_has_every_one_of_theirs_named() -> None:
+def test_a_forged_yaw_walking_ahead_of_the_vehicles_is_named_and_never_read() -> None:
     """A reviewer: a forger stamped 60 ms ahead of the vehicle, walking its yaw 2.9 degrees a
     sample (within the path's 3), was taken, and every one of the vehicle's, behind it,
     was dropped as "reordered": 90 degrees off, nothing named. An attitude behind the
-    newest taken, off the path of the nearest taken, is a second source, named (each
-    holds guidance 0.5 s, and 3 s of them end it)."""
+    newest taken, off the path of the nearest taken, is a second source, named; and a yaw
+    off the path of the oldest taken within _PATH_WINDOW_S is refused, named: the walk
+    stops within a window's allowance, and from there on the forger's are refused and the
+    vehicle's taken (each refusal holds guidance 0.5 s, and 3 s of them end it)."""
     t = known_origin()
+    assert t.update(local(1000, 0.0, 0.0), 1.0) == "LOCAL_POSITION_NED"  # (for snapshot)
     for k in range(50):
         assert t.update(_attitude(1000 + 20 * k, 0.0), 1.0 + 0.02 * k) == "ATTITUDE"
-    named = []
+    named, read_deg = [], []
     for k in range(50, 150):  # 2 s: the vehicle's at 50 Hz, the forger's 60 ms ahead
         boot, now = 1000 + 20 * k, 1.0 + 0.02 * k
         walked = math.radians(min(90.0, 2.9 * (k - 49)))
         t.update(_attitude(boot + 60, walked), now - 0.001)
-        t.take_refusal()
+        forged_named = t.take_refusal() is not None
         t.update(_attitude(boot, 0.0), now)
-        named.append(t.take_refusal() is not None)
-    assert all(named[5:]), named  # from 0.1 s on, every one of the vehicle's
+        named.append(forged_named or t.take_refusal() is not None)
+        snapshot = t.snapshot(10.0, now)
+        assert snapshot is not None
+        read_deg.append(abs(math.degrees(snapshot.yaw_rad)))
+    assert all(named[2:]), named  # from the third on, every step names one
+    assert max(read_deg) <= 6.0, read_deg  # (3 degrees and a window's acceleration)
+    assert read_deg[-1] == 0.0  # the vehicle's own, taken again
+
+
+def _burst(period_ms: int, frame: Any, step: float, back_ms: int = 3) -> list[tuple[float, Any]]:
+    """A reviewer's burst: after each of the vehicle's frames (``frame(ms, 0.0)``, every
+    ``period_ms`` for 10 s) a forger's 1 ms apart, each sent as its stamp falls due (never
+    ahead of the vehicle's clock), each ``step`` further off than the one before, out and
+    back onto the vehicle's path ``back_ms`` before its next (``frame(ms, offset)``).
+    (arrival, frame) in order of arrival."""
+    events = []
+    for ms in range(1000, 11000, period_ms):
+        events.append((ms / 1000 + 0.005, frame(ms, 0.0)))
+        if ms > 3000:
+            last = period_ms - back_ms
+            events += [((ms + i) / 1000 + 0.0055, frame(ms + i, min(i, last - i) * step))
+                       for i in range(1, last + 1)]  # fmt: skip
+    return sorted(events, key=lambda event: event[0])
+
+
+def _read_while_trusted(events: list[tuple[float, Any]], error: Any) -> float:
+    """Feeds ``events``; the largest ``error(snapshot, now)`` of what the law would read
+    while no refusal has been named in the last 0.5 s (a refusal holds guidance that long)."""
+    t = known_origin()
+    worst, named_s = 0.0, -math.inf
+    for now, frame in events:
+        t.update(frame, now)
+        if t.take_refusal() is not None:
+            named_s = now
+        snapshot = t.snapshot(10.0, now)
+        if snapshot is not None and now - named_s > 0.5:
+            worst = max(worst, error(snapshot, now))
+    return worst
+
+
+@pytest.mark.parametrize("period_ms", [20, 100, 200])
+def test_a_burst_between_the_vehicles_positions_moves_what_is_read_by_no_more_than_a_window(
+    period_ms: int,
+) -> None:
+    """A reviewer: a forger's positions 1 ms apart between the vehicle's, each 0.5 cm
+    further across the track, out and back before its next, were each on the path of the
+    one before and of the oldest of the last 8 (8 ms back): at 5 Hz the position read was
+    0.49 m off, nothing named. Each must now keep to the path of the oldest taken within
+    _PATH_WINDOW_S (0.1 s) too: the burst is named, and while nothing is, what is read
+    stays within a few centimetres of the track."""
+    speed = 5.0
+
+    def frame(ms: int, east: float) -> Any:
+        return local(ms, speed * ms / 1000, east, speed)
+
+    def across(snapshot: Any, now: float) -> float:
+        return abs(float(snapshot.east_m))
+
+    assert _read_while_trusted(_burst(period_ms, frame, 0.0), across) == 0.0  # (genuine)
+    assert _read_while_trusted(_burst(period_ms, frame, 0.005), across) <= 0.07
+
+
+@pytest.mark.parametrize("period_ms", [20, 100])
+def test_a_burst_between_the_vehicles_attitudes_moves_the_yaw_read_by_no_more_than_a_window(
+    period_ms: int,
+) -> None:
+    """A reviewer: the same burst on ATTITUDE, the yaw walked 2.9 degrees a frame (within the
+    3 of the path), judged only against the last taken: at 10 Hz the yaw read was 90
+    degrees off on 312 of 390 ticks, nothing named."""
+    def frame(ms: int, off: float) -> Any:
+        return _attitude(ms, min(off, math.radians(90.0)))
+
+    def position(ms: int) -> tuple[float, Any]:  # (for snapshot: a vehicle hovering)
+        return ms / 1000 + 0.004, local(ms, 0.0, 0.0, 0.0)
+
+    def yaw_off(snapshot: Any, now: float) -> float:
+        return abs(math.degrees(float(snapshot.yaw_rad)))
+
+    events = _burst(period_ms, frame, math.radians(2.9))
+    events = sorted(events + [position(ms) for ms in range(1000, 11000, 20)],
+                    key=lambda event: event[0])  # fmt: skip
+    assert _read_while_trusted(events, yaw_off) <= 6.0
+
+
+def test_a_copter_spinning_at_a_turn_a_second_is_not_refused() -> None:
+    """A reviewer: a copter spinning up at 4.7 rad/s^2 to 360 deg/s, its gyro 0.01 rad/s
+    noisy, was named on 12 of its 10 Hz attitudes: the cap was 2 pi rad/s exactly."""
+    rng = np.random.default_rng(7)
+    t = known_origin()
+    for k in range(100):  # 10 s at 10 Hz
+        time_s = 0.1 * k
+        rate = min(4.7 * time_s, 2.0 * math.pi)
+        yaw = 0.5 * 4.7 * time_s**2 if 4.7 * time_s <= 2.0 * math.pi else (
+            2.0 * math.pi * time_s - 0.5 * (2.0 * math.pi) ** 2 / 4.7)  # fmt: skip
+        yaw = (yaw + math.pi) % (2.0 * math.pi) - math.pi
+        sample = _attitude(1000 + 100 * k, yaw, rate + 0.01 * float(rng.standard_normal()))
+        assert t.update(sample, 1.0 + time_s) == "ATTITUDE", k
+        assert t.take_refusal() is None, k
 
 
 def test_a_late_repeat_of_a_sample_taken_is_no_second_source() -> None:

@@ -69,16 +69,18 @@ prediction goes on through it, below):
   last taken but stamped before a refused one is judged as new, the prediction taken back
   to its stamp.
 - off the path of the samples taken before it (``Hold.GATE``): within the gate, a position
-  must keep to the path of the last taken and of the oldest of the last few
-  (``_STEP_POSITION_M`` across, ``_STAMP_JITTER_S`` of travel more along), its velocity
-  within ``_GATE_VELOCITY_M_S`` plus the bound's; an estimate that steps (a reset) is
-  taken again once its samples have kept to the new path for ``_STEP_RUN_S``.
+  must keep to the path of the last taken, of the oldest of the last few and of the
+  oldest taken within ``_PATH_WINDOW_S`` (``_STEP_POSITION_M`` across,
+  ``_STAMP_JITTER_S`` of travel more along), its velocity within ``_GATE_VELOCITY_M_S``
+  plus the bound's; an estimate that steps (a reset) is taken again once its samples have
+  kept to the new path for ``_STEP_RUN_S``.
 - after a lost link or the latch, a new source is used once its samples have come for
   ``_CONFIRM_S``.
-- an attitude whose yaw leaves the path of the last taken (their Euler yaw rates,
-  trapezoid) by more than ``_YAW_STEP_RAD`` and what ``_YAW_ACCEL_RAD_S2`` allows over the
-  gap, or whose rate changed faster than that or beyond ``_YAW_RATE_MAX_RAD_S``
-  (``Hold.GATE``); a yaw reset is taken again, named, as a position's step is; an
+- an attitude whose yaw leaves the path of the last taken, or of the oldest taken within
+  ``_PATH_WINDOW_S`` (their Euler yaw rates, trapezoid), by more than ``_YAW_STEP_RAD``
+  and what ``_YAW_ACCEL_RAD_S2`` allows over the gap, or whose rate changed faster than
+  that or beyond ``_YAW_RATE_MAX_RAD_S`` (``Hold.GATE``); a yaw reset is taken again,
+  named, as a position's step is; an
   attitude behind the newest taken is judged as a position behind is (reordering within
   ``_REORDER_S`` on the path of the nearest taken; else a second source, named).
 - local and global disagreeing (``Hold.DISAGREE``): when both are fresh, each new sample is
@@ -201,9 +203,19 @@ _YAW_GAP_S = 0.2  # ... over at most this (a 5 Hz stream's period; at 50 Hz a fo
 # most; their per-sample changes 0.13 and 0.65 rad/s); it is at most this in all (a
 # copter's fastest yaw, ArduCopter ACRO and PX4 MC_YAWRATE_MAX, about 200 deg/s)
 _YAW_RATE_SLACK_RAD_S = 0.2
-_YAW_RATE_MAX_RAD_S = 2.0 * math.pi
+# (a turn's worth a second, and the slack: a reviewer's copter spinning at 360 deg/s with
+# 0.01 rad/s of gyro noise had been named on 12 of its samples at 10 Hz)
+_YAW_RATE_MAX_RAD_S = 2.0 * math.pi + _YAW_RATE_SLACK_RAD_S
 # taken samples remembered: a new one is judged against the oldest of them too
 _REPEATS_KEPT = 8
+# ... and against the oldest taken within this much of its stamp (positions: of the taken
+# ones at least a quarter of it apart; attitudes: of the last 64), so that the noise
+# allowances are granted once in this time, however many frames come in it: a reviewer's
+# forger, sending a frame a millisecond between the vehicle's 5 Hz positions, each 0.5 cm
+# further across the track and back before the vehicle's next, had moved the position the
+# law read by 0.49 m (a yaw in the same way by 90 degrees) with nothing named, when the
+# oldest of the last 8 was only 8 ms old
+_PATH_WINDOW_S = 0.1
 # ... and for this long (vehicle time), so that a repeat of one arriving late by another
 # route is known as a repeat, silently, and a sample behind the newest is judged against
 # the nearest of them (a reviewer's second route lagging 0.7 to 2 s had its every repeat
@@ -241,6 +253,8 @@ class _Track:
     step_run: list[tuple[float, _Position]] = field(default_factory=list)
     # the last few taken
     taken: deque[_Position] = field(default_factory=lambda: deque(maxlen=_REPEATS_KEPT))
+    # taken ones at least a quarter of _PATH_WINDOW_S apart, over the last _PATH_WINDOW_S
+    spaced: deque[_Position] = field(default_factory=deque)
     # those of the last _REPEATS_S, by stamp: a repeat of any of them (two routes, one
     # late) is no second source
     history: dict[float, _Position] = field(default_factory=dict)
@@ -264,8 +278,14 @@ class _Track:
         return track
 
     def remember(self, sample: _Position) -> None:
-        """A sample taken: among the last few, and in the history of the last _REPEATS_S."""
+        """A sample taken: among the last few (and the spaced ones of the last
+        _PATH_WINDOW_S), and in the history of the last _REPEATS_S."""
         self.taken.append(sample)
+        spaced = self.spaced
+        if not spaced or sample.boot_s - spaced[-1].boot_s >= 0.25 * _PATH_WINDOW_S:
+            spaced.append(sample)
+        while spaced[0].boot_s < sample.boot_s - _PATH_WINDOW_S:  # (never the newest)
+            spaced.popleft()
         self.history[sample.boot_s] = sample
         _forget_before(self.history, sample.boot_s - _REPEATS_S)
 
@@ -623,6 +643,9 @@ class TelemetryState:
         vehicle's, had been read by 894 of 895 ticks."""
         last = self._yaw_taken[-1]
         off, allowed = _yaw_off(last, (boot_s, yaw, rate))
+        if off <= allowed:  # and on the path of the oldest taken within _PATH_WINDOW_S
+            last = self._yaw_oldest_within(boot_s)
+            off, allowed = _yaw_off(last, (boot_s, yaw, rate))
         run = self._yaw_run
         if off <= allowed:
             run.clear()
@@ -637,9 +660,20 @@ class TelemetryState:
             return True
         return self._refuse(
             Hold.GATE,
-            f"attitude yaw {math.degrees(off):.1f} deg off the path of the one before (at most "
-            f"{math.degrees(allowed):.1f} deg in {boot_s - last[0]:.3f} s): refused",
+            f"attitude yaw {math.degrees(off):.1f} deg off the path of the one taken "
+            f"{boot_s - last[0]:.3f} s before (at most {math.degrees(allowed):.1f} deg): refused",
         )
+
+    def _yaw_oldest_within(self, boot_s: float) -> tuple[float, float, float]:
+        """The oldest attitude taken within ``_PATH_WINDOW_S`` of ``boot_s`` (of the last
+        64; the last taken where none is)."""
+        taken = self._yaw_taken
+        oldest = taken[-1]
+        for entry in reversed(taken):
+            if entry[0] < boot_s - _PATH_WINDOW_S:
+                break
+            oldest = entry
+        return oldest
 
     def _on_vfr_hud(self, msg: Message, now_s: float) -> bool:
         # Only checked: ground speed and heading come from the position messages (vx, vy) and
@@ -800,10 +834,15 @@ class TelemetryState:
                 f"{limit:.2f} m): refused",
             )
         off, within = _off_path(last, sample, bound)
-        # and on the path of the oldest of the last few taken: the noise allowances are
-        # granted once over them, not at every sample (a reviewer's forger at 200 Hz
-        # accelerated at 12 m/s^2 within the per-sample allowance of a 2 m/s^2 bound)
+        # and on the path of the oldest of the last few taken, and of the oldest taken
+        # within _PATH_WINDOW_S: the noise allowances are granted once over them, not at
+        # every sample (a reviewer's forger at 200 Hz accelerated at 12 m/s^2 within the
+        # per-sample allowance of a 2 m/s^2 bound)
         oldest = track.taken[0]
+        window = next((p for p in track.spaced if p.boot_s >= sample.boot_s - _PATH_WINDOW_S),
+                      last)  # fmt: skip
+        if window is not last and not _on_path(window, sample, bound):
+            oldest = window  # (the one it is off the path of: the message names it)
         on_oldest = oldest is last or _on_path(oldest, sample, bound)
         stepped = (not velocity_ok or off > within or not on_oldest) and _stepped(
             track, sample, now_s, bound
@@ -825,7 +864,7 @@ class TelemetryState:
                 Hold.GATE,
                 f"{kind} position or velocity off the path of the sample taken "
                 f"{sample.boot_s - oldest.boot_s:.3f} s before it (a velocity changed faster "
-                f"than the bound over {len(track.taken)} samples): refused",
+                "than the bound over the samples between): refused",
             )
         if stepped:  # the prediction follows the estimate's new velocity
             track.pred_vn_m_s, track.pred_ve_m_s = sample.vn_m_s, sample.ve_m_s
@@ -834,6 +873,7 @@ class TelemetryState:
         track.step_run.clear()
         if stepped:  # taken, and named (it holds guidance as a refusal does); the old path
             track.taken.clear()  # is no longer one to judge samples against
+            track.spaced.clear()
             self._refusal = (
                 Hold.GATE,
                 f"{kind} position stepped {off:.3f} m, velocity {dv:.2f} m/s (the estimate "

@@ -31,7 +31,14 @@ from urllib.parse import urlsplit
 
 from ezcompanion.errors import ConfigError
 
-__all__ = ["DEFAULT_BAUD", "Endpoint", "EndpointKind", "parse_endpoint", "pymavlink_url"]
+__all__ = [
+    "DEFAULT_BAUD",
+    "Endpoint",
+    "EndpointKind",
+    "is_loopback_host",
+    "parse_endpoint",
+    "pymavlink_url",
+]
 
 DEFAULT_BAUD = 57600
 MAX_BAUD = 12_000_000  # above any UART a flight controller has
@@ -84,12 +91,7 @@ class Endpoint:
     def on_a_network(self) -> bool:
         """Reachable from other machines: a network endpoint not on the loopback (a serial
         port and 127.0.0.1 are not; a DNS name other than localhost is taken to be)."""
-        if self.kind is EndpointKind.SERIAL or self.host == "localhost":
-            return False
-        try:
-            return not ipaddress.ip_address(self.host).is_loopback
-        except ValueError:
-            return True
+        return self.kind is not EndpointKind.SERIAL and not is_loopback_host(self.host)
 
     @property
     def pymavlink(self) -> str:
@@ -97,6 +99,17 @@ class Endpoint:
         if self.kind is EndpointKind.SERIAL:
             return f"{self.device},{self.baud}"
         return f"{self.kind.value}:{self.host}:{self.port}"
+
+
+def is_loopback_host(host: str) -> bool:
+    """``host`` is ``localhost`` or a loopback address (127.0.0.0/8, ::1); any other name
+    is taken to reach other machines."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
 
 
 def pymavlink_url(text: object, *, field: str = "connect") -> str:

@@ -154,3 +154,22 @@ def test_the_stubs_connect_setting_takes_either_spelling() -> None:
 ])
 def test_an_endpoint_knows_whether_other_machines_reach_it(text: str, network: bool) -> None:
     assert parse_endpoint(text).on_a_network is network
+
+
+@pytest.mark.parametrize("host", ["127.0.0.1", "localhost"])
+def test_a_udpout_link_to_the_loopback_listens_on_the_loopback_only(host: str) -> None:
+    """A reviewer: pymavlink leaves a udpout: socket unbound, and the kernel binds it to every
+    interface at its first send, so a stranger who found its port could send to it though
+    the endpoint counts as the loopback (no signing asked). It is bound to 127.0.0.1: a
+    datagram to its port on any other address of this machine finds nobody."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as peer:
+        peer.bind(("127.0.0.1", 0))
+        port = peer.getsockname()[1]
+        link = open_link(f"udpout:{host}:{port}", system_id=1, component_id=191)
+        try:
+            assert link.send(link.mav.heartbeat_encode(18, 8, 0, 0, 0))
+            assert link.local_address is not None and link.local_address[0] == "127.0.0.1"
+            data, sender = peer.recvfrom(1024)  # and it still reaches its peer
+            assert data and sender[0] == "127.0.0.1"
+        finally:
+            link.close()

@@ -30,9 +30,9 @@ waits (``Lockstep.trusted``), so that refusal comes before any setpoint.
 
 from __future__ import annotations
 
-import ipaddress
 import os
 
+from ezcompanion.endpoint import is_loopback_host
 from ezcompanion.errors import ConfigError
 from ezcompanion.service.clock import LockstepClock
 from ezcompanion.wire import Message
@@ -60,13 +60,7 @@ def check_loopback_url(url: str) -> None:
         return
     scheme, _, rest = url.partition(":")
     host = rest.rsplit(":", 1)[0].strip("/[]") if ":" in rest else ""
-    loopback = host == "localhost"
-    if not loopback:
-        try:
-            loopback = ipaddress.ip_address(host).is_loopback
-        except ValueError:
-            loopback = False
-    if scheme not in ("udpin", "udpout", "udp", "tcp", "tcpin") or not loopback:
+    if scheme not in ("udpin", "udpout", "udp", "tcp", "tcpin") or not is_loopback_host(host):
         raise ConfigError(
             "--lockstep",
             url,

@@ -69,14 +69,14 @@ prediction goes on through it, below):
   last taken but stamped before a refused one is judged as new, the prediction taken back
   to its stamp.
 - off the path of the samples taken before it (``Hold.GATE``): within the gate, a position
-  must keep to the path of the last taken, of the oldest of the last few and of the
-  oldest taken within ``_PATH_WINDOW_S`` (``_STEP_POSITION_M`` across,
+  must keep to the path of the last taken, of the oldest of the last few and of every
+  one taken within ``_PATH_WINDOW_S`` (``_STEP_POSITION_M`` across,
   ``_STAMP_JITTER_S`` of travel more along), its velocity within ``_GATE_VELOCITY_M_S``
   plus the bound's; an estimate that steps (a reset) is taken again once its samples have
   kept to the new path for ``_STEP_RUN_S``.
 - after a lost link or the latch, a new source is used once its samples have come for
   ``_CONFIRM_S``.
-- an attitude whose yaw leaves the path of the last taken, or of the oldest taken within
+- an attitude whose yaw leaves the path of the last taken, or of any taken within
   ``_PATH_WINDOW_S`` (their Euler yaw rates, trapezoid), by more than ``_YAW_STEP_RAD``
   and what ``_YAW_ACCEL_RAD_S2`` allows over the gap, or whose rate changed faster than
   that or beyond ``_YAW_RATE_MAX_RAD_S`` (``Hold.GATE``); a yaw reset is taken again,
@@ -208,14 +208,18 @@ _YAW_RATE_SLACK_RAD_S = 0.2
 _YAW_RATE_MAX_RAD_S = 2.0 * math.pi + _YAW_RATE_SLACK_RAD_S
 # taken samples remembered: a new one is judged against the oldest of them too
 _REPEATS_KEPT = 8
-# ... and against the oldest taken within this much of its stamp (positions: of the taken
-# ones at least a quarter of it apart; attitudes: of the last 64), so that the noise
-# allowances are granted once in this time, however many frames come in it: a reviewer's
-# forger, sending a frame a millisecond between the vehicle's 5 Hz positions, each 0.5 cm
-# further across the track and back before the vehicle's next, had moved the position the
-# law read by 0.49 m (a yaw in the same way by 90 degrees) with nothing named, when the
-# oldest of the last 8 was only 8 ms old
-_PATH_WINDOW_S = 0.1
+# ... and against every one taken within this much of its stamp, so that the noise
+# allowances are granted once in this time, however many frames come in it, and the
+# vehicle's own last sample is among them down to 5 Hz (as _REORDER_S): a reviewer's forger,
+# sending a frame a millisecond between the vehicle's 5 Hz positions, each 0.5 cm further
+# across the track and back before the vehicle's next, had moved the position the law read
+# by 0.49 m (a yaw in the same way by 90 degrees) with nothing named, when the oldest of the
+# last 8 was only 8 ms old; and the next reviewer's, judged against the oldest of a ladder
+# of samples 25 ms apart, placed its own frames on every rung and read 0.10 m. Each sample
+# is so within the allowances of every one in the window, the vehicle's own included (the
+# bound's term grows with the time between: 5 cm + bound x dt^2 / 4 of the vehicle's last
+# position, 3 degrees + 10 rad/s^2 x dt^2 / 2 of its yaw)
+_PATH_WINDOW_S = 0.22
 # ... and for this long (vehicle time), so that a repeat of one arriving late by another
 # route is known as a repeat, silently, and a sample behind the newest is judged against
 # the nearest of them (a reviewer's second route lagging 0.7 to 2 s had its every repeat
@@ -253,8 +257,8 @@ class _Track:
     step_run: list[tuple[float, _Position]] = field(default_factory=list)
     # the last few taken
     taken: deque[_Position] = field(default_factory=lambda: deque(maxlen=_REPEATS_KEPT))
-    # taken ones at least a quarter of _PATH_WINDOW_S apart, over the last _PATH_WINDOW_S
-    spaced: deque[_Position] = field(default_factory=deque)
+    # those of the last _PATH_WINDOW_S (by stamp)
+    recent: deque[_Position] = field(default_factory=deque)
     # those of the last _REPEATS_S, by stamp: a repeat of any of them (two routes, one
     # late) is no second source
     history: dict[float, _Position] = field(default_factory=dict)
@@ -278,14 +282,10 @@ class _Track:
         return track
 
     def remember(self, sample: _Position) -> None:
-        """A sample taken: among the last few (and the spaced ones of the last
-        _PATH_WINDOW_S), and in the history of the last _REPEATS_S."""
+        """A sample taken: among the last few and those of the last _PATH_WINDOW_S, and
+        in the history of the last _REPEATS_S."""
         self.taken.append(sample)
-        spaced = self.spaced
-        if not spaced or sample.boot_s - spaced[-1].boot_s >= 0.25 * _PATH_WINDOW_S:
-            spaced.append(sample)
-        while spaced[0].boot_s < sample.boot_s - _PATH_WINDOW_S:  # (never the newest)
-            spaced.popleft()
+        _keep_within(self.recent, sample, sample.boot_s)
         self.history[sample.boot_s] = sample
         _forget_before(self.history, sample.boot_s - _REPEATS_S)
 
@@ -408,6 +408,8 @@ class TelemetryState:
     # the attitudes taken last (stamp, yaw, rate): one behind the newest is judged by them
     _yaw_taken: deque[tuple[float, float, float]] = field(
         default_factory=lambda: deque(maxlen=64))
+    # those of the last _PATH_WINDOW_S: a new one keeps to the path of each
+    _yaw_recent: deque[tuple[float, float, float]] = field(default_factory=deque)
     _attitude_s: float = -math.inf
     _attitude_boot_s: float = -math.inf
     _local_offset: tuple[float, float, float] | None = None  # vehicle origin in ours
@@ -459,6 +461,7 @@ class TelemetryState:
         self._attitude_s = self._attitude_boot_s = -math.inf
         self._yaw_run.clear()
         self._yaw_taken.clear()
+        self._yaw_recent.clear()
         self._refusal = None
         self._relinked = True
 
@@ -607,6 +610,7 @@ class TelemetryState:
             return False
         self._yaw_rad, self._attitude_boot_s = msg.yaw, boot_s
         self._yaw_taken.append((boot_s, msg.yaw, rate))
+        _keep_within(self._yaw_recent, (boot_s, msg.yaw, rate), boot_s)
         # (only positions, which pass the gate, move the vehicle's clock: a forger's
         # attitudes, each a little ahead, would otherwise age every genuine position)
         self._attitude_s = self._sent_s(boot_s, now_s)
@@ -643,9 +647,12 @@ class TelemetryState:
         vehicle's, had been read by 894 of 895 ticks."""
         last = self._yaw_taken[-1]
         off, allowed = _yaw_off(last, (boot_s, yaw, rate))
-        if off <= allowed:  # and on the path of the oldest taken within _PATH_WINDOW_S
-            last = self._yaw_oldest_within(boot_s)
-            off, allowed = _yaw_off(last, (boot_s, yaw, rate))
+        for before in self._yaw_recent:  # and of every one taken within _PATH_WINDOW_S
+            if off > allowed:
+                break
+            if before[0] >= boot_s - _PATH_WINDOW_S:
+                last = before
+                off, allowed = _yaw_off(last, (boot_s, yaw, rate))
         run = self._yaw_run
         if off <= allowed:
             run.clear()
@@ -654,6 +661,7 @@ class TelemetryState:
         off = min(off, math.pi)  # (for the message: a rate beyond its change is "off")
         if _run_lasted(run, now_s, (boot_s, yaw, rate), follows):
             run.clear()
+            self._yaw_recent.clear()  # the old path is no longer one to judge by
             self._refusal = (Hold.GATE, f"attitude yaw stepped {math.degrees(off):.1f} deg "
                              f"(the estimate reset): its samples kept to the new path for "
                              f"{_STEP_RUN_S:g} s, none to the old: taken")  # fmt: skip
@@ -663,17 +671,6 @@ class TelemetryState:
             f"attitude yaw {math.degrees(off):.1f} deg off the path of the one taken "
             f"{boot_s - last[0]:.3f} s before (at most {math.degrees(allowed):.1f} deg): refused",
         )
-
-    def _yaw_oldest_within(self, boot_s: float) -> tuple[float, float, float]:
-        """The oldest attitude taken within ``_PATH_WINDOW_S`` of ``boot_s`` (of the last
-        64; the last taken where none is)."""
-        taken = self._yaw_taken
-        oldest = taken[-1]
-        for entry in reversed(taken):
-            if entry[0] < boot_s - _PATH_WINDOW_S:
-                break
-            oldest = entry
-        return oldest
 
     def _on_vfr_hud(self, msg: Message, now_s: float) -> bool:
         # Only checked: ground speed and heading come from the position messages (vx, vy) and
@@ -834,15 +831,13 @@ class TelemetryState:
                 f"{limit:.2f} m): refused",
             )
         off, within = _off_path(last, sample, bound)
-        # and on the path of the oldest of the last few taken, and of the oldest taken
+        # and on the path of the oldest of the last few taken, and of every one taken
         # within _PATH_WINDOW_S: the noise allowances are granted once over them, not at
         # every sample (a reviewer's forger at 200 Hz accelerated at 12 m/s^2 within the
         # per-sample allowance of a 2 m/s^2 bound)
-        oldest = track.taken[0]
-        window = next((p for p in track.spaced if p.boot_s >= sample.boot_s - _PATH_WINDOW_S),
-                      last)  # fmt: skip
-        if window is not last and not _on_path(window, sample, bound):
-            oldest = window  # (the one it is off the path of: the message names it)
+        oldest = next((p for p in track.recent if p is not last
+                       and p.boot_s >= sample.boot_s - _PATH_WINDOW_S
+                       and not _on_path(p, sample, bound)), track.taken[0])  # fmt: skip
         on_oldest = oldest is last or _on_path(oldest, sample, bound)
         stepped = (not velocity_ok or off > within or not on_oldest) and _stepped(
             track, sample, now_s, bound
@@ -873,7 +868,7 @@ class TelemetryState:
         track.step_run.clear()
         if stepped:  # taken, and named (it holds guidance as a refusal does); the old path
             track.taken.clear()  # is no longer one to judge samples against
-            track.spaced.clear()
+            track.recent.clear()
             self._refusal = (
                 Hold.GATE,
                 f"{kind} position stepped {off:.3f} m, velocity {dv:.2f} m/s (the estimate "
@@ -973,6 +968,19 @@ def _forget_before(by_stamp: dict[float, Any], oldest_s: float) -> None:
     ``oldest_s``."""
     while next(iter(by_stamp)) < oldest_s:
         del by_stamp[next(iter(by_stamp))]
+
+
+def _keep_within(recent: deque[Any], entry: Any, boot_s: float) -> None:
+    """Append ``entry`` (stamped ``boot_s``, the newest) to ``recent`` and drop those stamped
+    more than ``_PATH_WINDOW_S`` before it."""
+    recent.append(entry)
+    while _stamp(recent[0]) < boot_s - _PATH_WINDOW_S:
+        recent.popleft()
+
+
+def _stamp(entry: Any) -> float:
+    """The stamp of a position or of an attitude (stamp, yaw, rate)."""
+    return float(entry.boot_s if isinstance(entry, _Position) else entry[0])
 
 
 def _off_path(last: _Position, sample: _Position, bound: float) -> tuple[float, float]:

@@ -9,6 +9,7 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
+from ezcompanion.endpoint import is_loopback_host
 from ezcompanion.errors import ConfigError, LinkError
 from ezcompanion.wire.dialect import Address, Message, mavlink, mavutil
 from ezcompanion.wire.signing import SIGNING_EPOCH_S, check_signature_first
@@ -118,6 +119,11 @@ class Link:
                     dialect="ardupilotmega",
                     autoreconnect=False,
                 )
+                if scheme == "udpout" and is_loopback_host(url.split(":")[1]):
+                    # pymavlink leaves a udpout: socket unbound, so the kernel binds it to
+                    # every interface at its first send: anyone who finds the port could
+                    # send to it (a reviewer). To a loopback address, it listens there only.
+                    self._conn.port.bind(("127.0.0.1", 0))
         except (ValueError, ImportError) as exc:
             raise ConfigError("connect", self.url, f"cannot be opened: {exc}") from exc
         except OSError as exc:  # the port is taken, the device is missing or not ours

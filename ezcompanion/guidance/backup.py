@@ -158,8 +158,13 @@ PLAN_SIZE = PLAN_POLICIES + SHIELD_PLAN_DEPTH_MAX
     S_ROBUST,
     S_RUNGS,
     S_PLAN,
+    S_LIMIT_LEFT,
+    S_LIMIT_RIGHT,
     S_SIZE,
-) = range(16)
+) = range(18)
+# (S_LIMIT_LEFT, S_LIMIT_RIGHT: the hard turns' limits a*, ``_turn_limit``, computed once
+# when packed: 50 Newton steps at every turn's flight had been 4% of the straight track's
+# shield step, perf on bench_law.py's states)
 
 # The sampled part of a flow ends when the heading change still to come is bounded by this
 # (it is then accounted for in closed form), or after this many samples; a turn looks for
@@ -217,6 +222,8 @@ def pack_shield(params: GuidanceParams, **abandon: float) -> FloatArray:
     p[S_ROBUST] = params.shield_robust_m
     p[S_RUNGS] = params.shield_rungs
     p[S_PLAN] = params.shield_plan_depth
+    p[S_LIMIT_LEFT] = _turn_limit(p, -1.0)
+    p[S_LIMIT_RIGHT] = _turn_limit(p, 1.0)
     return p
 
 
@@ -266,14 +273,22 @@ def _advance_straighten(a: float, dt_s: float, accel_max: float, p1: float, n: i
 
 
 @jit_inline
-def _lag_response(a0: float, a1: float, av0: float, tau: float, t: float, dt: float
-                  ) -> tuple[float, float]:
+def _decays(tau: float, dt: float) -> tuple[float, float]:
+    """exp(-t / tau) at t = dt / 2 and dt, for ``_fly`` (1 without a lag): the same for every
+    step of a flight, so computed once a flight rather than twice a step."""
+    if tau <= 0.0:
+        return 1.0, 1.0
+    return math.exp(-(0.5 * dt) / tau), math.exp(-dt / tau)
+
+
+@jit_inline
+def _lag_response(a0: float, a1: float, av0: float, tau: float, t: float, dt: float,
+                  decay: float) -> tuple[float, float]:
     """a_v(t) and its integral over [0, t] for a_v' = (a - a_v) / tau, a linear from a0 to a1
-    over dt (tau = 0: a_v = a)."""  # fmt: skip
+    over dt (tau = 0: a_v = a); ``decay`` = exp(-t / tau) (``_decays``)."""  # fmt: skip
     rate = (a1 - a0) / dt
     if tau <= 0.0:
         return a0 + rate * t, a0 * t + 0.5 * rate * t * t
-    decay = math.exp(-t / tau)
     offset = av0 - a0 + rate * tau
     av = a0 + rate * t - rate * tau + offset * decay
     integral = a0 * t + 0.5 * rate * t * t - rate * tau * t + offset * tau * (1.0 - decay)
@@ -282,14 +297,14 @@ def _lag_response(a0: float, a1: float, av0: float, tau: float, t: float, dt: fl
 
 @jit_inline
 def _fly(n: float, e: float, h: float, cos_h: float, sin_h: float, a0: float, a1: float,
-         av0: float, speed: float, tau: float, dt: float
+         av0: float, speed: float, tau: float, dt: float, decays: tuple[float, float]
          ) -> tuple[float, float, float, float, float, float]:
     """The vehicle over dt while the actuator moves linearly from a0 to a1: position by
     Simpson's rule on the exact heading, heading and a_v exact. ``cos_h``, ``sin_h``: of
     ``h``, and returned for the heading after (a flight of many steps computes each
-    once)."""  # fmt: skip
-    _, half = _lag_response(a0, a1, av0, tau, 0.5 * dt, dt)
-    av1, full = _lag_response(a0, a1, av0, tau, dt, dt)
+    once); ``decays``: ``_decays(tau, dt)``, computed once a flight."""  # fmt: skip
+    _, half = _lag_response(a0, a1, av0, tau, 0.5 * dt, dt, decays[0])
+    av1, full = _lag_response(a0, a1, av0, tau, dt, dt, decays[1])
     hm = h + half / speed
     h1 = h + full / speed
     cos_h1, sin_h1 = math.cos(h1), math.sin(h1)
@@ -634,6 +649,7 @@ def straight_certificate(
     blocker = 0
     ch, sh = math.cos(h), math.sin(h)
     trapezoid = _trapezoid_excess(s, dt)
+    decays = _decays(tau, dt)
     for j in range(_MAX_SAMPLES):
         if early and j % _TAIL_EVERY == 0:
             tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, trapezoid)
@@ -660,7 +676,7 @@ def straight_certificate(
                 return -math.inf
         for _ in range(ticks):
             a1 = _advance_straighten(a, dt, amax, p1, int(s[S_N]), s[S_CMD])
-            n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a, a1, av, speed, tau, dt)
+            n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a, a1, av, speed, tau, dt, decays)
             a = a1
     tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, trapezoid)
     return max(certified, min(best, tail))
@@ -707,7 +723,8 @@ def _turn_setup(s: FloatArray, policy: int, speed: float, dt: float
     step, the bound on a_v's rate, and the lateral acceleration it converges to."""  # fmt: skip
     sign = -1.0 if policy == BACKUP_LEFT else 1.0
     ticks = sample_ticks(s, speed, dt)
-    return s[S_CMD] * sign, ticks, ticks * dt, _av_rate_bound(s), _turn_limit(s, sign)
+    limit = s[S_LIMIT_LEFT] if policy == BACKUP_LEFT else s[S_LIMIT_RIGHT]
+    return s[S_CMD] * sign, ticks, ticks * dt, _av_rate_bound(s), limit
 
 
 @jit_inline
@@ -725,13 +742,15 @@ def _circled(s: FloatArray, a: float, av: float, limit: float, speed: float, con
 def _turn_step(
     s: FloatArray, cmd: float, n: float, e: float, h: float, a: float, av: float, ch: float,
     sh: float, speed: float, dt: float, amax: float, p1: float, tau: float,
+    decays: tuple[float, float],
 ) -> tuple[float, float, float, float, float, float, float]:
     """One control step of a hard turn (the actuator command ``cmd`` held): the state after
     it (n, e, h, a, a_v, cos h, sin h). (``amax``, ``p1``, ``tau``: ``s``'s, read once by
     the caller: read from ``s`` here, in a loop that writes to an array, they were read
-    again at every step, some 5% of the bench's straight-track tick.)"""
+    again at every step, some 5% of the bench's straight-track tick; ``decays``:
+    ``_decays(tau, dt)``.)"""
     a1 = advance_one(a, cmd, dt, amax, p1, int(s[S_N]), s[S_CMD])
-    n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a, a1, av, speed, tau, dt)
+    n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a, a1, av, speed, tau, dt, decays)
     return n, e, h, a1, av, ch, sh
 
 
@@ -753,6 +772,7 @@ def turn_certificate(
     up to the next)."""  # fmt: skip
     amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
     cmd, ticks, step, rate, limit = _turn_setup(s, policy, speed, dt)
+    decays = _decays(tau, dt)
     best = math.inf
     turned = 0.0
     converged = False
@@ -781,7 +801,7 @@ def turn_certificate(
         h0 = h
         for tick in range(ticks):
             n, e, h, a, av, ch, sh = _turn_step(s, cmd, n, e, h, a, av, ch, sh, speed, dt, amax,
-                                                p1, tau)  # fmt: skip
+                                                p1, tau, decays)  # fmt: skip
             if every_step and tick < ticks - 1:
                 leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
                                             dt, blocker, screen_level, exit_level,
@@ -905,6 +925,7 @@ def _rung_turn(
     the stop: nothing after it is needed). ``rung_value`` reads a rung's value from this."""
     amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
     cmd, ticks, step, rate, limit = _turn_setup(s, policy, speed, dt)
+    decays = _decays(tau, dt)
     slack = _SCREEN_SLACK * speed * speed / amax
     waiting = levels.shape[0]  # the rungs [0, waiting) have not found their exit yet
     for r in range(waiting):
@@ -940,7 +961,7 @@ def _rung_turn(
         h0 = h
         for tick in range(ticks):
             n, e, h, a, av, ch, sh = _turn_step(s, cmd, n, e, h, a, av, ch, sh, speed, dt, amax,
-                                                p1, tau)  # fmt: skip
+                                                p1, tau, decays)  # fmt: skip
             if tick < ticks - 1:
                 low = levels[waiting - 1]
                 leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
@@ -1054,10 +1075,11 @@ def _fly_step(
     )
     # the vehicle sees the actuator move from a to a_end; substeps interpolate it linearly
     ch, sh = math.cos(h), math.sin(h)
+    decays = _decays(s[S_TAU], sub)
     for i in range(steps):
         a0 = a + (a_end - a) * i / steps
         a1 = a + (a_end - a) * (i + 1) / steps
-        n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a0, a1, av, speed, s[S_TAU], sub)
+        n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a0, a1, av, speed, s[S_TAU], sub, decays)
         best = min(best, point_gap(zn, ze, zmur, zreach, kz, n, e, ch, sh, s[S_EPS], speed,
                                     amax, rate, sub))  # fmt: skip
     return best, n, e, h, a_end, av

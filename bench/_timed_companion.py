@@ -34,9 +34,9 @@ class TimedService(CompanionService):
         assert link is not None
         receive = link.recv
 
-        def timed_receive(max_reads: int = 64) -> list[Any]:
+        def timed_receive(max_reads: int = 64, **bounds: Any) -> list[Any]:
             started = time.perf_counter()
-            frames = receive(max_reads)
+            frames = receive(max_reads, **bounds)  # (the read bounds: max_frames, budget_s)
             if any(f.kind == "LOCAL_POSITION_NED" for f in frames):
                 self._read_at = started
             return frames

@@ -538,6 +538,21 @@ def test_a_late_repeat_of_a_sample_taken_is_no_second_source() -> None:
             assert t.take_refusal() is None
 
 
+def test_a_late_repeat_of_an_attitude_by_a_second_route_is_no_second_source() -> None:
+    """A reviewer: attitudes delivered twice (two routes), one copy 1.5 s late at 50 Hz,
+    more than the 64 last taken behind: 11 of 34 copies were named a second source. A
+    repeat of any attitude taken in the last 5 s is dropped without a word."""
+    t = known_origin()
+    for k in range(200):  # 4 s at 50 Hz, turning at 0.5 rad/s
+        assert t.update(_attitude(1000 + 20 * k, 0.01 * k, 0.5), 1.0 + 0.02 * k) == "ATTITUDE"
+        assert t.take_refusal() is None
+        late = k - 75  # the other route's copy, 1.5 s late
+        if late >= 0:
+            copy = _attitude(1000 + 20 * late, 0.01 * late, 0.5)
+            assert t.update(copy, 1.0 + 0.02 * k + 0.001) is None
+            assert t.take_refusal() is None, k
+
+
 def test_a_burst_of_samples_each_a_little_ahead_of_the_last_is_refused() -> None:
     """A reviewer's attack: 22 LOCAL_POSITION_NED in a burst, each stamped 99 ms past the
     one before, walked to the target: each was judged against the least offset the one

@@ -410,6 +410,9 @@ class TelemetryState:
         default_factory=lambda: deque(maxlen=64))
     # those of the last _PATH_WINDOW_S: a new one keeps to the path of each
     _yaw_recent: deque[tuple[float, float, float]] = field(default_factory=deque)
+    # those of the last _REPEATS_S, by stamp: a repeat of any of them (a second route, late
+    # by more than the 64 above) is no second source
+    _yaw_history: dict[float, tuple[float, float, float]] = field(default_factory=dict)
     _attitude_s: float = -math.inf
     _attitude_boot_s: float = -math.inf
     _local_offset: tuple[float, float, float] | None = None  # vehicle origin in ours
@@ -462,6 +465,7 @@ class TelemetryState:
         self._yaw_run.clear()
         self._yaw_taken.clear()
         self._yaw_recent.clear()
+        self._yaw_history.clear()
         self._refusal = None
         self._relinked = True
 
@@ -611,6 +615,8 @@ class TelemetryState:
         self._yaw_rad, self._attitude_boot_s = msg.yaw, boot_s
         self._yaw_taken.append((boot_s, msg.yaw, rate))
         _keep_within(self._yaw_recent, (boot_s, msg.yaw, rate), boot_s)
+        self._yaw_history[boot_s] = (boot_s, msg.yaw, rate)
+        _forget_before(self._yaw_history, boot_s - _REPEATS_S)
         # (only positions, which pass the gate, move the vehicle's clock: a forger's
         # attitudes, each a little ahead, would otherwise age every genuine position)
         self._attitude_s = self._sent_s(boot_s, now_s)
@@ -622,9 +628,10 @@ class TelemetryState:
         without a word; else it is a second source of attitudes, named (a reviewer's forger,
         stamped 30 to 99 ms ahead of the vehicle's and walking its yaw 2.9 degrees a sample,
         had every one of the vehicle's dropped as "reordered": 90 degrees off, nothing
-        named). False either way."""
+        named); a repeat of one taken in the last ``_REPEATS_S`` is dropped too (a reviewer's
+        second route, 1.5 s late at 50 Hz, had had 11 of 34 named). False either way."""
         taken = self._yaw_taken
-        if not taken or sample in taken:
+        if not taken or sample in taken or self._yaw_history.get(sample[0]) == sample:
             return False
         nearest = min(taken, key=lambda a: abs(a[0] - sample[0]))
         off, allowed = _yaw_off(nearest, sample)

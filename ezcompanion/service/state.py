@@ -80,9 +80,9 @@ prediction goes on through it, below):
   ``_PATH_WINDOW_S`` (their Euler yaw rates, trapezoid), by more than ``_YAW_STEP_RAD``
   and what ``_YAW_ACCEL_RAD_S2`` allows over the gap, or whose rate changed faster than
   that or beyond ``_YAW_RATE_MAX_RAD_S`` (``Hold.GATE``); a yaw reset is taken again,
-  named, as a position's step is; an
-  attitude behind the newest taken is judged as a position behind is (reordering within
-  ``_REORDER_S`` on the path of the nearest taken; else a second source, named).
+  named, as a position's step is; an attitude behind the newest taken is judged as a
+  position behind is (a repeat within ``_REPEATS_S``, or reordering within ``_REORDER_S``
+  on the path of the nearest taken: dropped; else a second source, named).
 - local and global disagreeing (``Hold.DISAGREE``): when both are fresh, each new sample is
   compared with the other source propagated to its time stamp.
 
@@ -652,14 +652,14 @@ class TelemetryState:
         new path for ``_STEP_RUN_S`` with none on the old (as a position's step). Else
         refused, named: a reviewer's forged yaw of +90 degrees, stamped after each of the
         vehicle's, had been read by 894 of 895 ticks."""
-        last = self._yaw_taken[-1]
-        off, allowed = _yaw_off(last, (boot_s, yaw, rate))
+        reference = self._yaw_taken[-1]
+        off, allowed = _yaw_off(reference, (boot_s, yaw, rate))
         for before in self._yaw_recent:  # and of every one taken within _PATH_WINDOW_S
             if off > allowed:
-                break
+                break  # (the reference it is off the path of: the message names it)
             if before[0] >= boot_s - _PATH_WINDOW_S:
-                last = before
-                off, allowed = _yaw_off(last, (boot_s, yaw, rate))
+                reference = before
+                off, allowed = _yaw_off(reference, (boot_s, yaw, rate))
         run = self._yaw_run
         if off <= allowed:
             run.clear()
@@ -676,7 +676,8 @@ class TelemetryState:
         return self._refuse(
             Hold.GATE,
             f"attitude yaw {math.degrees(off):.1f} deg off the path of the one taken "
-            f"{boot_s - last[0]:.3f} s before (at most {math.degrees(allowed):.1f} deg): refused",
+            f"{boot_s - reference[0]:.3f} s before (at most {math.degrees(allowed):.1f} deg): "
+            "refused",
         )
 
     def _on_vfr_hud(self, msg: Message, now_s: float) -> bool:
@@ -842,11 +843,12 @@ class TelemetryState:
         # within _PATH_WINDOW_S: the noise allowances are granted once over them, not at
         # every sample (a reviewer's forger at 200 Hz accelerated at 12 m/s^2 within the
         # per-sample allowance of a 2 m/s^2 bound)
-        oldest = next((p for p in track.recent if p is not last
-                       and p.boot_s >= sample.boot_s - _PATH_WINDOW_S
-                       and not _on_path(p, sample, bound)), track.taken[0])  # fmt: skip
-        on_oldest = oldest is last or _on_path(oldest, sample, bound)
-        stepped = (not velocity_ok or off > within or not on_oldest) and _stepped(
+        # (the first of them it is off the path of, the message names it; else the oldest)
+        reference = next((p for p in track.recent if p is not last
+                          and p.boot_s >= sample.boot_s - _PATH_WINDOW_S
+                          and not _on_path(p, sample, bound)), track.taken[0])  # fmt: skip
+        on_path = reference is last or _on_path(reference, sample, bound)
+        stepped = (not velocity_ok or off > within or not on_path) and _stepped(
             track, sample, now_s, bound
         )
         if not velocity_ok and not stepped:
@@ -861,11 +863,11 @@ class TelemetryState:
                 f"{kind} position off the path of the sample before it ({off:.3f} m from "
                 f"it, at most {within:.3f} m in {sample.boot_s - last.boot_s:.3f} s): refused",
             )
-        if not on_oldest and not stepped:  # (a reviewer: the message had named the last)
+        if not on_path and not stepped:  # (a reviewer: the message had named the last)
             return self._refuse(
                 Hold.GATE,
                 f"{kind} position or velocity off the path of the sample taken "
-                f"{sample.boot_s - oldest.boot_s:.3f} s before it (a velocity changed faster "
+                f"{sample.boot_s - reference.boot_s:.3f} s before it (a velocity changed faster "
                 "than the bound over the samples between): refused",
             )
         if stepped:  # the prediction follows the estimate's new velocity

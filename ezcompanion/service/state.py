@@ -101,7 +101,11 @@ import math
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, TypeVar
+from itertools import islice
+from typing import Any, NamedTuple, TypeVar
+
+import numpy as np
+import numpy.typing as npt
 
 from ezcompanion.config import GeoOrigin
 from ezcompanion.frames import wrap_pi
@@ -258,7 +262,7 @@ class _Track:
     # the last few taken
     taken: deque[_Position] = field(default_factory=lambda: deque(maxlen=_REPEATS_KEPT))
     # those of the last _PATH_WINDOW_S (by stamp)
-    recent: deque[_Position] = field(default_factory=deque)
+    recent: _Window = field(default_factory=lambda: _Window())
     # those of the last _REPEATS_S, by stamp: a repeat of any of them (two routes, one
     # late) is no second source
     history: dict[float, _Position] = field(default_factory=dict)
@@ -285,7 +289,7 @@ class _Track:
         """A sample taken: among the last few and those of the last _PATH_WINDOW_S, and
         in the history of the last _REPEATS_S."""
         self.taken.append(sample)
-        _keep_within(self.recent, sample, sample.boot_s)
+        self.recent.add(sample)
         self.history[sample.boot_s] = sample
         _forget_before(self.history, sample.boot_s - _REPEATS_S)
 
@@ -614,7 +618,7 @@ class TelemetryState:
             return False
         self._yaw_rad, self._attitude_boot_s = msg.yaw, boot_s
         self._yaw_taken.append((boot_s, msg.yaw, rate))
-        _keep_within(self._yaw_recent, (boot_s, msg.yaw, rate), boot_s)
+        _keep_within(self._yaw_recent, (boot_s, msg.yaw, rate))
         self._yaw_history[boot_s] = (boot_s, msg.yaw, rate)
         _forget_before(self._yaw_history, boot_s - _REPEATS_S)
         # (only positions, which pass the gate, move the vehicle's clock: a forger's
@@ -843,11 +847,13 @@ class TelemetryState:
         # within _PATH_WINDOW_S: the noise allowances are granted once over them, not at
         # every sample (a reviewer's forger at 200 Hz accelerated at 12 m/s^2 within the
         # per-sample allowance of a 2 m/s^2 bound)
-        # (the first of them it is off the path of, the message names it; else the oldest)
-        reference = next((p for p in track.recent if p is not last
-                          and p.boot_s >= sample.boot_s - _PATH_WINDOW_S
-                          and not _on_path(p, sample, bound)), track.taken[0])  # fmt: skip
+        # (the message names the first of them it is off the path of)
+        reference = track.taken[0]
         on_path = reference is last or _on_path(reference, sample, bound)
+        since_s = sample.boot_s - reference.boot_s
+        off_at_s = track.recent.first_off(sample, bound) if on_path else None
+        if off_at_s is not None:
+            on_path, since_s = False, sample.boot_s - off_at_s
         stepped = (not velocity_ok or off > within or not on_path) and _stepped(
             track, sample, now_s, bound
         )
@@ -867,7 +873,7 @@ class TelemetryState:
             return self._refuse(
                 Hold.GATE,
                 f"{kind} position or velocity off the path of the sample taken "
-                f"{sample.boot_s - reference.boot_s:.3f} s before it (a velocity changed faster "
+                f"{since_s:.3f} s before it (a velocity changed faster "
                 "than the bound over the samples between): refused",
             )
         if stepped:  # the prediction follows the estimate's new velocity
@@ -979,17 +985,74 @@ def _forget_before(by_stamp: dict[float, Any], oldest_s: float) -> None:
         del by_stamp[next(iter(by_stamp))]
 
 
-def _keep_within(recent: deque[Any], entry: Any, boot_s: float) -> None:
-    """Append ``entry`` (stamped ``boot_s``, the newest) to ``recent`` and drop those stamped
+class _Rows(NamedTuple):
+    """Positions as columns: what a path check reads of each."""
+
+    boot_s: npt.NDArray[np.float64]
+    north_m: npt.NDArray[np.float64]
+    east_m: npt.NDArray[np.float64]
+    vn_m_s: npt.NDArray[np.float64]
+    ve_m_s: npt.NDArray[np.float64]
+
+
+# a window of up to this many positions is judged one at a time (at 50 Hz, 10: 0.7 us each),
+# a longer one in one vectorised step (about 18 us whatever its length)
+_WINDOW_LOOP_ROWS = 24
+
+
+class _Window:
+    """The positions taken within ``_PATH_WINDOW_S`` of the newest, also as rows of an
+    array, so that a new sample is judged against all of them in one step where they are
+    many (at 1000 Hz, 220: one at a time they had cost 148 us a sample, a reviewer
+    measured; 38 us so)."""
+
+    def __init__(self) -> None:
+        self.samples: deque[_Position] = deque()
+        self._rows = np.empty((64, 5))  # stamp, north, east, vn, ve; [start, end) in use
+        self._start = self._end = 0
+
+    def clear(self) -> None:
+        self.samples.clear()
+        self._start = self._end = 0
+
+    def add(self, p: _Position) -> None:
+        """``p``, taken (the newest), in; those stamped more than the window before out."""
+        if self._end == len(self._rows):  # full: move the rows in use to the front, or grow
+            live = self._rows[self._start : self._end].copy()
+            if 2 * len(live) > len(self._rows):
+                self._rows = np.empty((2 * len(self._rows), 5))
+            self._rows[: len(live)] = live
+            self._start, self._end = 0, len(live)
+        self._rows[self._end] = (p.boot_s, p.north_m, p.east_m, p.vn_m_s, p.ve_m_s)
+        self._end += 1
+        self.samples.append(p)
+        while self.samples[0].boot_s < p.boot_s - _PATH_WINDOW_S:  # (never the newest)
+            self.samples.popleft()
+            self._start += 1
+
+    def first_off(self, sample: _Position, bound: float) -> float | None:
+        """The stamp of the first position in the window within ``_PATH_WINDOW_S`` of
+        ``sample`` whose path it is off, the newest (the last taken, judged on its own)
+        left out; None where it keeps to every one."""
+        oldest_s = sample.boot_s - _PATH_WINDOW_S
+        if len(self.samples) <= _WINDOW_LOOP_ROWS:
+            for p in islice(self.samples, max(0, len(self.samples) - 1)):
+                if p.boot_s >= oldest_s and not _on_path(p, sample, bound):
+                    return p.boot_s
+            return None
+        rows = self._rows[self._start : self._end - 1]
+        rows = rows[int(np.searchsorted(rows[:, 0], oldest_s)) :]
+        off = ~_on_paths(_Rows(*rows.T), sample, bound)
+        return float(rows[np.argmax(off), 0]) if off.any() else None
+
+
+def _keep_within(recent: deque[tuple[float, float, float]], entry: tuple[float, float, float]
+                 ) -> None:  # fmt: skip
+    """Append ``entry`` (stamp, yaw, rate; the newest) to ``recent`` and drop those stamped
     more than ``_PATH_WINDOW_S`` before it."""
     recent.append(entry)
-    while _stamp(recent[0]) < boot_s - _PATH_WINDOW_S:
+    while recent[0][0] < entry[0] - _PATH_WINDOW_S:
         recent.popleft()
-
-
-def _stamp(entry: Any) -> float:
-    """The stamp of a position or of an attitude (stamp, yaw, rate)."""
-    return float(entry.boot_s if isinstance(entry, _Position) else entry[0])
 
 
 def _off_path(last: _Position, sample: _Position, bound: float) -> tuple[float, float]:
@@ -998,17 +1061,23 @@ def _off_path(last: _Position, sample: _Position, bound: float) -> tuple[float, 
     and the trapezoid's error for |a| <= ``bound``, and along the velocity the stamp's
     lead on the estimate at the speed (``_STAMP_JITTER_S``). (The distance returned is
     scaled so that the along-track allowance counts as the across-track one.)"""
+    return _path_residual(last, sample, bound, math.hypot)  # type: ignore[no-any-return]
+
+
+def _path_residual(last: Any, sample: _Position, bound: float, hypot: Any) -> Any:
+    """``_off_path`` for ``last`` a position or ``_Rows`` of them (``hypot``: math's or
+    numpy's)."""
     dt = sample.boot_s - last.boot_s
     d_north = sample.north_m - (last.north_m + 0.5 * (last.vn_m_s + sample.vn_m_s) * dt)
     d_east = sample.east_m - (last.east_m + 0.5 * (last.ve_m_s + sample.ve_m_s) * dt)
     within = _STEP_POSITION_M + 0.25 * bound * dt * dt
     speed = math.hypot(sample.vn_m_s, sample.ve_m_s)
     if speed < 1e-6:
-        return math.hypot(d_north, d_east), within
+        return hypot(d_north, d_east), within
     along = (d_north * sample.vn_m_s + d_east * sample.ve_m_s) / speed
     across = (d_east * sample.vn_m_s - d_north * sample.ve_m_s) / speed
-    along *= within / (within + speed * _STAMP_JITTER_S)  # its allowance, as across's
-    return math.hypot(along, across), within
+    along = along * (within / (within + speed * _STAMP_JITTER_S))  # its allowance, as across's
+    return hypot(along, across), within
 
 
 def _on_path(before: _Position, sample: _Position, bound: float) -> bool:
@@ -1017,6 +1086,15 @@ def _on_path(before: _Position, sample: _Position, bound: float) -> bool:
     dv = math.hypot(sample.vn_m_s - before.vn_m_s, sample.ve_m_s - before.ve_m_s)
     return off <= within and dv <= bound * abs(sample.boot_s - before.boot_s) + (
         _GATE_VELOCITY_M_S)
+
+
+def _on_paths(rows: _Rows, sample: _Position, bound: float) -> npt.NDArray[np.bool_]:
+    """``_on_path`` for each of ``rows``, in one vectorised step."""
+    off, within = _path_residual(rows, sample, bound, np.hypot)
+    dv = np.hypot(sample.vn_m_s - rows.vn_m_s, sample.ve_m_s - rows.ve_m_s)
+    ok: npt.NDArray[np.bool_] = (off <= within) & (
+        dv <= bound * np.abs(sample.boot_s - rows.boot_s) + _GATE_VELOCITY_M_S)
+    return ok
 
 
 def _yaw_off(before: tuple[float, float, float],

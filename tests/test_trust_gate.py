@@ -554,6 +554,24 @@ def test_a_late_repeat_of_an_attitude_by_a_second_route_is_no_second_source() ->
             assert t.take_refusal() is None, k
 
 
+def test_an_attitude_lost_on_one_route_and_come_late_by_another_is_no_second_source() -> None:
+    """A reviewer: one attitude in 25 lost on the fast route and delivered by a second 3 s
+    later (never taken, so no repeat) was judged against the nearest of the last 64 taken
+    only, 1.28 s at 50 Hz: named a second source. The nearest is looked for among all those
+    taken in the last 5 s: it lies between two of them, on their path."""
+    t = known_origin()
+    late: dict[int, Any] = {}
+    for k in range(300):  # 6 s at 50 Hz, turning at 0.5 rad/s
+        frame = _attitude(1000 + 20 * k, 0.01 * k, 0.5)
+        if k % 25 == 3:
+            late[k + 150] = frame  # by the other route, 3 s later
+        else:
+            assert t.update(frame, 1.0 + 0.02 * k) == "ATTITUDE"
+        if k in late:
+            assert t.update(late.pop(k), 1.0 + 0.02 * k + 0.001) is None
+        assert t.take_refusal() is None, k
+
+
 def test_a_burst_of_samples_each_a_little_ahead_of_the_last_is_refused() -> None:
     """A reviewer's attack: 22 LOCAL_POSITION_NED in a burst, each stamped 99 ms past the
     one before, walked to the target: each was judged against the least offset the one

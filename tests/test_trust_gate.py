@@ -572,6 +572,31 @@ def test_an_attitude_lost_on_one_route_and_come_late_by_another_is_no_second_sou
         assert t.take_refusal() is None, k
 
 
+def test_a_yaw_reset_is_taken_again_though_frames_from_before_it_come_late() -> None:
+    """A reviewer: a 20 degree yaw reset, every 10th frame lost on one route and delivered 2
+    s later by another. Each late frame from before the reset, on the old path, was taken
+    for reordering and cleared the reset's run, so the reset was taken 2.24 s after it
+    rather than 0.25 s. A late frame clears the run only where stamped after it began."""
+    t = known_origin()
+    late: dict[int, Any] = {}
+    stepped_s = None
+    for k in range(400):  # 8 s at 50 Hz, turning at 0.2 rad/s, the yaw reset at 4 s
+        yaw = 0.004 * k + (math.radians(20.0) if k >= 200 else 0.0)
+        frame = _attitude(1000 + 20 * k, yaw, 0.2)
+        now = 1.0 + 0.02 * k
+        if k % 10 == 3:
+            late[k + 100] = frame  # by the other route, 2 s later
+        else:
+            t.update(frame, now)
+            refusal = t.take_refusal()
+            if refusal is not None and "stepped" in refusal[1] and stepped_s is None:
+                stepped_s = 0.02 * (k - 200)
+        if k in late:
+            t.update(late.pop(k), now + 0.001)
+            t.take_refusal()
+    assert stepped_s is not None and stepped_s <= 0.3, stepped_s
+
+
 def test_a_burst_of_samples_each_a_little_ahead_of_the_last_is_refused() -> None:
     """A reviewer's attack: 22 LOCAL_POSITION_NED in a burst, each stamped 99 ms past the
     one before, walked to the target: each was judged against the least offset the one

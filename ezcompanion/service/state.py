@@ -643,7 +643,9 @@ class TelemetryState:
         nearest = _nearest(self._yaw_history, sample[0])
         off, allowed = _yaw_off(nearest, sample)
         if abs(nearest[0] - sample[0]) <= _REORDER_S and off <= allowed:  # (on its path)
-            self._yaw_run.clear()  # reordering: the old path goes on
+            run = self._yaw_run  # reordering: where stamped after a reset's run began, the
+            if run and sample[0] > run[0][1][0]:  # old path went on (a reviewer: frames
+                run.clear()  # from before it, late by a second route, had held it off 2 s)
             return False
         return self._refuse(
             Hold.GATE,
@@ -926,7 +928,8 @@ class TelemetryState:
         if abs(nearest.boot_s - sample.boot_s) <= _REORDER_S and _on_path(
             nearest, sample, self.accel_bound_m_s2
         ):
-            track.step_run.clear()
+            if track.step_run and sample.boot_s > track.step_run[0][1].boot_s:
+                track.step_run.clear()  # (as an attitude's: the old path went on after it)
             return False  # reordering
         return self._refuse(
             Hold.GATE,

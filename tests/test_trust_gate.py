@@ -470,8 +470,8 @@ def test_a_burst_between_the_vehicles_positions_moves_what_is_read_by_no_more_th
     """A reviewer: a forger's positions 1 ms apart between the vehicle's, each 0.5 cm
     further across the track, out and back before its next, were each on the path of the
     one before and of the oldest of the last 8 (8 ms back): at 5 Hz the position read was
-    0.49 m off, nothing named. Each must now keep to the path of the oldest taken within
-    _PATH_WINDOW_S (0.1 s) too: the burst is named, and while nothing is, what is read
+    0.49 m off, nothing named. Each must now keep to the path of every one taken within
+    _PATH_WINDOW_S (0.22 s) too: the burst is named, and while nothing is, what is read
     stays within a few centimetres of the track."""
     speed = 5.0
 

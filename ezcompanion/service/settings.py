@@ -235,6 +235,7 @@ def signing_key(
 
 
 def _unsigned_risk(connect: str) -> str:
+    """What a sender on the vehicle's address can do on an unsigned ``connect``."""
     return (f"whoever can send from the vehicle's address on {connect} can move its position "
             "as the service reads it by the estimate gate's tolerances (5 cm across the "
             "track; docs/service.md, the trust table) and end guidance")
@@ -250,9 +251,8 @@ def refuse_unsigned(settings: CompanionSettings) -> None:
         return
     raise ConfigError(
         "connect", settings.connect,
-        "is reachable from other machines and no signing key is set: a sender on the "
-        "vehicle's address could move the position the service reads by the estimate "
-        "gate's tolerances and end guidance. Set a signing key (--signing-key-file or "
+        "is reachable from other machines and no signing key is set: "
+        f"{_unsigned_risk(settings.connect)}. Set a signing key (--signing-key-file or "
         "EZCOMPANION_SIGNING_KEY), listen on 127.0.0.1, or accept the risk with "
         "--allow-unsigned (companion.allow_unsigned: true)",
     )  # fmt: skip

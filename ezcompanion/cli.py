@@ -34,6 +34,8 @@ from ezcompanion.commands import (
     run_reference_demo,
     run_scale,
     run_service,
+    run_setup_signing,
+    run_signing_key,
     run_simulate,
 )
 from ezcompanion.exit_codes import ExitCode
@@ -185,6 +187,38 @@ def _parser() -> argparse.ArgumentParser:
         "--gate-position-m", type=number_within(0.0, 25.0, unit=" m"), default=0.5,
         help="the gate's position allowance (companion.gate_position_m; default 0.5)",
     )  # fmt: skip
+    key = commands.add_parser(
+        "signing-key", help="write a new random MAVLink 2 signing key to a file (mode 600)"
+    )
+    key.add_argument("file", type=Path, help="the key file to create (never replaced)")
+    signing = commands.add_parser(
+        "setup-signing",
+        help="give the autopilot a MAVLink 2 signing key over a link you trust (USB, a "
+        "cable) and wait until its frames are signed with it",
+    )
+    signing.add_argument(
+        "--connect", type=endpoint, required=True,
+        help="the autopilot's endpoint (its USB port: /dev/ttyACM0; SITL: tcp:127.0.0.1:5760)",
+    )  # fmt: skip
+    signing.add_argument(
+        "--signing-key-file", type=Path,
+        help="the key to give it: 64 hex digits (or set EZCOMPANION_SIGNING_KEY or "
+        "EZCOMPANION_SIGNING_PASSPHRASE)",
+    )  # fmt: skip
+    signing.add_argument(
+        "--signed-with", type=Path, metavar="KEY_FILE",
+        help="the key the autopilot signs with now, if it signs already: it refuses an "
+        "unsigned request (PX4; ArduPilot but on its USB port)",
+    )  # fmt: skip
+    job = signing.add_mutually_exclusive_group()
+    job.add_argument("--check", action="store_true",
+                     help="send no key: check that the autopilot's frames are signed with it")
+    job.add_argument("--disable", action="store_true",
+                     help="turn the autopilot's signing off (a blank key)")
+    signing.add_argument("--target-system", type=int, default=0,
+                         help="the autopilot's system id (default: the first heard)")
+    signing.add_argument("--timeout", type=SECONDS, default=10.0,
+                         help="how long to wait for the autopilot (default 10 s)")
     commands.add_parser(
         "compile",
         help="compile the service's guidance kernel into numba's cache (once after an install "
@@ -254,6 +288,16 @@ def _dispatch(args: argparse.Namespace) -> int:
         return code
     if args.command == "compile":
         return run_compile()
+    if args.command == "signing-key":
+        return run_signing_key(args.file)
+    if args.command == "setup-signing":
+        return run_setup_signing(
+            args.connect,
+            signing_key_file=str(args.signing_key_file) if args.signing_key_file else None,
+            signed_with=str(args.signed_with) if args.signed_with else None,
+            disable=args.disable, check=args.check, target_system=args.target_system,
+            timeout_s=args.timeout,
+        )  # fmt: skip
     if args.command == "gate-check":
         return run_gate_check(args.tlog, accel_bound_m_s2=args.gate_accel_m_s2,
                               accel_max_m_s2=args.accel_max_m_s2,

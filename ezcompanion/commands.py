@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ezcompanion.errors import LinkError
+from ezcompanion.errors import ConfigError, LinkError
 from ezcompanion.exit_codes import ExitCode
 
 if TYPE_CHECKING:  # imported for real inside the commands (see above)
@@ -33,6 +33,8 @@ __all__ = [
     "run_reference_demo",
     "run_scale",
     "run_service",
+    "run_setup_signing",
+    "run_signing_key",
     "run_simulate",
 ]
 
@@ -127,6 +129,59 @@ def run_gate_check(tlog: Path, *, accel_bound_m_s2: float | None,
               "the log: nothing checked", file=sys.stderr)  # fmt: skip
         return ExitCode.BAD_INPUT
     return ExitCode.OK if report.clean else ExitCode.FAILED
+
+
+def run_signing_key(path: Path) -> int:
+    """Write a new random MAVLink 2 signing key to ``path`` (64 hex digits, mode 600); a file
+    already there is never replaced (IO_ERROR)."""
+    import os
+    import secrets
+
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    with os.fdopen(fd, "w", encoding="ascii") as out:
+        out.write(secrets.token_hex(32) + "\n")
+    print(f"wrote a new signing key to {path} (mode 600): give it to the autopilot with "
+          f"`ezcompanion setup-signing --signing-key-file {path}`, then to `ezcompanion run`")
+    return ExitCode.OK
+
+
+def run_setup_signing(
+    connect: str, *, signing_key_file: str | None, signed_with: str | None, disable: bool,
+    check: bool, target_system: int, timeout_s: float,
+) -> int:
+    """Give the autopilot on ``connect`` the signing key (``setup_signing``), take it off
+    (``disable``), or only check that its frames are signed with it (``check``); OK once its
+    frames show it, LINK_FAILURE (one line) otherwise."""
+    from ezcompanion.service.settings import CompanionSettings, signing_key
+    from ezcompanion.service.signing_setup import check_signing, setup_signing
+    from ezcompanion.wire import open_link
+
+    ours = CompanionSettings(signing_key_file=signing_key_file)  # the companion's ids
+    key = None if disable else signing_key(ours)
+    if key is None and not disable:
+        raise ConfigError("--signing-key-file", None, "is needed (or EZCOMPANION_SIGNING_KEY "
+                          "or EZCOMPANION_SIGNING_PASSPHRASE): the key to give the autopilot "
+                          "(`ezcompanion signing-key FILE` writes a new one)")  # fmt: skip
+    current = (signing_key(CompanionSettings(signing_key_file=signed_with))
+               if signed_with is not None else None)  # fmt: skip
+    with open_link(connect, system_id=ours.system_id, component_id=ours.component_id) as link:
+        if check:
+            assert key is not None
+            result = check_signing(link, key, target_system=target_system, timeout_s=timeout_s)
+            print(f"system {result.system_id} ({result.autopilot}) signs with this key "
+                  f"({result.shown_by}, after {result.after_s:.1f} s)")
+            return ExitCode.OK
+        result = setup_signing(link, key, current_key=current, target_system=target_system,
+                               timeout_s=timeout_s)  # fmt: skip
+    if key is None:
+        print(f"system {result.system_id} ({result.autopilot}) no longer signs "
+              f"({result.shown_by} unsigned, after {result.after_s:.1f} s)")
+    else:
+        print(f"system {result.system_id} ({result.autopilot}) took the key: its "
+              f"{result.shown_by} came signed with it {result.after_s:.1f} s after the "
+              "request; it now refuses unsigned frames on every link but its USB port "
+              "(ArduPilot) or but a few (PX4): run the companion with the same key")
+    return ExitCode.OK
 
 
 def run_simulate(

@@ -36,6 +36,7 @@ from sitl_stub.config import StubConfig
 from sitl_stub.mav import Message, finite, roll_of_quaternion
 from sitl_stub.mav import mav as mavlink
 from sitl_stub.profiles import Behaviour, ModeSpec
+from sitl_stub.signing import KeyChange, key_change, signing_rules
 from sitl_stub.status import (
     extended_sys_state,
     gps_global_origin,
@@ -109,6 +110,7 @@ class Autopilot(CommandHandlers):
         self.armed = config.settings.start_armed
         self.outbox: list[Message] = []
         self.requested: list[str] = []  # messages asked for once (MAV_CMD_REQUEST_MESSAGE)
+        self.signing_change: KeyChange | None = None  # a key taken (SETUP_SIGNING), for the link
         self._guided: _Active | None = None  # velocity or course command
         self._override: _Active | None = None  # attitude command, ahead of the guided one
         self._last_setpoint_s = -math.inf
@@ -223,6 +225,13 @@ class Autopilot(CommandHandlers):
         if hasattr(msg, "target_system") and msg.target_system not in (0, self.system_id):
             return  # addressed to another vehicle
         handler(self, msg, t_s, state)
+
+    def _on_setup_signing(self, msg: Message, t_s: float, state: VehicleState) -> None:
+        change, said = key_change(signing_rules(self.spec.autopilot), msg, armed=self.armed)
+        if change is not None:
+            self.signing_change = change
+        if said is not None:
+            self.statustext(*said)
 
     def _guided_ok(self, what: str, t_s: float) -> bool:
         if self.mode.behaviour is not Behaviour.GUIDED:
@@ -354,4 +363,5 @@ _HANDLERS = {
     "REQUEST_DATA_STREAM": Autopilot._on_data_stream,
     "TIMESYNC": Autopilot._on_timesync,
     "PARAM_REQUEST_READ": Autopilot._on_param_request_read,
+    "SETUP_SIGNING": Autopilot._on_setup_signing,
 }

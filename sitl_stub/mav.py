@@ -296,12 +296,21 @@ class StubLink:
         else:
             self._conn.close()
 
-    def enable_signing(self, key: bytes) -> None:
-        """Sign every frame sent; drop unsigned or badly signed input."""
-        stamp = int(max(time.time() - _SIGNING_EPOCH_S, 0.0) * 1e5)
-        self._conn.setup_signing(key, sign_outgoing=True, initial_timestamp=stamp)
+    def enable_signing(self, key: bytes, *, timestamp_10us: int | None = None,
+                       unsigned_ids: frozenset[int] = frozenset()) -> None:
+        """Sign every frame sent (from ``timestamp_10us``, default now); drop unsigned or
+        badly signed input but the message ids ``unsigned_ids``."""
+        if timestamp_10us is None:
+            timestamp_10us = int(max(time.time() - _SIGNING_EPOCH_S, 0.0) * 1e5)
+        self._conn.setup_signing(
+            key, sign_outgoing=True, initial_timestamp=timestamp_10us,
+            allow_unsigned_callback=lambda _parser, msg_id: msg_id in unsigned_ids)
         parser = self._conn.mav
         parser.check_signature = lambda buf, s, c: _verify_then_store(parser, buf, s, c)
+
+    def disable_signing(self) -> None:
+        """Send unsigned frames; take unsigned input."""
+        self._conn.disable_signing()
 
     def wait_readable(self, timeout_s: float, *extra_fds: int) -> list[int]:
         if self._stream is not None:

@@ -38,6 +38,7 @@ from sitl_stub.config import StreamRates, StubConfig
 from sitl_stub.faults import FaultInjector
 from sitl_stub.lockstep import LockstepGate
 from sitl_stub.mav import Message, StubLink
+from sitl_stub.signing import signing_rules
 from sitl_stub.telemetry import StreamScheduler, TelemetryEncoder
 from sitl_stub.truth import TruthWriter
 from sitl_stub.vehicle import VehicleParams, VehicleState, step
@@ -114,11 +115,12 @@ class SitlStub:
         """Open the link and start the simulation thread."""
         s = self.config.settings
         self._link = StubLink(s.connect, system_id=s.system_id, component_id=s.component_id)
-        key = s.signing_key()
-        if key is not None:
-            self._link.enable_signing(key)
         self._scheduler = StreamScheduler(s.streams, self.config.max_stream_rate_hz)
         self.autopilot = Autopilot(self.config, self._scheduler, self._link.mav)
+        self._signing = signing_rules(self.autopilot.spec.autopilot)
+        key = s.signing_key()
+        if key is not None:
+            self._link.enable_signing(key, unsigned_ids=self._signing.unsigned_ids)
         self._encoder = TelemetryEncoder(self._link, self.config.origin, self._wind,
                                          self.autopilot.spec.autopilot)
         self._truth = TruthWriter(self._truth_out, self._wind) if self._truth_out else None
@@ -311,8 +313,23 @@ class SitlStub:
             except Exception:
                 self.handler_errors += 1
                 _log.exception("handling %s failed", msg.get_type())
+            self._take_key(link)  # the next frames, the answer among them, signed with it
         if self._flush() and self.lockstep is not None:
             self.lockstep.hold(self._state.t_s)  # the companion sees the replies first
+
+    def _take_key(self, link: StubLink) -> None:
+        """A key the autopilot took (SETUP_SIGNING) goes to the link, as on every link of
+        the autopilots it imitates (:mod:`sitl_stub.signing`)."""
+        assert self.autopilot is not None
+        change, self.autopilot.signing_change = self.autopilot.signing_change, None
+        if change is None:
+            return
+        if change.key is None:
+            link.disable_signing()
+        else:
+            link.enable_signing(change.key, timestamp_10us=change.timestamp_10us,
+                                unsigned_ids=self._signing.unsigned_ids)
+        _log.info("signing %s", "off" if change.key is None else "on with a new key")
 
     def _flush(self) -> int:
         """Send what the autopilot has to say; how many messages."""

@@ -118,6 +118,17 @@ CHECKS: dict[str, Check] = {
     "python bench/bench_uncertified.py --runs 10000 --seed 2027 --certified 600": Check.PARSE,
     "python bench/bench_shield.py --runs 1000 --seed 2029 --every 7": Check.PARSE,
     "python bench/bench_shield.py --runs 300 --seed 2030 --every 7 --abandon px4": Check.PARSE,
+    # docs/field.md, "Signing the link" (a flight controller on USB, a network, PX4 SITL;
+    # tests/test_signing_setup.py runs each against the loopback vehicle)
+    "ezcompanion signing-key ~/.config/ezcompanion/signing.key": Check.PARSE,
+    "ezcompanion setup-signing --connect /dev/ttyACM0 "
+    "--signing-key-file ~/.config/ezcompanion/signing.key": Check.PARSE,
+    "ezcompanion run --config config/field_copter.yaml --connect udpin:0.0.0.0:14550 "
+    "--signing-key-file ~/.config/ezcompanion/signing.key --engage": Check.PARSE,
+    "ezcompanion setup-signing --connect udpin:127.0.0.1:14540 --signing-key-file new.key "
+    "--signed-with old.key": Check.PARSE,
+    "ezcompanion setup-signing --connect udpin:127.0.0.1:14540 --disable "
+    "--signed-with new.key": Check.PARSE,
     # docs/sitl_stub.md
     "sitl-stub --config config/paper_scenario1.yaml [--connect udpout:127.0.0.1:14550] "
     "[--speedup K] [--profile copter|plane|px4] [--truth-out truth.csv] [--duration S] "

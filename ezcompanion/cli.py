@@ -215,10 +215,16 @@ def _parser() -> argparse.ArgumentParser:
                      help="send no key: check that the autopilot's frames are signed with it")
     job.add_argument("--disable", action="store_true",
                      help="turn the autopilot's signing off (a blank key)")
+    signing.add_argument(
+        "--over-network", action="store_true",
+        help="send the key over an endpoint other machines reach (it travels in the clear: "
+        "only on a network that is yours alone)",
+    )  # fmt: skip
     signing.add_argument("--target-system", type=int, default=0,
                          help="the autopilot's system id (default: the first heard)")
     signing.add_argument("--timeout", type=SECONDS, default=10.0,
-                         help="how long to wait for the autopilot (default 10 s)")
+                         help="how long to wait for the autopilot, then for its proof "
+                         "(default 10 s each)")
     commands.add_parser(
         "compile",
         help="compile the service's guidance kernel into numba's cache (once after an install "
@@ -295,7 +301,8 @@ def _dispatch(args: argparse.Namespace) -> int:
             args.connect,
             signing_key_file=str(args.signing_key_file) if args.signing_key_file else None,
             signed_with=str(args.signed_with) if args.signed_with else None,
-            disable=args.disable, check=args.check, target_system=args.target_system,
+            disable=args.disable, check=args.check, over_network=args.over_network,
+            target_system=args.target_system,
             timeout_s=args.timeout,
         )  # fmt: skip
     if args.command == "gate-check":

@@ -132,14 +132,24 @@ def run_gate_check(tlog: Path, *, accel_bound_m_s2: float | None,
 
 
 def run_signing_key(path: Path) -> int:
-    """Write a new random MAVLink 2 signing key to ``path`` (64 hex digits, mode 600); a file
-    already there is never replaced (IO_ERROR)."""
+    """Write a new random MAVLink 2 signing key to ``path`` (64 hex digits, mode 600; a
+    missing directory is made, mode 700); a file already there is never replaced, and one
+    not written whole is removed (IO_ERROR either way)."""
     import os
     import secrets
 
+    if not path.parent.is_dir():
+        path.parent.mkdir(mode=0o700, parents=True)
+        print(f"made {path.parent}/ (mode 700)")
     fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-    with os.fdopen(fd, "w", encoding="ascii") as out:
-        out.write(secrets.token_hex(32) + "\n")
+    try:
+        with os.fdopen(fd, "w", encoding="ascii") as out:
+            out.write(secrets.token_hex(32) + "\n")
+            out.flush()
+            os.fsync(out.fileno())
+    except OSError:
+        path.unlink(missing_ok=True)
+        raise
     print(f"wrote a new signing key to {path} (mode 600): give it to the autopilot with "
           f"`ezcompanion setup-signing --signing-key-file {path}`, then to `ezcompanion run`")
     return ExitCode.OK
@@ -147,40 +157,62 @@ def run_signing_key(path: Path) -> int:
 
 def run_setup_signing(
     connect: str, *, signing_key_file: str | None, signed_with: str | None, disable: bool,
-    check: bool, target_system: int, timeout_s: float,
+    check: bool, over_network: bool, target_system: int, timeout_s: float,
 ) -> int:
     """Give the autopilot on ``connect`` the signing key (``setup_signing``), take it off
-    (``disable``), or only check that its frames are signed with it (``check``); OK once its
-    frames show it, LINK_FAILURE (one line) otherwise."""
+    (``disable``), or only check that it signs with it (``check``); OK once the autopilot
+    has answered a challenge as only a holder of the key can, LINK_FAILURE (one line)
+    otherwise. The key travels in the clear: an endpoint other machines reach is refused
+    (BAD_INPUT) unless ``over_network``."""
+    from ezcompanion.endpoint import parse_endpoint
     from ezcompanion.service.settings import CompanionSettings, signing_key
     from ezcompanion.service.signing_setup import check_signing, setup_signing
-    from ezcompanion.wire import open_link
+    from ezcompanion.wire import open_link, signing_key_from_file
 
+    if not 0 <= target_system <= 255:
+        raise ConfigError("--target-system", target_system,
+                          "must be within [1, 255] (0, the default: the first autopilot heard)")
+    if check and signed_with is not None:
+        raise ConfigError("--signed-with", signed_with, "is not used with --check (it sends "
+                          "no key)")  # fmt: skip
+    if disable and signing_key_file is not None:
+        raise ConfigError("--signing-key-file", signing_key_file, "is not used with "
+                          "--disable (it gives the autopilot no key; --signed-with signs the "
+                          "request)")  # fmt: skip
+    if parse_endpoint(connect).on_a_network and not over_network and not check:
+        raise ConfigError("--connect", connect, "is reachable from other machines, and "
+                          "SETUP_SIGNING carries the key in the clear: give it over the "
+                          "autopilot's USB port or the loopback, or pass --over-network if "
+                          "this network is yours alone")  # fmt: skip
     ours = CompanionSettings(signing_key_file=signing_key_file)  # the companion's ids
     key = None if disable else signing_key(ours)
     if key is None and not disable:
         raise ConfigError("--signing-key-file", None, "is needed (or EZCOMPANION_SIGNING_KEY "
                           "or EZCOMPANION_SIGNING_PASSPHRASE): the key to give the autopilot "
                           "(`ezcompanion signing-key FILE` writes a new one)")  # fmt: skip
-    current = (signing_key(CompanionSettings(signing_key_file=signed_with))
+    current = (signing_key_from_file(signed_with, field="--signed-with")
                if signed_with is not None else None)  # fmt: skip
     with open_link(connect, system_id=ours.system_id, component_id=ours.component_id) as link:
         if check:
             assert key is not None
             result = check_signing(link, key, target_system=target_system, timeout_s=timeout_s)
-            print(f"system {result.system_id} ({result.autopilot}) signs with this key "
-                  f"({result.shown_by}, after {result.after_s:.1f} s)")
-            return ExitCode.OK
-        result = setup_signing(link, key, current_key=current, target_system=target_system,
-                               timeout_s=timeout_s)  # fmt: skip
-    if key is None:
-        print(f"system {result.system_id} ({result.autopilot}) no longer signs "
-              f"({result.shown_by} unsigned, after {result.after_s:.1f} s)")
+        else:
+            result = setup_signing(link, key, current_key=current, target_system=target_system,
+                                   timeout_s=timeout_s)  # fmt: skip
+    who = f"system {result.system_id} ({result.autopilot})"
+    if check:
+        print(f"{who} signs with this key: it answered a challenge signed with it "
+              f"{result.after_s:.1f} s after the first")
+    elif key is None:
+        print(f"{who} no longer signs: it answered a challenge unsigned "
+              f"{result.after_s:.1f} s after the request, and its frames stayed unsigned")
     else:
-        print(f"system {result.system_id} ({result.autopilot}) took the key: its "
-              f"{result.shown_by} came signed with it {result.after_s:.1f} s after the "
-              "request; it now refuses unsigned frames on every link but its USB port "
-              "(ArduPilot) or but a few (PX4): run the companion with the same key")
+        where = ("on every link but its USB port (channel 0)" if result.autopilot == "ArduPilot"
+                 else "but HEARTBEAT, RADIO_STATUS, ADSB_VEHICLE and COLLISION, on every link"
+                 if result.autopilot == "PX4" else "")  # fmt: skip
+        print(f"{who} took the key: it answered a challenge signed with it "
+              f"{result.after_s:.1f} s after the request; it now refuses unsigned frames "
+              f"{where}: run the companion with the same key".replace("  ", " "))
     return ExitCode.OK
 
 

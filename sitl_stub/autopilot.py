@@ -222,7 +222,8 @@ class Autopilot(CommandHandlers):
         handler = _HANDLERS.get(kind)
         if handler is None:
             return
-        if hasattr(msg, "target_system") and msg.target_system not in (0, self.system_id):
+        if hasattr(msg, "target_system") and msg.target_system not in (0, self.system_id) and not (
+                kind == "SETUP_SIGNING" and signing_rules(self.spec.autopilot).any_target):
             return  # addressed to another vehicle
         handler(self, msg, t_s, state)
 

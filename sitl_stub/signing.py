@@ -7,6 +7,8 @@ SITL builds (docs/sitl_stub.md, "Signing"):
 - a key of 32 zero bytes with timestamp 0 turns signing off; any other is stored and used
   on every link at once, with no acknowledgement: PX4 says "MAVLink signing key accepted"
   (or "MAVLink signing disabled"), ArduPilot nothing;
+- PX4 takes a request addressed to any system (``mavlink_main.cpp`` reads no target),
+  ArduPilot only its own;
 - ArduPilot signs from the timestamp given plus a minute (its ``load_signing_key``), PX4
   from the timestamp given;
 - once signing, both drop unsigned frames but a few: ArduPilot RADIO_STATUS and RADIO, PX4
@@ -36,6 +38,7 @@ class SigningRules:
     armed_text: tuple[str, int]  # what it says to a key sent while armed (text, severity)
     accepted_text: tuple[str, int] | None  # ... when it takes a key
     disabled_text: tuple[str, int] | None  # ... when a blank key turns signing off
+    any_target: bool  # takes a request addressed to another system too (PX4)
 
 
 _ARDUPILOT = SigningRules(
@@ -44,6 +47,7 @@ _ARDUPILOT = SigningRules(
     armed_text=("ERROR: Won't setup signing when armed", mavlink.MAV_SEVERITY_WARNING),
     accepted_text=None,
     disabled_text=None,
+    any_target=False,
 )
 _PX4 = SigningRules(
     unsigned_ids=frozenset({
@@ -54,6 +58,7 @@ _PX4 = SigningRules(
     armed_text=("MAVLink signing: rejected while armed", mavlink.MAV_SEVERITY_CRITICAL),
     accepted_text=("MAVLink signing key accepted", mavlink.MAV_SEVERITY_INFO),
     disabled_text=("MAVLink signing disabled", mavlink.MAV_SEVERITY_INFO),
+    any_target=True,
 )
 
 

@@ -5,7 +5,10 @@ and PX4 SITL did (docs/field.md, "Signing the link")."""
 
 from __future__ import annotations
 
+import contextlib
+import socket
 import stat
+import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -84,7 +87,7 @@ def test_the_autopilot_takes_the_key_and_then_refuses_unsigned_frames(
         code = main(["setup-signing", "--connect", endpoint, "--signing-key-file", str(key)])
         out = capsys.readouterr().out
         assert code == ExitCode.OK, out
-        assert "took the key" in out and "came signed with it" in out
+        assert "took the key: it answered a challenge signed with it" in out
         assert not _acked(endpoint, None)  # now refused
         assert not _acked(endpoint, KEY_B)  # and signed with another key
         assert _acked(endpoint, KEY_A)
@@ -93,24 +96,30 @@ def test_the_autopilot_takes_the_key_and_then_refuses_unsigned_frames(
         other = _key_file(tmp_path, "b.hex", KEY_B)
         assert main(["setup-signing", "--check", "--connect", endpoint, "--timeout", "1.5",
                      "--signing-key-file", str(other)]) == ExitCode.LINK_FAILURE  # fmt: skip
-    assert "its frames are not signed with this key" in capsys.readouterr().err
+    assert "no answer signed with this key" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("profile", ["copter", "px4"])
 def test_a_signing_autopilot_takes_a_new_key_or_none_only_signed_with_its_own(
-    tmp_path: Path, capsys: Any
+    tmp_path: Path, capsys: Any, profile: str
 ) -> None:
+    """And each run's proof stands whatever the runs before it stamped: ArduPilot signs a
+    minute ahead of the clock, a signed link follows it, and a later run's challenges
+    stamped by the clock alone had been replays to it for a minute (ArduPilot SITL)."""
     old, new = _key_file(tmp_path, "a.hex", KEY_A), _key_file(tmp_path, "b.hex", KEY_B)
-    with _autopilot("px4", signing_key_hex=KEY_A) as endpoint:
+    with _autopilot(profile, signing_key_hex=KEY_A) as endpoint:
         code = main(["setup-signing", "--connect", endpoint, "--signing-key-file", str(new),
                      "--timeout", "2"])  # fmt: skip
         assert code == ExitCode.LINK_FAILURE
-        assert "give its current key with --signed-with" in capsys.readouterr().err
+        assert "give its present key with --signed-with" in capsys.readouterr().err
         assert _acked(endpoint, KEY_A)  # the old key still holds
         code = main(["setup-signing", "--connect", endpoint, "--signing-key-file", str(new),
                      "--signed-with", str(old)])  # fmt: skip
         assert code == ExitCode.OK
-        assert "signed with the current key" in capsys.readouterr().out
+        assert "signed with the present key" in capsys.readouterr().out
         assert _acked(endpoint, KEY_B) and not _acked(endpoint, KEY_A)
+        assert main(["setup-signing", "--check", "--connect", endpoint,
+                     "--signing-key-file", str(new)]) == ExitCode.OK  # fmt: skip
         assert main(["setup-signing", "--connect", endpoint, "--disable",
                      "--timeout", "2"]) == ExitCode.LINK_FAILURE  # fmt: skip
         assert main(["setup-signing", "--connect", endpoint, "--disable",
@@ -152,3 +161,275 @@ def test_the_loopback_autopilot_refuses_a_key_while_armed_in_its_own_words(
             conn.close()
         assert said is not None and said.text == text
         assert _acked(endpoint, None)
+
+
+# --- what a third party on the link can and cannot make of it --------------------------
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+def _frame(msg: Any, key: bytes | None, stamp_10us: int = 0) -> bytes:
+    """``msg`` as system 1 component 1 would send it, signed with ``key`` at ``stamp_10us``."""
+    encoder: Any = M.MAVLink(None, srcSystem=1, srcComponent=1)
+    if key is not None:
+        encoder.signing.secret_key = key
+        encoder.signing.sign_outgoing = True
+        encoder.signing.timestamp = stamp_10us
+    return bytes(msg.pack(encoder))
+
+
+@contextmanager
+def _third_party(port: int, payload: bytes) -> Iterator[list[bytes]]:
+    """Someone else on the loopback sending ``payload`` to ``port`` every 20 ms from its own
+    address; yields what it receives back."""
+    got: list[bytes] = []
+    stop = threading.Event()
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    sock.settimeout(0.02)
+
+    def run() -> None:
+        while not stop.is_set():
+            sock.sendto(payload, ("127.0.0.1", port))
+            with contextlib.suppress(OSError):
+                got.append(sock.recv(65535))
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    try:
+        yield got
+    finally:
+        stop.set()
+        thread.join()
+        sock.close()
+
+
+@contextmanager
+def _router(autopilot: str, payload: bytes, *, swallow: bool = False) -> Iterator[str]:
+    """A router between the command and the autopilot (``udpout:`` endpoint) that forwards
+    both ways (``swallow``: the command's frames only) and carries a stranger's ``payload``
+    to the command every 20 ms too, so that the stranger's frames come from the autopilot's
+    address: yields the command's endpoint."""
+    target = ("127.0.0.1", int(autopilot.rsplit(":", 1)[1]))
+    stop = threading.Event()
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    sock.settimeout(0.02)
+    command: list[tuple[str, int]] = []
+
+    def run() -> None:
+        while not stop.is_set():
+            with contextlib.suppress(OSError):
+                data, source = sock.recvfrom(65535)
+                if source == target:
+                    if command and not swallow:
+                        sock.sendto(data, command[-1])
+                else:
+                    command.append(source)
+                    sock.sendto(data, target)
+            if command:
+                sock.sendto(payload, command[-1])
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    try:
+        yield f"udpout:127.0.0.1:{sock.getsockname()[1]}"
+    finally:
+        stop.set()
+        thread.join()
+        sock.close()
+
+
+def test_an_old_frame_signed_with_the_key_proves_nothing(tmp_path: Path, capsys: Any) -> None:
+    """A reviewer's replay: the autopilot does not sign, and a frame signed with the key in
+    2016 reaches the command by the autopilot's own route; --check had said "signs with
+    this key". Only an answer to a challenge of this run counts."""
+    key = _key_file(tmp_path, "a.hex", KEY_A)
+    old = _frame(M.MAVLink_attitude_message(0, 0, 0, 0, 0, 0, 0), bytes.fromhex(KEY_A),
+                 365 * 86400 * 100_000)  # fmt: skip
+    with _autopilot() as endpoint, _router(endpoint, old) as routed:
+        code = main(["setup-signing", "--check", "--connect", routed, "--timeout", "2",
+                     "--signing-key-file", str(key)])  # fmt: skip
+    assert code == ExitCode.LINK_FAILURE
+    assert "no answer signed with this key" in capsys.readouterr().err
+
+
+def test_a_forged_unsigned_frame_does_not_turn_signing_off(
+    tmp_path: Path, capsys: Any
+) -> None:
+    """A reviewer's forgery: --disable signed with the wrong key (so the autopilot keeps
+    signing), and a stranger's unsigned frame as the autopilot had been taken for "no
+    longer signs"."""
+    wrong = _key_file(tmp_path, "b.hex", KEY_B)
+    forged = _frame(M.MAVLink_attitude_message(0, 0, 0, 0, 0, 0, 0), None)
+    with _autopilot("px4", signing_key_hex=KEY_A) as endpoint, \
+            _router(endpoint, forged) as routed:
+        code = main(["setup-signing", "--disable", "--connect", routed, "--timeout", "2",
+                     "--signed-with", str(wrong)])  # fmt: skip
+    assert code == ExitCode.LINK_FAILURE
+    assert "signing not turned off" in capsys.readouterr().err
+
+
+def test_a_router_that_speaks_for_the_autopilot_unsigned_does_not_turn_signing_off(
+    tmp_path: Path, capsys: Any
+) -> None:
+    """The autopilot's frames swallowed on the way, and unsigned ones sent in its name: an
+    unsigned frame, even a run of them, proves nothing; only an answer to a challenge of
+    this run, unsigned, counts (and none comes)."""
+    wrong = _key_file(tmp_path, "b.hex", KEY_B)
+    posing = (_frame(M.MAVLink_heartbeat_message(2, 12, 0, 0, 0, 3), None)
+              + _frame(M.MAVLink_attitude_message(0, 0, 0, 0, 0, 0, 0), None))  # fmt: skip
+    with _autopilot("px4", signing_key_hex=KEY_A) as endpoint, \
+            _router(endpoint, posing, swallow=True) as routed:
+        code = main(["setup-signing", "--disable", "--connect", routed, "--timeout", "3",
+                     "--signed-with", str(wrong)])  # fmt: skip
+    assert code == ExitCode.LINK_FAILURE
+    assert "signing not turned off" in capsys.readouterr().err
+
+
+def test_the_key_goes_to_the_autopilot_alone(tmp_path: Path) -> None:
+    """On udpin: pymavlink answers every address it has heard: a reviewer's spy, sending the
+    port a byte every 20 ms, received SETUP_SIGNING and the key in it. Now the link is
+    locked to the autopilot's address once its heartbeats are heard."""
+    key = _key_file(tmp_path, "a.hex", KEY_A)
+    port = _free_port()
+    config = make_config(port, speedup=5.0, start_armed=False)
+    with SitlStub(config), _third_party(port, b"\x00") as received:
+        code = main(["setup-signing", "--connect", f"udpin:127.0.0.1:{port}",
+                     "--signing-key-file", str(key)])  # fmt: skip
+    assert code == ExitCode.OK
+    assert received, "the spy heard nothing at all: no test"
+    assert not any(bytes.fromhex(KEY_A) in datagram for datagram in received)
+    assert not any(_message_id(d) == M.MAVLINK_MSG_ID_SETUP_SIGNING for d in received)
+
+
+def test_one_posing_as_the_autopilot_is_refused_before_the_key_is_sent(
+    tmp_path: Path, capsys: Any
+) -> None:
+    """The link locks to the autopilot's address; a sender posing as it with heartbeats of
+    its own (and sooner) would have been locked to, and sent the key."""
+    key = _key_file(tmp_path, "a.hex", KEY_A)
+    port = _free_port()
+    posing = _frame(M.MAVLink_heartbeat_message(2, 3, 0, 0, 0, 3), None)
+    config = make_config(port, speedup=5.0, start_armed=False)
+    with SitlStub(config), _third_party(port, posing) as received:
+        code = main(["setup-signing", "--connect", f"udpin:127.0.0.1:{port}",
+                     "--signing-key-file", str(key)])  # fmt: skip
+    assert code == ExitCode.LINK_FAILURE
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is heard from two addresses" in err
+    assert not any(bytes.fromhex(KEY_A) in datagram for datagram in received)
+
+
+def _message_id(datagram: bytes) -> int:
+    return int.from_bytes(datagram[7:10], "little") if datagram[:1] == b"\xfd" else -1
+
+
+def test_the_key_is_not_sent_where_other_machines_listen(tmp_path: Path, capsys: Any) -> None:
+    key = _key_file(tmp_path, "a.hex", KEY_A)
+    code = main(["setup-signing", "--connect", "udpin:0.0.0.0:14550",
+                 "--signing-key-file", str(key)])  # fmt: skip
+    assert code == ExitCode.BAD_INPUT
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("ezcompanion: error: --connect: is reachable")
+    assert "--over-network" in err
+
+
+@pytest.mark.parametrize(
+    ("argv", "flag"),
+    [(["--check", "--signing-key-file", "KEY", "--signed-with", "KEY"], "--signed-with"),
+     (["--disable", "--signing-key-file", "KEY"], "--signing-key-file"),
+     (["--signing-key-file", "KEY", "--target-system", "300"], "--target-system"),
+     (["--signing-key-file", "KEY", "--signed-with", "missing.hex"], "--signed-with")],
+)  # fmt: skip
+def test_flags_that_cannot_be_meant_are_refused_by_name(
+    tmp_path: Path, capsys: Any, argv: list[str], flag: str
+) -> None:
+    key = str(_key_file(tmp_path, "a.hex", KEY_A))
+    words = [key if word == "KEY" else word for word in argv]
+    code = main(["setup-signing", "--connect", "udpout:127.0.0.1:9", "--timeout", "1", *words])
+    assert code == ExitCode.BAD_INPUT
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"ezcompanion: error: {flag}:")
+
+
+def test_a_key_in_a_new_directory_gets_a_private_one(tmp_path: Path) -> None:
+    path = tmp_path / "home" / ".config" / "ezcompanion" / "signing.key"
+    assert main(["signing-key", str(path)]) == ExitCode.OK
+    assert stat.S_IMODE(path.parent.stat().st_mode) == 0o700
+    assert stat.S_IMODE(path.stat().st_mode) == 0o600
+
+
+# --- the loopback autopilot's own rules -------------------------------------------------
+
+
+@pytest.mark.parametrize(("profile", "lead_s"), [("copter", 60.0), ("px4", 0.0)])
+def test_the_loopback_autopilot_signs_from_where_its_autopilot_does(
+    tmp_path: Path, profile: str, lead_s: float
+) -> None:
+    """ArduPilot signs from the key's timestamp plus a minute, PX4 from the timestamp."""
+    key = _key_file(tmp_path, "a.hex", KEY_A)
+    with _autopilot(profile) as endpoint:
+        before_s = time.time()
+        assert main(["setup-signing", "--connect", endpoint,
+                     "--signing-key-file", str(key)]) == ExitCode.OK  # fmt: skip
+        conn: Any = wire.mavutil.mavlink_connection(endpoint, source_system=255,
+                                                    source_component=190)  # fmt: skip
+        try:
+            conn.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+            beat = conn.recv_match(type="HEARTBEAT", blocking=True, timeout=3.0)
+        finally:
+            conn.close()
+    assert beat is not None
+    stamp_s = int.from_bytes(bytes(beat.get_msgbuf()[-12:-6]), "little") / 1e5 + 1420070400
+    assert lead_s - 1.0 <= stamp_s - before_s <= lead_s + 5.0
+
+
+def test_the_loopback_px4_takes_unsigned_what_px4_takes() -> None:
+    """Signing, PX4 takes HEARTBEAT (and a few others) unsigned and drops the rest."""
+    from sitl_stub.mav import StubLink
+    from sitl_stub.signing import signing_rules
+
+    link = StubLink("udpin:127.0.0.1:0", system_id=1, component_id=1)
+    try:
+        link.enable_signing(bytes.fromhex(KEY_A),
+                            unsigned_ids=signing_rules(M.MAV_AUTOPILOT_PX4).unsigned_ids)
+        address = link.local_address
+        assert address is not None
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sender:
+            for msg in (M.MAVLink_heartbeat_message(6, 8, 0, 0, 0, 3),
+                        M.MAVLink_command_long_message(1, 1, 176, 0, 1, 4, 0, 0, 0, 0, 0)):
+                sender.sendto(_frame(msg, None), address)
+            deadline = time.monotonic() + 3.0
+            taken: list[str] = []
+            while time.monotonic() < deadline and link.stats.rejected_unsigned < 1:
+                link.wait_readable(0.1)
+                taken += [m.get_type() for m in link.recv_messages()]
+        assert taken == ["HEARTBEAT"] and link.stats.rejected_unsigned == 1
+    finally:
+        link.close()
+
+
+def test_an_autopilot_signing_far_ahead_of_the_clock_is_proven_all_the_same(
+    tmp_path: Path,
+) -> None:
+    """ArduPilot adds a minute to its signing timestamp at each boot, so a few boots without
+    GPS put it minutes ahead of the clock; it then refuses a new stream stamped by the
+    clock alone (more than a minute behind its own). The challenges go on from the
+    autopilot's own timestamp, as the MAVLink C library's signing does."""
+    key = _key_file(tmp_path, "a.hex", KEY_A)
+    ahead_10us = int((time.time() - 1420070400 + 300.0) * 1e5)
+    with _autopilot() as endpoint:
+        conn: Any = wire.mavutil.mavlink_connection(endpoint, source_system=255,
+                                                    source_component=190)  # fmt: skip
+        try:
+            conn.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+            conn.mav.setup_signing_send(1, 1, list(bytes.fromhex(KEY_A)), ahead_10us)
+        finally:
+            conn.close()
+        assert main(["setup-signing", "--check", "--connect", endpoint,
+                     "--signing-key-file", str(key)]) == ExitCode.OK  # fmt: skip

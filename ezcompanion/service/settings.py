@@ -43,7 +43,6 @@ import os
 from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import StrEnum
-from pathlib import Path
 from typing import Any
 
 from ezcompanion.config import Scenario, build_dataclass, enum_member
@@ -52,6 +51,7 @@ from ezcompanion.errors import ConfigError
 from ezcompanion.wire import (
     URL_SCHEMES,
     is_serial_device,
+    signing_key_from_file,
     signing_key_from_hex,
     signing_key_from_passphrase,
 )
@@ -210,17 +210,7 @@ def signing_key(
     if settings.signing_key_hex is not None:
         return signing_key_from_hex(settings.signing_key_hex)
     if settings.signing_key_file is not None:
-        path = Path(settings.signing_key_file)
-        try:
-            text = path.read_text(encoding="ascii").strip()
-        except (OSError, UnicodeDecodeError) as exc:
-            raise ConfigError("signing_key_file", str(path), f"cannot be read: {exc}") from None
-        try:
-            return signing_key_from_hex(text)
-        except ConfigError:
-            raise ConfigError(
-                "signing_key_file", str(path), "must hold 64 hexadecimal digits"
-            ) from None
+        return signing_key_from_file(settings.signing_key_file)
     if settings.signing_passphrase is not None:
         return signing_key_from_passphrase(settings.signing_passphrase)
     key_env, passphrase_env = SIGNING_ENV

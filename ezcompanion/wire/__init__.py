@@ -34,7 +34,11 @@ from ezcompanion.wire.commands import (
 from ezcompanion.wire.dialect import Address, Message, mavlink, mavutil
 from ezcompanion.wire.link import URL_SCHEMES, Frame, Link, LinkStats, is_serial_device, open_link
 from ezcompanion.wire.projection import Projection, geodetic_to_local
-from ezcompanion.wire.signing import signing_key_from_hex, signing_key_from_passphrase
+from ezcompanion.wire.signing import (
+    signing_key_from_file,
+    signing_key_from_hex,
+    signing_key_from_passphrase,
+)
 from ezcompanion.wire.units import (
     cdeg_to_rad,
     cm_s_to_m_s,
@@ -97,6 +101,7 @@ __all__ = [
     "roll_setpoint",
     "s_to_ms",
     "s_to_us",
+    "signing_key_from_file",
     "signing_key_from_hex",
     "signing_key_from_passphrase",
     "us_to_s",

@@ -25,6 +25,20 @@ def signing_key_from_hex(key_hex: str, *, field: str = "signing_key_hex") -> byt
     return key
 
 
+def signing_key_from_file(path: str, *, field: str = "signing_key_file") -> bytes:
+    """A 32-byte signing key from a file holding 64 hex digits; ConfigError names ``field``
+    and the path (never the file's content)."""
+    try:
+        with open(path, encoding="ascii") as source:
+            text = source.read().strip()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(field, path, f"cannot be read: {exc}") from None
+    try:
+        return signing_key_from_hex(text)
+    except ConfigError:
+        raise ConfigError(field, path, "must hold 64 hexadecimal digits") from None
+
+
 def signing_key_from_passphrase(passphrase: str) -> bytes:
     """The key MAVProxy's ``signing setup PASSPHRASE`` derives: SHA-256 of the UTF-8 text."""
     return hashlib.sha256(passphrase.encode("utf-8")).digest()

@@ -179,7 +179,7 @@ def run_setup_signing(
         raise ConfigError("--signing-key-file", signing_key_file, "is not used with "
                           "--disable (it gives the autopilot no key; --signed-with signs the "
                           "request)")  # fmt: skip
-    if parse_endpoint(connect).on_a_network and not over_network and not check:
+    if parse_endpoint(connect).on_a_network and not over_network and not (check or disable):
         raise ConfigError("--connect", connect, "is reachable from other machines, and "
                           "SETUP_SIGNING carries the key in the clear: give it over the "
                           "autopilot's USB port or the loopback, or pass --over-network if "

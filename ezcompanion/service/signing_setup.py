@@ -21,8 +21,11 @@ an old one replayed (a reviewer's, from 2016, passed the first version of ``--ch
 the autopilot is sent TIMESYNC requests, signed with the key, each with a fresh random
 ``ts1``; both autopilots answer a request with ``ts1`` echoed. Only an answer signed with the
 key that echoes one of this run's numbers counts. Turning signing off has no such proof (an
-unsigned frame proves nothing of its sender): there the answer must come unsigned and the
-autopilot's frames stay unsigned for ``_QUIET_S`` after it.
+unsigned frame proves nothing of its sender, and whoever reads the path reads the
+numbers): there the answer must come unsigned, then ``_QUIET_HEARTBEATS`` unsigned
+heartbeats of the autopilot's with no signed frame among them (a reviewer's router echoed
+the challenges unsigned while the autopilot still signed its 1 Hz heartbeats, and half a
+second without a signed frame had passed for the proof).
 
 The key travels in the clear in SETUP_SIGNING, so the link is locked to the autopilot's
 address once it is heard (pymavlink's ``udpin`` would answer every sender), and the command
@@ -43,14 +46,14 @@ from ezcompanion.errors import LinkError
 from ezcompanion.wire import Frame, Link
 from ezcompanion.wire.commands import is_autopilot_heartbeat
 from ezcompanion.wire.dialect import Message, mavlink
-from ezcompanion.wire.signing import SIGNING_EPOCH_S
+from ezcompanion.wire.signing import SIGNING_EPOCH_S, SIGNING_LEAD_S
 
 __all__ = ["SigningResult", "check_signing", "setup_signing"]
 
 _HEARTBEAT_PERIOD_S = 1.0
 _RESEND_S = 1.0  # SETUP_SIGNING again (with a fresh timestamp) until the proof comes
 _CHALLENGE_S = 0.25  # a TIMESYNC challenge this often
-_QUIET_S = 0.5  # turned off: no signed frame of the autopilot's for this long after
+_QUIET_HEARTBEATS = 2  # turned off: this many unsigned heartbeats after, and none signed
 _LISTEN_S = 1.5  # (UDP) the autopilot's heartbeats listened for before its address is locked
 _SIGNATURE_LEN = 13  # link id, 6-byte timestamp, 6-byte signature
 _BLANK_KEY = bytes(32)
@@ -151,12 +154,13 @@ class _Challenger:
         if self._encoder is None:
             self._link.send(msg)
             return
-        # signed from the present time at least (not from when this began): ArduPilot signs
-        # from the key's timestamp plus a minute and takes a new stream at most a minute
-        # behind its own, so a challenge stamped before the request's timestamp is refused
-        # (the loopback ArduPilot refused every one)
+        # signed from the present time at least, and a minute ahead as a signed link is
+        # (``SIGNING_LEAD_S``; not from when this began): ArduPilot signs from the key's
+        # timestamp plus a minute and takes a new stream at most a minute behind its own,
+        # so a challenge stamped before the request's timestamp is refused (the loopback
+        # ArduPilot refused every one)
         signing = self._encoder.signing
-        signing.timestamp = max(signing.timestamp, _now_10us())
+        signing.timestamp = max(signing.timestamp, _now_10us(SIGNING_LEAD_S))
         self._link.write(bytes(msg.pack(self._encoder)))
         self._encoder.seq = (self._encoder.seq + 1) % 256
 
@@ -181,8 +185,9 @@ def _prove(
     request: Callable[[], Message] | None, say: Say, missing: str,
 ) -> SigningResult:
     """Challenges (and ``request()`` every ``_RESEND_S``, our heartbeat every second) until
-    the autopilot of ``heartbeat`` answers one signed with ``key`` (None: unsigned, and its
-    frames then stay unsigned for ``_QUIET_S``). What it says of signing goes to ``say``."""
+    the autopilot of ``heartbeat`` answers one signed with ``key`` (None: unsigned, then
+    ``_QUIET_HEARTBEATS`` unsigned heartbeats and nothing signed). What it says of signing
+    goes to ``say``."""
     system, component = heartbeat.get_srcSystem(), heartbeat.get_srcComponent()
     peer = link.peer  # (UDP) the autopilot's address: frames from any other are not its
     challenger = _Challenger(link, key)
@@ -190,6 +195,7 @@ def _prove(
     due = {"request": started, "challenge": started, "heartbeat": started}
     said: list[str] = []
     unsigned_at: float | None = None  # (key None) when the unsigned answer came
+    quiet_beats = 0  # (key None) unsigned heartbeats since it, none signed
     signed = unsigned = 0
     while (now := time.monotonic()) < deadline:
         if request is not None and now >= due["request"]:
@@ -201,7 +207,7 @@ def _prove(
         if now >= due["heartbeat"]:
             _send_heartbeat(link)
             due["heartbeat"] = now + _HEARTBEAT_PERIOD_S
-        if unsigned_at is not None and now - unsigned_at >= _QUIET_S:
+        if unsigned_at is not None and quiet_beats >= _QUIET_HEARTBEATS:
             return SigningResult(system, component, _name(heartbeat), unsigned_at - started,
                                  tuple(said))  # fmt: skip
         link.wait_readable(min([*due.values(), deadline]) - now)
@@ -219,9 +225,11 @@ def _prove(
             unsigned += not is_signed
             if key is None:
                 if is_signed:
-                    unsigned_at = None  # still signing (or again): no proof yet
+                    unsigned_at, quiet_beats = None, 0  # still signing (or again): no proof
                 elif challenger.answered(frame) and unsigned_at is None:
                     unsigned_at = time.monotonic()
+                elif unsigned_at is not None and frame.kind == "HEARTBEAT":
+                    quiet_beats += 1
             elif _signed_with(key, msg):
                 challenger.seen(msg)
                 if not challenger.answered(frame):
@@ -237,10 +245,12 @@ def _prove(
 
 def _autopilot(link: Link, target_system: int, deadline: float) -> Message:
     """The autopilot's heartbeat (of ``target_system``, if not 0), our own heartbeat sent
-    every second meanwhile (a vehicle on udpout: or tcp: hears of us from it). Over UDP its
-    heartbeats are listened for ``_LISTEN_S`` more: one system heard from two addresses is
-    refused (a sender posing as the autopilot would be sent the key), one address is locked
-    to, and nothing more goes to anyone else."""
+    every second meanwhile (a vehicle on udpout: or tcp: hears of us from it). Over UDP
+    autopilot heartbeats are listened for ``_LISTEN_S`` after the first: the system wanted
+    heard from two addresses, or (``target_system`` 0) any two autopilots heard from two
+    addresses, is refused (a sender posing as the autopilot, under its id or another,
+    would be sent the key: a reviewer's, as system 42, was); one address is locked to, and
+    nothing more goes to anyone else."""
     next_heartbeat = time.monotonic()
     first: Frame | None = None
     until = deadline
@@ -253,17 +263,25 @@ def _autopilot(link: Link, target_system: int, deadline: float) -> Message:
             msg = frame.message
             if not (frame.kind == "HEARTBEAT" and is_autopilot_heartbeat(msg)):
                 continue
-            if first is None and target_system in (0, msg.get_srcSystem()):
+            wanted = target_system in (0, msg.get_srcSystem())
+            if first is None:
+                if not wanted:
+                    continue
                 if frame.source is None:  # a byte stream (tcp:, serial): one sender
                     return msg
                 first = frame
-                until = min(deadline, time.monotonic() + _LISTEN_S)
-            elif first is not None and msg.get_srcSystem() == first.message.get_srcSystem() \
-                    and frame.source != first.source:
-                raise LinkError(_who(first.message), f"{_address(first.source)} and "
-                                f"{_address(frame.source)}", "is heard from two addresses: one "
-                                "of them poses as it, and would be sent the key; give it over "
-                                "a link no one else reaches (its USB port)")  # fmt: skip
+                until = time.monotonic() + _LISTEN_S  # the whole window, whatever the timeout
+            elif frame.source != first.source and (wanted or target_system == 0):
+                other = msg.get_srcSystem()
+                raise LinkError(
+                    _who(first.message), f"{_address(first.source)} and system {other} at "
+                    f"{_address(frame.source)}",
+                    "is not alone on this link: another address sends autopilot heartbeats "
+                    + ("under its id" if other == first.message.get_srcSystem() else
+                       "(give --target-system if that is another vehicle)")
+                    + ", and a sender posing as the autopilot would be sent the key: give it "
+                    "over a link no one else reaches (its USB port)",
+                )  # fmt: skip
     if first is not None:
         assert first.source is not None
         link.lock_peer(first.source)
@@ -277,9 +295,10 @@ def _address(source: tuple[str, int] | None) -> str:
     return "?" if source is None else f"{source[0]}:{source[1]}"
 
 
-def _now_10us() -> int:
-    """The present time as MAVLink 2 signing counts it (10 us since 2015)."""
-    return int(max(time.time() - SIGNING_EPOCH_S, 0.0) * 1e5)
+def _now_10us(ahead_s: float = 0.0) -> int:
+    """The present time (plus ``ahead_s``) as MAVLink 2 signing counts it (10 us since
+    2015)."""
+    return int(max(time.time() - SIGNING_EPOCH_S + ahead_s, 0.0) * 1e5)
 
 
 def _send_heartbeat(link: Link) -> None:

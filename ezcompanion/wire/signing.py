@@ -11,6 +11,10 @@ from ezcompanion.errors import ConfigError
 
 #: 2015-01-01T00:00:00Z, MAVLink 2 signing's time origin
 SIGNING_EPOCH_S = 1420070400
+#: a signed stream starts this far ahead of the clock, as ArduPilot's does at each boot (a
+#: stream's timestamp follows the newest taken, so one stamped by the clock alone may be
+#: behind what an earlier run sent: ``Link.enable_signing``)
+SIGNING_LEAD_S = 60.0
 _NEW_STREAM_BEHIND_10US = 60 * 100_000  # a new signed stream may be a minute behind ours
 
 

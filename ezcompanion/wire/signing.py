@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import hmac
+import time
 from typing import Any
 
 from ezcompanion.errors import ConfigError
@@ -57,7 +58,10 @@ def check_signature_first(
     frame with a wrong key and timestamp 2^48 makes every later genuine frame of that
     stream "old" for good. Here the signature is checked first; only a genuine frame can
     move a stream's timestamp (or the link's own). The timestamp rules are the spec's: a
-    known stream must advance (no replay), a new stream may be at most a minute behind.
+    known stream must advance (no replay), a new stream may be at most a minute behind:
+    behind the newest timestamp taken, or the clock, not the link's own (which starts
+    ``SIGNING_LEAD_S`` ahead: an autopilot signing by the clock, as PX4 does, would be a
+    minute behind it, and refused until it had taken one of ours).
     """
     signing = mav.signing
     key = signing.secret_key
@@ -72,8 +76,11 @@ def check_signature_first(
     last = signing.stream_timestamps.get(stream)
     if last is not None and timestamp <= last:
         return False  # a replay, or reordered
-    if last is None and timestamp + _NEW_STREAM_BEHIND_10US < signing.timestamp:
-        return False  # a new stream more than a minute behind
+    if last is None:
+        newest = max(signing.stream_timestamps.values(), default=0)
+        clock = int(max(time.time() - SIGNING_EPOCH_S, 0.0) * 1e5)
+        if timestamp + _NEW_STREAM_BEHIND_10US < max(newest, clock):
+            return False  # a new stream more than a minute behind
     signing.stream_timestamps[stream] = timestamp
     signing.timestamp = max(signing.timestamp, timestamp)
     return True

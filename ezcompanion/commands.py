@@ -207,12 +207,15 @@ def run_setup_signing(
         print(f"{who} no longer signs: it answered a challenge unsigned "
               f"{result.after_s:.1f} s after the request, and its frames stayed unsigned")
     else:
-        where = ("on every link but its USB port (channel 0)" if result.autopilot == "ArduPilot"
-                 else "but HEARTBEAT, RADIO_STATUS, ADSB_VEHICLE and COLLISION, on every link"
-                 if result.autopilot == "PX4" else "")  # fmt: skip
+        refuses = {  # what each does with unsigned frames now (docs/field.md)
+            "ArduPilot": "; it now refuses unsigned frames on every link but its USB port "
+                         "(channel 0)",
+            "PX4": "; it now refuses unsigned frames but HEARTBEAT, RADIO_STATUS, "
+                   "ADSB_VEHICLE and COLLISION, on every link",
+        }.get(result.autopilot, "")  # fmt: skip
         print(f"{who} took the key: it answered a challenge signed with it "
-              f"{result.after_s:.1f} s after the request; it now refuses unsigned frames "
-              f"{where}: run the companion with the same key".replace("  ", " "))
+              f"{result.after_s:.1f} s after the request{refuses}: run the companion with "
+              "the same key")
     return ExitCode.OK
 
 

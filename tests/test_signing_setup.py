@@ -265,36 +265,41 @@ def test_an_old_frame_signed_with_the_key_proves_nothing(tmp_path: Path, capsys:
     assert "no answer signed with this key" in capsys.readouterr().err
 
 
-def test_a_forged_unsigned_frame_does_not_turn_signing_off(
-    tmp_path: Path, capsys: Any
-) -> None:
-    """A reviewer's forgery: --disable signed with the wrong key (so the autopilot keeps
-    signing), and a stranger's unsigned frame as the autopilot had been taken for "no
-    longer signs"."""
-    wrong = _key_file(tmp_path, "b.hex", KEY_B)
-    forged = _frame(M.MAVLink_attitude_message(0, 0, 0, 0, 0, 0, 0), None)
-    with _autopilot("px4", signing_key_hex=KEY_A) as endpoint, \
-            _router(endpoint, forged) as routed:
-        code = main(["setup-signing", "--disable", "--connect", routed, "--timeout", "2",
-                     "--signed-with", str(wrong)])  # fmt: skip
-    assert code == ExitCode.LINK_FAILURE
-    assert "signing not turned off" in capsys.readouterr().err
+_HEARTBEATS_ONLY = StreamRates(global_position_int_hz=0.0, local_position_ned_hz=0.0,
+                               attitude_hz=0.0, vfr_hud_hz=0.0)  # fmt: skip
 
 
-def test_a_router_that_speaks_for_the_autopilot_unsigned_does_not_turn_signing_off(
-    tmp_path: Path, capsys: Any
+@pytest.mark.parametrize(
+    ("stranger", "payload", "route", "streams"),
+    [
+        # a reviewer's: a stranger's unsigned frame in the autopilot's name had been taken
+        # for "no longer signs"
+        ("sends an unsigned frame in its name",
+         _frame(M.MAVLink_attitude_message(0, 0, 0, 0, 0, 0, 0), None), {}, None),
+        # a run of unsigned frames proves nothing: only an answer to a challenge of this run
+        ("swallows its frames and sends unsigned ones in its name",
+         _frame(M.MAVLink_heartbeat_message(2, 12, 0, 0, 0, 3), None)
+         + _frame(M.MAVLink_attitude_message(0, 0, 0, 0, 0, 0, 0), None),
+         {"swallow": True}, None),
+        # a reviewer's: the challenges read and answered unsigned while the autopilot still
+        # signed its 1 Hz heartbeats; half a second with no signed frame had passed
+        ("reads its challenges and answers them unsigned", b"", {"echo": True},
+         _HEARTBEATS_ONLY),
+    ],
+)  # fmt: skip
+def test_signing_off_is_not_taken_from_a_stranger_on_the_path(
+    tmp_path: Path, capsys: Any, stranger: str, payload: bytes, route: dict[str, bool],
+    streams: StreamRates | None,
 ) -> None:
-    """The autopilot's frames swallowed on the way, and unsigned ones sent in its name: an
-    unsigned frame, even a run of them, proves nothing; only an answer to a challenge of
-    this run, unsigned, counts (and none comes)."""
+    """--disable signed with the wrong key, so the autopilot keeps signing, and a stranger
+    on the path that {stranger}: not proof that signing is off."""
     wrong = _key_file(tmp_path, "b.hex", KEY_B)
-    posing = (_frame(M.MAVLink_heartbeat_message(2, 12, 0, 0, 0, 3), None)
-              + _frame(M.MAVLink_attitude_message(0, 0, 0, 0, 0, 0, 0), None))  # fmt: skip
-    with _autopilot("px4", signing_key_hex=KEY_A) as endpoint, \
-            _router(endpoint, posing, swallow=True) as routed:
-        code = main(["setup-signing", "--disable", "--connect", routed, "--timeout", "3",
+    settings: dict[str, Any] = {} if streams is None else {"streams": streams}
+    with _autopilot("px4", signing_key_hex=KEY_A, **settings) as endpoint, \
+            _router(endpoint, payload, **route) as routed:
+        code = main(["setup-signing", "--disable", "--connect", routed, "--timeout", "4",
                      "--signed-with", str(wrong)])  # fmt: skip
-    assert code == ExitCode.LINK_FAILURE
+    assert code == ExitCode.LINK_FAILURE, stranger
     assert "signing not turned off" in capsys.readouterr().err
 
 
@@ -312,24 +317,6 @@ def test_the_key_goes_to_the_autopilot_alone(tmp_path: Path) -> None:
     assert received, "the spy heard nothing at all: no test"
     assert not any(bytes.fromhex(KEY_A) in datagram for datagram in received)
     assert not any(_message_id(d) == M.MAVLINK_MSG_ID_SETUP_SIGNING for d in received)
-
-
-def test_a_reader_of_the_path_cannot_fake_signing_off_while_the_autopilot_signs(
-    tmp_path: Path, capsys: Any
-) -> None:
-    """A reviewer's: an autopilot that sends only its 1 Hz heartbeats (signed), and a
-    stranger on the path that reads each challenge and answers it unsigned in its name.
-    Half a second with no signed frame had passed for "no longer signs"; now two unsigned
-    heartbeats of its own must follow the answer, none signed."""
-    wrong = _key_file(tmp_path, "b.hex", KEY_B)
-    silent = StreamRates(global_position_int_hz=0.0, local_position_ned_hz=0.0,
-                         attitude_hz=0.0, vfr_hud_hz=0.0)  # fmt: skip
-    with _autopilot("px4", signing_key_hex=KEY_A, streams=silent) as endpoint, \
-            _router(endpoint, b"", echo=True) as routed:
-        code = main(["setup-signing", "--disable", "--connect", routed, "--timeout", "4",
-                     "--signed-with", str(wrong)])  # fmt: skip
-    assert code == ExitCode.LINK_FAILURE
-    assert "signing not turned off" in capsys.readouterr().err
 
 
 def test_one_posing_as_the_autopilot_is_refused_before_the_key_is_sent(

@@ -70,7 +70,6 @@ class SigningResult:
     component_id: int
     autopilot: str
     after_s: float
-    said: tuple[str, ...]  # what it said of signing (STATUSTEXT), in order
 
 
 def setup_signing(
@@ -208,8 +207,7 @@ def _prove(
             _send_heartbeat(link)
             due["heartbeat"] = now + _HEARTBEAT_PERIOD_S
         if unsigned_at is not None and quiet_beats >= _QUIET_HEARTBEATS:
-            return SigningResult(system, component, _name(heartbeat), unsigned_at - started,
-                                 tuple(said))  # fmt: skip
+            return SigningResult(system, component, _name(heartbeat), unsigned_at - started)
         link.wait_readable(min([*due.values(), deadline]) - now)
         for frame in link.recv():
             msg = frame.message
@@ -235,7 +233,7 @@ def _prove(
                 if not challenger.answered(frame):
                     continue
                 return SigningResult(system, component, _name(heartbeat),
-                                     time.monotonic() - started, tuple(said))  # fmt: skip
+                                     time.monotonic() - started)
     last = f"; it said: {said[-1]}" if said else ""
     raise LinkError(
         _who(heartbeat), f"{unsigned} of its frames unsigned, {signed} signed",

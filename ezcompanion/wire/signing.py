@@ -16,7 +16,7 @@ SIGNING_EPOCH_S = 1420070400
 #: stream's timestamp follows the newest taken, so one stamped by the clock alone may be
 #: behind what an earlier run sent: ``Link.enable_signing``)
 SIGNING_LEAD_S = 60.0
-_NEW_STREAM_BEHIND_10US = 60 * 100_000  # a new signed stream may be a minute behind ours
+_NEW_STREAM_BEHIND_10US = 60 * 100_000  # a new stream: at most a minute behind the newest or clock
 
 
 def signing_key_from_hex(key_hex: str, *, field: str = "signing_key_hex") -> bytes:

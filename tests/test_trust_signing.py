@@ -108,10 +108,10 @@ def test_a_replay_is_refused_and_a_restarted_peer_is_taken(pair: Pair) -> None:
 
 
 def test_a_peer_signing_by_the_clock_is_heard_before_it_has_taken_ours(pair: Pair) -> None:
-    """The link signs a minute ahead of the clock (``SIGNING_LEAD_S``, as ArduPilot at
-    boot); a new stream is judged against the clock and the newest taken, not against that:
-    PX4 signs from the timestamp it was given, a few seconds behind the clock once it has
-    signed for a while, and would be refused until it had taken one of ours."""
+    """PX4 signs from the timestamp it was given, a few seconds behind the clock once it
+    has signed for a while: a new stream up to a minute behind the link's own timestamp is
+    taken. (A link that signed a minute ahead of the clock, tried to be heard at once after
+    a restart, refused it until it had taken one of ours: this test fails on it.)"""
     behind = signer(KEY, timestamp_10us=int((time.time() - _EPOCH_S - 5.0) * 1e5))
     assert pair.deliver(heartbeat(behind))
 

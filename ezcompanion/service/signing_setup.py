@@ -46,7 +46,7 @@ from ezcompanion.errors import LinkError
 from ezcompanion.wire import Frame, Link
 from ezcompanion.wire.commands import is_autopilot_heartbeat
 from ezcompanion.wire.dialect import Message, mavlink
-from ezcompanion.wire.signing import SIGNING_EPOCH_S, SIGNING_LEAD_S
+from ezcompanion.wire.signing import SIGNING_EPOCH_S
 
 __all__ = ["SigningResult", "check_signing", "setup_signing"]
 
@@ -153,13 +153,12 @@ class _Challenger:
         if self._encoder is None:
             self._link.send(msg)
             return
-        # signed from the present time at least, and a minute ahead as a signed link is
-        # (``SIGNING_LEAD_S``; not from when this began): ArduPilot signs from the key's
-        # timestamp plus a minute and takes a new stream at most a minute behind its own,
-        # so a challenge stamped before the request's timestamp is refused (the loopback
-        # ArduPilot refused every one)
+        # signed from the present time at least (not from when this began): ArduPilot signs
+        # from the key's timestamp plus a minute and takes a new stream at most a minute
+        # behind its own, so a challenge stamped before the request's timestamp is refused
+        # (the loopback ArduPilot refused every one)
         signing = self._encoder.signing
-        signing.timestamp = max(signing.timestamp, _now_10us(SIGNING_LEAD_S))
+        signing.timestamp = max(signing.timestamp, _now_10us())
         self._link.write(bytes(msg.pack(self._encoder)))
         self._encoder.seq = (self._encoder.seq + 1) % 256
 
@@ -293,10 +292,9 @@ def _address(source: tuple[str, int] | None) -> str:
     return "?" if source is None else f"{source[0]}:{source[1]}"
 
 
-def _now_10us(ahead_s: float = 0.0) -> int:
-    """The present time (plus ``ahead_s``) as MAVLink 2 signing counts it (10 us since
-    2015)."""
-    return int(max(time.time() - SIGNING_EPOCH_S + ahead_s, 0.0) * 1e5)
+def _now_10us() -> int:
+    """The present time as MAVLink 2 signing counts it (10 us since 2015)."""
+    return int(max(time.time() - SIGNING_EPOCH_S, 0.0) * 1e5)
 
 
 def _send_heartbeat(link: Link) -> None:

@@ -5,18 +5,13 @@ from __future__ import annotations
 
 import hashlib
 import hmac
-import time
 from typing import Any
 
 from ezcompanion.errors import ConfigError
 
 #: 2015-01-01T00:00:00Z, MAVLink 2 signing's time origin
 SIGNING_EPOCH_S = 1420070400
-#: a signed stream starts this far ahead of the clock, as ArduPilot's does at each boot (a
-#: stream's timestamp follows the newest taken, so one stamped by the clock alone may be
-#: behind what an earlier run sent: ``Link.enable_signing``)
-SIGNING_LEAD_S = 60.0
-_NEW_STREAM_BEHIND_10US = 60 * 100_000  # a new stream: at most a minute behind the newest or clock
+_NEW_STREAM_BEHIND_10US = 60 * 100_000  # a new signed stream may be a minute behind ours
 
 
 def signing_key_from_hex(key_hex: str, *, field: str = "signing_key_hex") -> bytes:
@@ -58,10 +53,7 @@ def check_signature_first(
     frame with a wrong key and timestamp 2^48 makes every later genuine frame of that
     stream "old" for good. Here the signature is checked first; only a genuine frame can
     move a stream's timestamp (or the link's own). The timestamp rules are the spec's: a
-    known stream must advance (no replay), a new stream may be at most a minute behind:
-    behind the newest timestamp taken, or the clock, not the link's own (which starts
-    ``SIGNING_LEAD_S`` ahead: an autopilot signing by the clock, as PX4 does, would be a
-    minute behind it, and refused until it had taken one of ours).
+    known stream must advance (no replay), a new stream may be at most a minute behind.
     """
     signing = mav.signing
     key = signing.secret_key
@@ -76,11 +68,8 @@ def check_signature_first(
     last = signing.stream_timestamps.get(stream)
     if last is not None and timestamp <= last:
         return False  # a replay, or reordered
-    if last is None:
-        newest = max(signing.stream_timestamps.values(), default=0)
-        clock = int(max(time.time() - SIGNING_EPOCH_S, 0.0) * 1e5)
-        if timestamp + _NEW_STREAM_BEHIND_10US < max(newest, clock):
-            return False  # a new stream more than a minute behind
+    if last is None and timestamp + _NEW_STREAM_BEHIND_10US < signing.timestamp:
+        return False  # a new stream more than a minute behind
     signing.stream_timestamps[stream] = timestamp
     signing.timestamp = max(signing.timestamp, timestamp)
     return True

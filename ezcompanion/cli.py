@@ -194,7 +194,7 @@ def _parser() -> argparse.ArgumentParser:
     signing = commands.add_parser(
         "setup-signing",
         help="give the autopilot a MAVLink 2 signing key over a link you trust (USB, a "
-        "cable) and wait until its frames are signed with it",
+        "cable) and wait until it answers a challenge signed with it",
     )
     signing.add_argument(
         "--connect", type=endpoint, required=True,
@@ -212,7 +212,8 @@ def _parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     job = signing.add_mutually_exclusive_group()
     job.add_argument("--check", action="store_true",
-                     help="send no key: check that the autopilot's frames are signed with it")
+                     help="send no key: check that the autopilot signs with it (a "
+                     "challenge answered)")
     job.add_argument("--disable", action="store_true",
                      help="turn the autopilot's signing off (a blank key)")
     signing.add_argument(

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest_sitl import make_config
+from conftest_sitl import ANSWER_WAIT_S, make_config
 
 from ezcompanion import wire
 from ezcompanion.cli import main
@@ -25,6 +25,8 @@ from sitl_stub import SitlStub
 from sitl_stub.config import StreamRates
 
 M = wire.mavutil.mavlink
+# an answer that should not come is waited for this long (one that should, ANSWER_WAIT_S)
+REFUSED_WAIT_S = 1.5
 KEY_A = "a1" * 32
 KEY_B = "b2" * 32
 
@@ -48,13 +50,16 @@ def _autopilot(profile: str = "copter", **settings: Any) -> Iterator[str]:
     assert stub.error is None and stub.handler_errors == 0
 
 
-def _acked(endpoint: str, key_hex: str | None) -> bool:
-    """Whether the autopilot answers a command sent unsigned, or signed with ``key_hex``."""
+def _acked(endpoint: str, key_hex: str | None, *, wait_s: float = ANSWER_WAIT_S) -> bool:
+    """Whether the autopilot answers a command sent unsigned, or signed with ``key_hex``:
+    it is sent again every 0.3 s until answered or ``wait_s`` has passed (an answer that
+    should come is waited for as long as a loaded machine may take; one that should not,
+    ``REFUSED_WAIT_S``)."""
     conn: Any = wire.mavutil.mavlink_connection(endpoint, source_system=255, source_component=190)
     try:
         if key_hex is not None:
             conn.setup_signing(bytes.fromhex(key_hex), sign_outgoing=True)
-        deadline = time.monotonic() + 1.5
+        deadline = time.monotonic() + wait_s
         while time.monotonic() < deadline:
             conn.mav.command_long_send(1, 1, M.MAV_CMD_DO_SET_SERVO, 0, 9, 1500, 0, 0, 0, 0, 0)
             if conn.recv_match(type="COMMAND_ACK", blocking=True, timeout=0.3) is not None:
@@ -89,8 +94,8 @@ def test_the_autopilot_takes_the_key_and_then_refuses_unsigned_frames(
         out = capsys.readouterr().out
         assert code == ExitCode.OK, out
         assert "took the key: it answered a challenge signed with it" in out
-        assert not _acked(endpoint, None)  # now refused
-        assert not _acked(endpoint, KEY_B)  # and signed with another key
+        assert not _acked(endpoint, None, wait_s=REFUSED_WAIT_S)  # now refused
+        assert not _acked(endpoint, KEY_B, wait_s=REFUSED_WAIT_S)  # and signed with another key
         assert _acked(endpoint, KEY_A)
         assert main(["setup-signing", "--check", "--connect", endpoint,
                      "--signing-key-file", str(key)]) == ExitCode.OK  # fmt: skip
@@ -118,7 +123,8 @@ def test_a_signing_autopilot_takes_a_new_key_or_none_only_signed_with_its_own(
                      "--signed-with", str(old)])  # fmt: skip
         assert code == ExitCode.OK
         assert "signed with the present key" in capsys.readouterr().out
-        assert _acked(endpoint, KEY_B) and not _acked(endpoint, KEY_A)
+        assert _acked(endpoint, KEY_B)
+        assert not _acked(endpoint, KEY_A, wait_s=REFUSED_WAIT_S)
         assert main(["setup-signing", "--check", "--connect", endpoint,
                      "--signing-key-file", str(new)]) == ExitCode.OK  # fmt: skip
         assert main(["setup-signing", "--connect", endpoint, "--disable",
@@ -236,7 +242,9 @@ def _router(autopilot: str, payload: bytes, *, swallow: bool = False,
                     command.append(source)
                     sock.sendto(data, target)
                     if echo and data[:1] == b"\xfd" and data[7:10] == b"\x6f\x00\x00":
-                        ts1 = int.from_bytes(data[10 + 8:10 + 16].ljust(8, b"\x00"), "little")
+                        # TIMESYNC: tc1, ts1 (int64 each); MAVLink 2 trims trailing zeros
+                        body = data[10:10 + data[1]].ljust(16, b"\x00")
+                        ts1 = int.from_bytes(body[8:16], "little", signed=True)
                         sock.sendto(_frame(M.MAVLink_timesync_message(1, ts1), None), source)
             if command:
                 sock.sendto(payload, command[-1])
@@ -481,10 +489,10 @@ def test_a_companion_restarted_within_the_minute_is_heard_once_it_has_heard_the_
     it, a reviewer found, and was taken back.)"""
     key = _key_file(tmp_path, "a.hex", KEY_A)
 
-    def answered(link: wire.Link) -> bool:
+    def answered(link: wire.Link, wait_s: float = ANSWER_WAIT_S) -> bool:
         link.send(link.mav.command_long_encode(1, 1, M.MAV_CMD_DO_SET_SERVO, 0, 9, 1500, 0,
                                                0, 0, 0, 0))  # fmt: skip
-        deadline = time.monotonic() + 1.5
+        deadline = time.monotonic() + wait_s
         while time.monotonic() < deadline:
             link.wait_readable(0.1)
             if any(f.kind == "COMMAND_ACK" for f in link.recv()):
@@ -507,6 +515,6 @@ def test_a_companion_restarted_within_the_minute_is_heard_once_it_has_heard_the_
             assert answered(link)  # stamped from the autopilot's timestamp, a minute ahead
         with wire.open_link(endpoint, system_id=1, component_id=191) as link:
             link.enable_signing(bytes.fromhex(KEY_A))
-            assert not answered(link)  # restarted: stamped by the clock, a replay
+            assert not answered(link, REFUSED_WAIT_S)  # restarted: by the clock, a replay
             hear(link)
             assert answered(link)

@@ -149,6 +149,7 @@ def fly(
     stub_config: Path | None = None,
     lockstep: bool = False,
     vehicle_first: bool = False,
+    before: Any = None,
     **companion: Any,
 ) -> Flight:
     """The companion in a thread, the vehicle in a process, until the engagement ends.
@@ -159,7 +160,8 @@ def fly(
     has reached ``port`` (a process start-up is seconds of wall time on a loaded machine,
     and at 5x each is five of the companion's seconds, which its budgets count); not the
     default: the vehicle then flies on its own clock for those seconds, which moves where
-    and when the engagement starts (placement, a fault's time), which several tests fix. With
+    and when the engagement starts (placement, a fault's time), which several tests fix;
+    ``before(port)`` then runs on the companion's port before the companion opens it. With
     ``lockstep`` both run in lockstep (``--lockstep``): the vehicle's time waits for the
     companion and every budget is in vehicle time, whatever the load of the machine; for
     every test that does not test timing or time stamps itself (hostile input may forge
@@ -198,6 +200,8 @@ def fly(
         with stub_process(vehicle, to, truth, "--profile", profile, *mode) as stub:
             if vehicle_first:
                 wait_for_vehicle(port)
+                if before is not None:
+                    before(port)
                 thread.start()
                 assert listening.wait(30.0), "the companion never opened its link"
             if during is not None:
@@ -480,6 +484,45 @@ def test_signing_mismatch_is_refused_and_a_match_flies(tmp_path: Path) -> None:
     match_dir.mkdir()
     matched = fly(mismatch, match_dir, signing_key_hex=KEY_A)
     assert matched.outcome.intercepted
+
+
+def test_the_field_recipe_for_signing_flies_signed(tmp_path: Path) -> None:
+    """docs/field.md, "Signing the link", end to end on the loopback copter: a key written,
+    given to the disarmed autopilot (`setup-signing`, its proof a challenge), the autopilot
+    armed by a ground station holding the key, and the companion flying the engagement
+    with it to the intercept; a ground station without it is refused."""
+    from ezcompanion.cli import main
+    from ezcompanion.wire import mavlink, mavutil
+
+    key = tmp_path / "keys" / "signing.key"
+    assert main(["signing-key", str(key)]) == 0
+    key_hex = key.read_text().strip()
+    config = scenario_file(tmp_path, sitl_stub={"start_armed": False})
+
+    def give_the_key_and_arm(port: int) -> None:
+        assert main(["setup-signing", "--connect", f"udpin:127.0.0.1:{port}",
+                     "--signing-key-file", str(key)]) == 0  # fmt: skip
+        for signed, answer in ((False, None), (True, mavlink.MAV_RESULT_ACCEPTED)):
+            gcs: Any = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}",
+                                                  source_system=255, source_component=190)
+            try:
+                if signed:
+                    gcs.setup_signing(bytes.fromhex(key_hex), sign_outgoing=True)
+                gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=10.0)
+                deadline = time.monotonic() + (10.0 if signed else 1.5)
+                ack = None
+                while ack is None and time.monotonic() < deadline:
+                    gcs.mav.command_long_send(1, 1, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0,
+                                              0, 0, 0, 0, 0)  # fmt: skip
+                    ack = gcs.recv_match(type="COMMAND_ACK", blocking=True, timeout=0.3)
+                assert (None if ack is None else ack.result) == answer, signed
+            finally:
+                gcs.close()
+
+    flight = fly(config, tmp_path, vehicle_first=True, before=give_the_key_and_arm,
+                 signing_key_file=str(key))  # fmt: skip
+    assert flight.outcome.intercepted
+    assert judge_truth(load_scenario(config), flight.truth)[0]
 
 
 def test_the_tlog_reads_back_with_pymavlink(tmp_path: Path) -> None:

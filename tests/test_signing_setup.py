@@ -179,10 +179,11 @@ def _free_port() -> int:
         return int(probe.getsockname()[1])
 
 
-def _frame(msg: Any, key: bytes | None, stamp_10us: int = 0, *, system: int = 1) -> bytes:
-    """``msg`` as ``system``'s component 1 would send it, signed with ``key`` at
+def _frame(msg: Any, key: bytes | None, stamp_10us: int = 0, *, system: int = 1,
+           component: int = 1) -> bytes:
+    """``msg`` as ``system``'s ``component`` would send it, signed with ``key`` at
     ``stamp_10us``."""
-    encoder: Any = M.MAVLink(None, srcSystem=system, srcComponent=1)
+    encoder: Any = M.MAVLink(None, srcSystem=system, srcComponent=component)
     if key is not None:
         encoder.signing.secret_key = key
         encoder.signing.sign_outgoing = True
@@ -217,13 +218,14 @@ def _third_party(port: int, payload: bytes) -> Iterator[list[bytes]]:
 
 
 @contextmanager
-def _router(autopilot: str, payload: bytes, *, swallow: bool = False,
-            echo: bool = False) -> Iterator[str]:
+def _router(autopilot: str, payload: bytes, *, swallow: bool = False, echo: bool = False,
+            every_s: float = 0.02, echo_as: int = 1) -> Iterator[str]:
     """A router between the command and the autopilot (``udpout:`` endpoint) that forwards
     both ways (``swallow``: the command's frames only) and carries a stranger's ``payload``
     to the command every 20 ms too, so that the stranger's frames come from the autopilot's
-    address; ``echo``: the stranger reads the command's TIMESYNC requests on the way and
-    answers each, unsigned, in the autopilot's name. Yields the command's endpoint."""
+    address (every ``every_s``); ``echo``: the stranger reads the command's TIMESYNC
+    requests on the way and answers each, unsigned, as component ``echo_as`` of the
+    autopilot's system. Yields the command's endpoint."""
     target = ("127.0.0.1", int(autopilot.rsplit(":", 1)[1]))
     stop = threading.Event()
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -232,6 +234,7 @@ def _router(autopilot: str, payload: bytes, *, swallow: bool = False,
     command: list[tuple[str, int]] = []
 
     def run() -> None:
+        next_payload = 0.0
         while not stop.is_set():
             with contextlib.suppress(OSError):
                 data, source = sock.recvfrom(65535)
@@ -245,9 +248,11 @@ def _router(autopilot: str, payload: bytes, *, swallow: bool = False,
                         # TIMESYNC: tc1, ts1 (int64 each); MAVLink 2 trims trailing zeros
                         body = data[10:10 + data[1]].ljust(16, b"\x00")
                         ts1 = int.from_bytes(body[8:16], "little", signed=True)
-                        sock.sendto(_frame(M.MAVLink_timesync_message(1, ts1), None), source)
-            if command:
+                        sock.sendto(_frame(M.MAVLink_timesync_message(1, ts1), None,
+                                           component=echo_as), source)  # fmt: skip
+            if command and payload and time.monotonic() >= next_payload:
                 sock.sendto(payload, command[-1])
+                next_payload = time.monotonic() + every_s
 
     thread = threading.Thread(target=run, daemon=True)
     thread.start()
@@ -293,6 +298,16 @@ _HEARTBEATS_ONLY = StreamRates(global_position_int_hz=0.0, local_position_ned_hz
         # signed its 1 Hz heartbeats; half a second with no signed frame had passed
         ("reads its challenges and answers them unsigned", b"", {"echo": True},
          _HEARTBEATS_ONLY),
+        # ... and sends an unsigned heartbeat in its name now and then: the autopilot's own
+        # signed ones between them end each run of two
+        ("answers its challenges unsigned and sends an unsigned heartbeat every 0.4 s",
+         _frame(M.MAVLink_heartbeat_message(2, 12, 0, 0, 0, 3), None),
+         {"echo": True, "every_s": 0.4}, _HEARTBEATS_ONLY),
+        # a reviewer's: a camera under the autopilot's id (MAV_AUTOPILOT_GENERIC in its
+        # heartbeat) had been taken for the autopilot, and its unsigned answers for proof
+        ("is a camera under its id that answers the challenges unsigned",
+         _frame(M.MAVLink_heartbeat_message(30, 0, 0, 0, 0, 3), None, component=100),
+         {"echo": True, "echo_as": 100}, _HEARTBEATS_ONLY),
     ],
 )  # fmt: skip
 def test_signing_off_is_not_taken_from_a_stranger_on_the_path(

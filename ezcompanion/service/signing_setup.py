@@ -215,15 +215,17 @@ def _prove(
             if frame.kind == "STATUSTEXT" and "sign" in str(msg.text).lower():
                 said.append(str(msg.text))  # unauthenticated: told, never acted on
                 say(f"{_who(heartbeat)} says: {msg.text}")
+            is_signed = _signed_frame(msg)
+            if key is None and is_signed:  # any of its components: it still signs
+                unsigned_at, quiet_beats = None, 0
             if msg.get_srcComponent() != component:
                 continue
-            is_signed = _signed_frame(msg)
             signed += is_signed
             unsigned += not is_signed
             if key is None:
                 if is_signed:
-                    unsigned_at, quiet_beats = None, 0  # still signing (or again): no proof
-                elif challenger.answered(frame) and unsigned_at is None:
+                    continue  # no proof yet (reset above)
+                if challenger.answered(frame) and unsigned_at is None:
                     unsigned_at = time.monotonic()
                 elif unsigned_at is not None and frame.kind == "HEARTBEAT":
                     quiet_beats += 1
@@ -243,7 +245,9 @@ def _prove(
 def _autopilot(link: Link, target_system: int, deadline: float) -> Message:
     """The autopilot's heartbeat (of ``target_system``, if not 0), our own heartbeat sent
     every second meanwhile (a vehicle on udpout: or tcp: hears of us from it). Over UDP
-    autopilot heartbeats are listened for ``_LISTEN_S`` after the first: the system wanted
+    autopilot heartbeats (component 1, MAV_COMP_ID_AUTOPILOT1, as ArduPilot's and PX4's:
+    a camera or gimbal under its id is not it) are listened for ``_LISTEN_S`` after the
+    first: the system wanted
     heard from two addresses, or (``target_system`` 0) any two autopilots heard from two
     addresses, is refused (a sender posing as the autopilot, under its id or another,
     would be sent the key: a reviewer's, as system 42, was); one address is locked to, and
@@ -258,8 +262,9 @@ def _autopilot(link: Link, target_system: int, deadline: float) -> Message:
         link.wait_readable(min(next_heartbeat, until) - now)
         for frame in link.recv():
             msg = frame.message
-            if not (frame.kind == "HEARTBEAT" and is_autopilot_heartbeat(msg)):
-                continue
+            if not (frame.kind == "HEARTBEAT" and is_autopilot_heartbeat(msg)
+                    and msg.get_srcComponent() == mavlink.MAV_COMP_ID_AUTOPILOT1):
+                continue  # (a camera or gimbal under the autopilot's id is not it)
             wanted = target_system in (0, msg.get_srcSystem())
             if first is None:
                 if not wanted:

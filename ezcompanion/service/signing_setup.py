@@ -34,8 +34,6 @@ line refuses an endpoint other machines reach unless told otherwise.
 
 from __future__ import annotations
 
-import hashlib
-import hmac
 import secrets
 import time
 from collections.abc import Callable
@@ -46,7 +44,7 @@ from ezcompanion.errors import LinkError
 from ezcompanion.wire import Frame, Link
 from ezcompanion.wire.commands import is_autopilot_heartbeat
 from ezcompanion.wire.dialect import Message, mavlink
-from ezcompanion.wire.signing import SIGNING_EPOCH_S
+from ezcompanion.wire.signing import signature_matches, signing_now_10us
 
 __all__ = ["SigningResult", "check_signing", "setup_signing"]
 
@@ -55,7 +53,6 @@ _RESEND_S = 1.0  # SETUP_SIGNING again (with a fresh timestamp) until the proof 
 _CHALLENGE_S = 0.25  # a TIMESYNC challenge this often
 _QUIET_HEARTBEATS = 2  # turned off: this many unsigned heartbeats after, and none signed
 _LISTEN_S = 1.5  # (UDP) the autopilot's heartbeats listened for before its address is locked
-_SIGNATURE_LEN = 13  # link id, 6-byte timestamp, 6-byte signature
 _BLANK_KEY = bytes(32)
 _CHALLENGE_LINK_ID = 1  # the challenges' signing stream (the link's own is link id 0)
 
@@ -93,8 +90,9 @@ def setup_signing(
                         "armed: disarm it first")  # fmt: skip
 
     def request() -> Message:
+        stamp_10us = signing_now_10us() if key is not None else 0
         return link.mav.setup_signing_encode(system, component, list(key or _BLANK_KEY),
-                                             _now_10us() if key is not None else 0)  # fmt: skip
+                                             stamp_10us)  # fmt: skip
 
     say(f"{_who(heartbeat)}: SETUP_SIGNING sent"
         + (", signed with the present key" if current_key is not None else ""))
@@ -158,7 +156,7 @@ class _Challenger:
         # behind its own, so a challenge stamped before the request's timestamp is refused
         # (the loopback ArduPilot refused every one)
         signing = self._encoder.signing
-        signing.timestamp = max(signing.timestamp, _now_10us())
+        signing.timestamp = max(signing.timestamp, signing_now_10us())
         self._link.write(bytes(msg.pack(self._encoder)))
         self._encoder.seq = (self._encoder.seq + 1) % 256
 
@@ -297,11 +295,6 @@ def _address(source: tuple[str, int] | None) -> str:
     return "?" if source is None else f"{source[0]}:{source[1]}"
 
 
-def _now_10us() -> int:
-    """The present time as MAVLink 2 signing counts it (10 us since 2015)."""
-    return int(max(time.time() - SIGNING_EPOCH_S, 0.0) * 1e5)
-
-
 def _send_heartbeat(link: Link) -> None:
     link.send(link.mav.heartbeat_encode(mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
                                         mavlink.MAV_AUTOPILOT_INVALID, 0, 0,
@@ -315,15 +308,8 @@ def _signed_frame(msg: Message) -> bool:
 
 
 def _signed_with(key: bytes, msg: Message) -> bool:
-    """The frame carries a signature made with ``key`` (SHA-256 of the key and the frame,
-    the MAVLink 2 specification's)."""
-    if not _signed_frame(msg):
-        return False
-    buf = bytes(msg.get_msgbuf())
-    if len(buf) < _SIGNATURE_LEN:
-        return False
-    digest = hashlib.sha256(key + buf[:-6]).digest()[:6]
-    return hmac.compare_digest(digest, buf[-6:])
+    """The frame carries a signature made with ``key``."""
+    return _signed_frame(msg) and signature_matches(key, msg.get_msgbuf())
 
 
 def _armed(heartbeat: Message) -> bool:

@@ -12,7 +12,7 @@ from typing import Any
 from ezcompanion.endpoint import is_loopback_host
 from ezcompanion.errors import ConfigError, LinkError
 from ezcompanion.wire.dialect import Address, Message, mavlink, mavutil
-from ezcompanion.wire.signing import SIGNING_EPOCH_S, check_signature_first
+from ezcompanion.wire.signing import check_signature_first, signing_now_10us
 from ezcompanion.wire.streams import SerialPort, Stream, TcpClient
 
 URL_SCHEMES = ("udpin", "udpout", "udp", "tcpin", "tcp")
@@ -203,7 +203,7 @@ class Link:
         if len(key) != 32:
             raise ConfigError("signing_key", key.hex(), "must be 32 bytes")
         callback = (lambda _mav, _msg_id: True) if allow_unsigned else None
-        epoch_10us = int(max(time.time() - SIGNING_EPOCH_S, 0.0) * 1e5)
+        epoch_10us = signing_now_10us()
         self._conn.setup_signing(
             key,
             sign_outgoing=True,

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import hmac
+import time
 from typing import Any
 
 from ezcompanion.errors import ConfigError
@@ -44,6 +45,21 @@ def signing_key_from_passphrase(passphrase: str) -> bytes:
     return hashlib.sha256(passphrase.encode("utf-8")).digest()
 
 
+def signing_now_10us() -> int:
+    """The present time as MAVLink 2 signing counts it (10 us since 2015)."""
+    return int(max(time.time() - SIGNING_EPOCH_S, 0.0) * 1e5)
+
+
+def signature_matches(key: bytes, msgbuf: bytes | bytearray) -> bool:
+    """The signed frame ``msgbuf`` carries a signature made with ``key`` (SHA-256 of the key
+    and the frame, the MAVLink 2 specification's; constant-time compare). Its timestamp is
+    not judged here."""
+    if len(msgbuf) < 13:  # link id, 6-byte timestamp, 6-byte signature
+        return False
+    digest = hashlib.sha256(key + bytes(msgbuf[:-6])).digest()[:6]
+    return hmac.compare_digest(digest, bytes(msgbuf[-6:]))
+
+
 def check_signature_first(
     mav: Any, msgbuf: bytearray, src_system: int, src_component: int
 ) -> bool:
@@ -57,10 +73,7 @@ def check_signature_first(
     """
     signing = mav.signing
     key = signing.secret_key
-    if key is None or len(msgbuf) < 13:
-        return False
-    digest = hashlib.sha256(bytes(key) + bytes(msgbuf[:-6])).digest()[:6]
-    if not hmac.compare_digest(digest, bytes(msgbuf[-6:])):
+    if key is None or not signature_matches(bytes(key), msgbuf):
         return False
     tlow, thigh = mav.mav_sign_unpacker.unpack(msgbuf[-12:-6])
     timestamp = tlow + (thigh << 32)

@@ -45,6 +45,30 @@ class Gcs:
     def close(self) -> None:
         self.conn.close()
 
+    def lock(self, port: int) -> None:
+        """Hear and answer only the stub sending from 127.0.0.1:``port``. (pymavlink's
+        ``udpin`` answers every address it has heard: under the full suite another test's
+        vehicle, sending to a port this one was then given, was answered, and its
+        COMMAND_ACK taken for this stub's.)"""
+        conn, peer = self.conn, ("127.0.0.1", port)
+
+        def recv(n: int | None = None) -> bytes:
+            try:
+                data, source = conn.port.recvfrom(65535)
+            except (BlockingIOError, InterruptedError):
+                return b""
+            return data if source == peer else b""
+
+        conn.recv = recv
+        conn.clients = {peer}
+        conn.clients_last_alive = {peer: math.inf}
+
+    def unlock(self) -> None:
+        """Hear every address again (the next stub's)."""
+        del self.conn.recv  # the instance's, over pymavlink's own
+        self.conn.clients = set()
+        self.conn.clients_last_alive = {}
+
     @property
     def mav(self) -> Any:
         return self.conn.mav
@@ -141,7 +165,13 @@ def running_stub(gcs: Gcs, *, record_truth: bool = True, **settings: Any) -> Ite
     stub = SitlStub(make_config(gcs.port, **settings), record_truth=record_truth)
     with stub:
         assert gcs.recv("HEARTBEAT", ANSWER_WAIT_S) is not None, "no heartbeat from the stub"
-        yield stub
+        address = stub.local_address  # bound by its first send
+        assert address is not None
+        gcs.lock(address[1])
+        try:
+            yield stub
+        finally:
+            gcs.unlock()
     assert stub.error is None, stub.error
     assert stub.handler_errors == 0
 

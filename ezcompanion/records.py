@@ -126,6 +126,7 @@ class EventKind(StrEnum):
     PARAMETER = "parameter"  # a vehicle parameter read (data: name, value)
     ABANDON = "abandon"  # the abandon path every setpoint is checked against (or none)
     RESPONSE = "response"  # the vehicle's response identified, and what the law is told
+    ZONE = "zone"  # inside a zone by the vehicle's own estimate, or out again (data: inside)
     ON_EXIT = "on_exit"  # the end mode asked for, and whether the vehicle took it (data: failed)
 
 

@@ -11,6 +11,12 @@ emits a ``failsafe`` event, tells a vehicle that can stop (velocity setpoints: c
 PX4) to stop where it is with one zero-velocity setpoint built from nothing it reported,
 and the next fresh tick emits a ``resumed`` one. A plane flies on as its autopilot does
 with no new course (ArduPlane holds the last one).
+
+"Intercepted" is claimed by the vehicle's own estimate, whole: within the intercept radius
+of the target, and outside every zone at every tick of the engagement (the law's r - rho
+per zone at the tick's position and course, the zones then in force). A tick inside a zone
+is a ``zone`` event when it enters and when it is out again; an engagement that reached the
+target after one ends "not intercepted", naming the zone and how deep.
 """
 
 from __future__ import annotations
@@ -54,6 +60,12 @@ class EngagementOutcome:
     brakes_sent: int = 0  # zero-velocity stops sent at failsafes
     # setpoints sent that were not safe to abandon, with an abandon path in force
     abandon_unsafe_setpoints: int = 0
+    # within the intercept radius by the vehicle's estimate (intercepted: this, and no zone
+    # entered)
+    reached_target: bool = False
+    # each zone the vehicle was inside at a tick, by its own estimate, with its least
+    # clearance r - rho (< 0), in the order entered
+    zones_entered: tuple[tuple[str, float], ...] = ()
 
 
 class Engagement:
@@ -82,6 +94,9 @@ class Engagement:
         self.brakes_sent = 0  # zero-velocity stops at failsafes (not counted as setpoints)
         self.abandon_unsafe_setpoints = 0
         self._abandon_unsafe_since_s: float | None = None
+        self.zones_entered: dict[str, float] = {}  # zone: least clearance (< 0), estimated
+        self._inside: tuple[str, ...] = ()  # the zones the last command's tick was inside
+        self._inside_since_s = 0.0
         self.last_command: TickCommand | None = None
         self.outcome: EngagementOutcome | None = None
         self.failsafe_active = False
@@ -170,14 +185,25 @@ class Engagement:
             self.track.write(now, state.north_m, state.east_m, result.course_rad, result.step)
         self.last_command = result
         if result.captured:
+            self._judge_zones(now, result)
             if self.publisher is not None:
                 self.publisher.publish_tick(result)
-            self.events.emit(
-                EventKind.INTERCEPTED,
-                now,
-                f"within {self.intercept_radius_m:g} m of the target; setpoints stopped",
-                miss_distance_m=self.loop.miss_distance_m,
-            )
+            if self.zones_entered:
+                self.events.emit(
+                    EventKind.WARNING, now, f"within {self.intercept_radius_m:g} m of the "
+                    f"target after entering the zone of {self._entered_text()} by the "
+                    "vehicle's own estimate: not intercepted outside every zone; setpoints "
+                    "stopped",
+                    miss_distance_m=self.loop.miss_distance_m,
+                    zones_entered=dict(self.zones_entered),
+                )  # fmt: skip
+            else:
+                self.events.emit(
+                    EventKind.INTERCEPTED,
+                    now,
+                    f"within {self.intercept_radius_m:g} m of the target; setpoints stopped",
+                    miss_distance_m=self.loop.miss_distance_m,
+                )
             self.done = True
             return
         if self.failsafe_active:
@@ -196,8 +222,42 @@ class Engagement:
                 self._abandon_said(now, self.loop.abandon_safe(result))
             else:  # counted as what it is (issue 13: a failed write was counted as sent)
                 self.setpoint_write_failures += 1
-        if self.publisher is not None:  # after the setpoint has left
+        self._judge_zones(now, result)  # after the setpoint has left
+        if self.publisher is not None:
             self.publisher.publish_tick(result)
+
+    def _judge_zones(self, now: float, result: TickCommand) -> None:
+        """Keep each zone the vehicle is inside at this tick by its own estimate (the law's
+        clearance r - rho per zone, at the position and course it steered from), and say
+        when it enters one and when it is out of every zone again."""
+        clearance = result.step.law.clearance_m
+        if not self._inside and float(clearance.min()) >= 0.0:
+            return
+        values = dict(zip(self.loop.controller.zones.names, clearance.tolist(), strict=True))
+        inside = tuple(name for name, c in values.items() if c < 0.0)
+        for name in inside:
+            self.zones_entered[name] = min(self.zones_entered.get(name, 0.0), values[name])
+        for name in inside:
+            if name not in self._inside:
+                self.events.emit(
+                    EventKind.ZONE, now, f"inside the engagement zone of {name} by "
+                    f"{-values[name]:.3f} m by the vehicle's own estimate: the engagement can no "
+                    "longer end intercepted", zone=name, inside=True,
+                    clearance_m=values[name],
+                )  # fmt: skip
+        if inside and not self._inside:
+            self._inside_since_s = now
+        if self._inside and not inside:
+            self.events.emit(
+                EventKind.ZONE, now, f"outside every zone again after "
+                f"{now - self._inside_since_s:.2f} s; entered so far: {self._entered_text()}",
+                inside=False, zones_entered=dict(self.zones_entered),
+            )  # fmt: skip
+        self._inside = inside
+
+    def _entered_text(self) -> str:
+        """The zones entered and how deep: "D1 (0.120 m deep), D3 (0.010 m deep)"."""
+        return ", ".join(f"{name} ({-c:.3f} m deep)" for name, c in self.zones_entered.items())
 
     def _abandon_said(self, now: float, safe: bool | None) -> None:
         """Count a setpoint sent that is not safe to abandon, and say when they start and
@@ -245,7 +305,8 @@ class Engagement:
         velocity sent was a full one, which PX4 flew for its 1 s and ArduCopter for its 3 s
         (GUID_TIMEOUT) past the target, unless an end mode took it first."""
         self.pause(now, brake=self._guiding_since_s is not None)
-        intercepted = self.loop.captured
+        reached = self.loop.captured
+        intercepted = reached and not self.zones_entered
         self.outcome = EngagementOutcome(
             intercepted=intercepted,
             time_s=now,
@@ -256,6 +317,8 @@ class Engagement:
             failsafes=self.failsafes,
             brakes_sent=self.brakes_sent,
             abandon_unsafe_setpoints=self.abandon_unsafe_setpoints,
+            reached_target=reached,
+            zones_entered=tuple(self.zones_entered.items()),
         )
         verdict = "intercepted" if intercepted else "not intercepted"
         if math.isinf(self.loop.miss_distance_m):  # the law never ran: no miss to speak of
@@ -265,5 +328,9 @@ class Engagement:
                 f"miss distance {self.loop.miss_distance_m:.3f} m after "
                 f"{self._guiding_total_s:.2f} s of guidance"
             )
-        self.events.emit(EventKind.ENDED, now, f"{verdict}; {detail}", intercepted=intercepted)
+        if self.zones_entered:
+            detail += (f"; {'reached the target, but ' if reached else ''}entered the zone "
+                       f"of {self._entered_text()} by the vehicle's own estimate")  # fmt: skip
+        self.events.emit(EventKind.ENDED, now, f"{verdict}; {detail}", intercepted=intercepted,
+                         zones_entered=dict(self.zones_entered))  # fmt: skip
         return self.outcome

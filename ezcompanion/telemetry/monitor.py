@@ -109,8 +109,9 @@ class MonitorView:
             view.state = payload
         elif leaf == "guidance":
             view.guidance = payload
-            if payload.get("captured"):
-                view.outcome = "intercepted"
+            if payload.get("captured"):  # its event says whether outside every zone
+                if view.outcome != "intercepted":
+                    view.outcome = "at the target"
             elif view.outcome in ("waiting", "gone"):
                 view.outcome = "guiding"
         elif leaf == "event":
@@ -120,6 +121,10 @@ class MonitorView:
                 view.outcome = "intercepted"
             elif kind == "ended" and view.outcome != "intercepted":
                 view.outcome = "ended: " + str(payload.get("message", ""))
+            elif kind == "zone":  # in, or out of every zone again
+                data = payload.get("data")
+                inside = isinstance(data, dict) and data.get("inside") is True
+                view.outcome = "inside a zone" if inside else "guiding"
             elif kind == "failsafe":
                 view.outcome = "failsafe"
             elif kind == "resumed":

@@ -338,6 +338,11 @@ class Autopilot(CommandHandlers):
         self._guided = (None if command is None else
                         _Active(label, command, t_s, self.config.timeout_s("course")))
 
+    def pilot_mode(self, name: str) -> None:
+        """A pilot (or a ground station) switches the mode (``pilot_modes``): taken as any
+        mode change is, from whatever the vehicle does."""
+        self._set_mode(name)
+
     def _set_mode(self, name: str) -> None:
         mode = self.spec.mode_by_name(name)
         assert mode is not None

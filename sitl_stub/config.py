@@ -27,6 +27,7 @@ Layout (every key optional; see ``docs/sitl_stub.md``)::
       wind_north_m_s: 0.0           # each within [-100, 100]
       wind_east_m_s: 0.0
       initial_mode: AUTO            # default per profile
+      pilot_modes: []               # [[at_s, MODE], ...]: a pilot's mode switches, in order
       start_armed: true
       local_origin_after_s: 0.0     # LOCAL_POSITION_NED only from then on; < 0 = never
       setpoint_timeout_s: 3.0       # default per profile; 0 = no timeout
@@ -179,6 +180,8 @@ class StubSettings:
     wind_north_m_s: float = 0.0
     wind_east_m_s: float = 0.0
     initial_mode: str | None = None
+    # a pilot's (or a ground station's) mode switches: (simulated s, mode name), in order
+    pilot_modes: tuple[tuple[float, str], ...] = ()
     start_armed: bool = True
     local_origin_after_s: float = 0.0
     setpoint_timeout_s: float | None = None
@@ -243,6 +246,7 @@ class StubSettings:
         ):
             names = ", ".join(m.name for m in spec.modes)
             raise ConfigError("initial_mode", self.initial_mode, f"must be one of {names}")
+        object.__setattr__(self, "pilot_modes", _pilot_modes(self.pilot_modes, spec))
 
     @classmethod
     def from_mapping(cls, data: Mapping[str, Any], path: str = "sitl_stub") -> StubSettings:
@@ -389,3 +393,24 @@ def stub_config(scenario: Scenario, **overrides: Any) -> StubConfig:
 def load_stub_config(path: str | Path, **overrides: Any) -> StubConfig:
     """Read a scenario file and resolve the stub's configuration (file, then overrides)."""
     return stub_config(load_scenario(path), **overrides)
+
+
+def _pilot_modes(value: Any, spec: Any) -> tuple[tuple[float, str], ...]:
+    """``pilot_modes`` checked: a list of [at_s, MODE] pairs, times increasing, each mode
+    one of the profile's."""
+    if not isinstance(value, (list, tuple)):
+        raise ConfigError("pilot_modes", value, "must be a list of [at_s, MODE] pairs")
+    out: list[tuple[float, str]] = []
+    for index, pair in enumerate(value):
+        where = f"pilot_modes[{index}]"
+        if not isinstance(pair, (list, tuple)) or len(pair) != 2:
+            raise ConfigError(where, pair, "must be a pair [at_s, MODE]")
+        at_s, mode = pair
+        _check(where, at_s, low=0.0, high=1e6)
+        if not isinstance(mode, str) or spec.mode_by_name(mode) is None:
+            names = ", ".join(m.name for m in spec.modes)
+            raise ConfigError(where, mode, f"mode must be one of {names}")
+        if out and float(at_s) <= out[-1][0]:
+            raise ConfigError(where, at_s, "must come after the switch before it")
+        out.append((float(at_s), mode))
+    return tuple(out)

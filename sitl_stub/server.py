@@ -109,6 +109,7 @@ class SitlStub:
                               "a reboot restarts the clock that lockstep runs on: not both")
         self._boot_s = 0.0  # the simulated time the autopilot last booted at
         self.reboots = 0  # 1 once the autopilot has rebooted (faults.reboot_at_s)
+        self._pilot_next = 0  # the next of pilot_modes to fall due
 
     # ---- lifecycle ---------------------------------------------------------------------
     def start(self) -> SitlStub:
@@ -280,6 +281,14 @@ class SitlStub:
         f = self.config.settings.faults
         return 0.0 <= f.reboot_at_s <= t_s < f.reboot_at_s + f.reboot_s
 
+    def _pilot(self, t_s: float) -> None:
+        """The pilot's mode switches (``pilot_modes``) that have fallen due."""
+        assert self.autopilot is not None
+        changes = self.config.settings.pilot_modes
+        while self._pilot_next < len(changes) and changes[self._pilot_next][0] <= t_s + 1e-9:
+            self.autopilot.pilot_mode(changes[self._pilot_next][1])
+            self._pilot_next += 1
+
     def _power(self, t_s: float) -> None:
         """The reboot of ``faults.reboot_at_s``: the autopilot goes down (disarmed, no
         guidance), and ``reboot_s`` later boots afresh: a new clock, its initial mode, no
@@ -366,6 +375,7 @@ class SitlStub:
             if self._record:
                 self.history.append(new)
             self._power(new.t_s)
+            self._pilot(new.t_s)
             ap = self.autopilot
             if self._truth is not None:
                 self._truth.write(new, ap.mode.name, ap.armed)

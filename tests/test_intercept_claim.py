@@ -7,7 +7,9 @@ reports a straight line through a zone to the target has reached the target but 
 intercepted (the zone named, in and out, and in the end); the same target reached on a
 line clear of every zone is intercepted. Over real UDP, a loopback copter lagging 3 s (far
 beyond what the law is told at first) enters D2's zone by its own report: the service names
-it as it happens, as deep as the stub's truth went.
+it as it happens, as deep as the stub's truth went; so is a zone entered while a pilot
+has the vehicle (guidance paused, no tick), with the companion's ticks before and after
+the pass all outside.
 """
 
 from __future__ import annotations
@@ -18,12 +20,14 @@ from pathlib import Path
 
 import pytest
 import yaml
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from test_service_loopback import fly
 
 from ezcompanion import wire
 from ezcompanion.config import load_scenario
 from ezcompanion.config_checks import clearance_m
-from ezcompanion.records import EventKind, VehicleState
+from ezcompanion.records import EventKind, TickCommand, VehicleState
 from ezcompanion.service.demo import judge_truth
 from ezcompanion.service.engagement import Engagement, EngagementOutcome
 from ezcompanion.service.events import EventLog
@@ -127,3 +131,75 @@ def test_a_zone_entered_by_the_vehicles_own_report_is_named_over_udp(tmp_path: P
     assert left.data["inside"] is False and left.time_s > entered.time_s
     assert not flight.outcome.intercepted and "D2" in flight.events.of_kind(
         EventKind.ENDED)[0].message
+
+
+def test_positions_between_slow_ticks_are_judged(tmp_path: Path) -> None:
+    # ticks at 10 Hz on positions at 50 Hz: the sample that first lies inside is judged
+    # (the ticks alone first saw D2's zone 0.045 m deep, 50 ms later)
+    data = yaml.safe_load(CONFIG.read_text())
+    data["sitl_stub"] = {"velocity_lag_s": 3.0}
+    config = tmp_path / "lagging.yaml"
+    config.write_text(yaml.safe_dump(data))
+    flight = fly(config, tmp_path, max_time_s=5.0, lockstep=True, loop_rate_hz=10.0,
+                 telemetry_rate_hz=50.0)  # fmt: skip
+    entered = flight.events.of_kind(EventKind.ZONE)[0]
+    assert entered.data["zone"] == "D2" and -0.02 < entered.data["clearance_m"] < 0.0
+
+
+def test_a_zone_entered_while_the_pilot_has_the_vehicle_is_named(tmp_path: Path) -> None:
+    # the pilot switches to ALT_HOLD 1 s in (the loopback copter flies straight on, into
+    # D2's zone and out) and back to GUIDED at 6 s: no tick in between
+    data = yaml.safe_load(CONFIG.read_text())
+    data["sitl_stub"] = {"pilot_modes": [[1.0, "ALT_HOLD"], [6.0, "GUIDED"]]}
+    config = tmp_path / "pilot.yaml"
+    config.write_text(yaml.safe_dump(data))
+    flight = fly(config, tmp_path, max_time_s=10.0, lockstep=True)
+    truth_least = judge_truth(load_scenario(config), flight.truth)[3]
+    assert truth_least[1] < -0.2 and min(truth_least[0], truth_least[2]) > 0.0  # D2 only
+    left, back = (e.time_s for e in flight.events.of_kind(EventKind.MODE)
+                  if e.data.get("mode") in ("ALT_HOLD", "GUIDED") and e.time_s > 0.5)
+    entered, out = flight.events.of_kind(EventKind.ZONE)
+    assert left < entered.time_s < out.time_s < back  # all while the pilot had it
+    ((name, deepest),) = flight.outcome.zones_entered
+    assert name == "D2" and deepest == pytest.approx(truth_least[1], abs=0.02)
+    assert not flight.outcome.intercepted
+
+
+def test_a_slow_vehicle_is_not_let_start_on_a_course_inside_a_zone(tmp_path: Path) -> None:
+    """The loopback copter flies straight at D2 at 0.2 m/s in ALT_HOLD (between a tenth and
+    half the flown speed: the law steers from its yaw) into D2's zone; the pilot hands it to
+    GUIDED there. It was taken as at rest, free to turn (inside only for every course),
+    and guided from 0.15 m inside; now it is refused, named."""
+    scenario = yaml.safe_load(CONFIG.read_text())
+    vehicle = yaml.safe_load(CONFIG.read_text())
+    vehicle["vehicle"] = {"north_m": 7.6, "east_m": -2.0, "course_deg": 180.0,
+                          "speed_m_s": 0.2, "accel_max_m_s2": 1.0}  # outside, heading in
+    vehicle["sitl_stub"] = {"pilot_modes": [[1.5, "GUIDED"]]}
+    ours, theirs = tmp_path / "ours.yaml", tmp_path / "theirs.yaml"
+    ours.write_text(yaml.safe_dump(scenario))
+    theirs.write_text(yaml.safe_dump(vehicle))
+    flight = fly(ours, tmp_path, stub_config=theirs, start_mode="ALT_HOLD", max_time_s=5.0,
+                 lockstep=True, engage=False)  # fmt: skip
+    (aborted,) = flight.events.of_kind(EventKind.ABORTED)
+    assert aborted.data["cause"] == "inside" and "D2" in aborted.message
+    assert not flight.events.of_kind(EventKind.ENGAGED) and flight.outcome.setpoints_sent == 0
+
+
+@settings(max_examples=200, deadline=None)
+@given(north=st.floats(-2.0, 10.0), east=st.floats(-6.0, 6.0), speed=st.floats(0.0, 1.2),
+       heading=st.floats(-math.pi, math.pi), yaw=st.floats(-math.pi, math.pi))
+def test_the_course_a_position_is_judged_on_is_the_one_the_law_starts_from(
+        north: float, east: float, speed: float, heading: float, yaw: float) -> None:
+    """``GuidanceLoop.course_of``, which the service checks a start on and judges a position
+    it does not tick on, is the course the law's first tick steers from (at rest, the line
+    it picks). (The start check had taken a vehicle below half the flown speed as free to
+    turn, the tick only below a tenth: a vehicle drifting at 0.2 m/s with its nose into D2
+    was let start, and its first tick was 2.1 m inside D2's zone on its yaw.)"""
+    loop = GuidanceLoop(load_scenario(CONFIG), loop_rate_hz=50.0, stale_after_s=0.5)
+    state = VehicleState(
+        north_m=north, east_m=east, down_m=-20.0, velocity_north_m_s=speed * math.cos(heading),
+        velocity_east_m_s=speed * math.sin(heading), yaw_rad=yaw, position_time_s=0.0,
+        attitude_time_s=0.0, position_source="local")  # fmt: skip
+    course = loop.course_of(state)
+    command = loop.tick(state, 0.0)
+    assert isinstance(command, TickCommand) and command.course_rad == course

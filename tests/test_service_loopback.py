@@ -172,10 +172,10 @@ def fly(
     # positions a wall second, and the machine running the tests is shared
     companion.setdefault("telemetry_rate_hz", 20.0)
     companion.setdefault("loop_rate_hz", 20.0)
+    companion.setdefault("engage", True)
     settings = companion_settings(
         scenario,
         connect=f"udpin:127.0.0.1:{port}",
-        engage=True,
         speedup=None if lockstep else SPEEDUP,
         tlog=str(tmp_path / "companion.tlog"),
         **companion,

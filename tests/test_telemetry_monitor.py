@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from test_telemetry import (  # type: ignore[import-not-found]
     CONFIG,
     SCENARIO_RAW,
@@ -252,3 +254,33 @@ def test_replay_with_json_prints_the_recorded_lines(
     assert main(["monitor", "--replay", str(record)]) == 0  # the table, for both vehicles
     table = capsys.readouterr().out
     assert "ezcompanion monitor" in table and "{" not in table
+
+
+json_values = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats(allow_nan=True) | st.text(max_size=8),
+    lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=8), inner,
+                                                                max_size=3),
+    max_leaves=8,
+)
+# objects shaped like the samples, with any values in their fields
+sample_like = st.fixed_dictionaries({}, optional={
+    k: json_values for k in ("kind", "data", "message", "time_s", "mode", "captured", "zones",
+                             "h_m", "alpha", "range_to_target_m", "accel_lat_m_s2")})
+zone_lists = st.lists(st.fixed_dictionaries({}, optional={
+    k: json_values for k in ("name", "clearance_m", "margin_m")}) | json_values, max_size=3)
+
+
+@settings(max_examples=300, deadline=None)
+@given(leaf=st.sampled_from(["event", "guidance", "state", "status", "alive"]),
+       payload=json_values | sample_like | st.builds(lambda d, z: {**d, "zones": z},
+                                                     sample_like, zone_lists))
+def test_any_payload_from_the_network_is_drawn_or_dropped_never_a_crash(leaf: str,
+                                                                       payload: Any) -> None:
+    """A sample is whatever a peer on the router put there: the monitor takes it or counts
+    it malformed, and every view of it draws (a reviewer's list on the event key, a number
+    on the guidance key, a zone that is a string, had raised)."""
+    view = MonitorView()
+    view.update("ezcompanion/uav/guidance", {"time_s": 1.0, "zones": [{"name": "D1"}]})
+    view.update(f"ezcompanion/uav/{leaf}", payload)
+    assert isinstance(view.render(), str)
+    assert isinstance(view.render_table(120), str) and isinstance(view.render_table(40), str)

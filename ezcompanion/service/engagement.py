@@ -13,10 +13,12 @@ and the next fresh tick emits a ``resumed`` one. A plane flies on as its autopil
 with no new course (ArduPlane holds the last one).
 
 "Intercepted" is claimed by the vehicle's own estimate, whole: within the intercept radius
-of the target, and outside every zone at every tick of the engagement (the law's r - rho
-per zone at the tick's position and course, the zones then in force). A tick inside a zone
-is a ``zone`` event when it enters and when it is out again; an engagement that reached the
-target after one ends "not intercepted", naming the zone and how deep.
+of the target, and outside every zone at every position taken from the engage to the end
+(r - rho per zone, the zones then in force: at a tick the law's own, on the course it
+steered from; a position with no tick, :meth:`Engagement.judge_position`, on the course the
+law would take). A position inside a zone is a ``zone`` event when it enters and when it is
+out again; an engagement that reached the target after one ends "not intercepted", naming
+the zone and how deep.
 """
 
 from __future__ import annotations
@@ -97,6 +99,7 @@ class Engagement:
         self.zones_entered: dict[str, float] = {}  # zone: least clearance (< 0), estimated
         self._inside: tuple[str, ...] = ()  # the zones the last command's tick was inside
         self._inside_since_s = 0.0
+        self._judged_s = math.nan  # position_time_s of the last position judged
         self.last_command: TickCommand | None = None
         self.outcome: EngagementOutcome | None = None
         self.failsafe_active = False
@@ -227,13 +230,31 @@ class Engagement:
             self.publisher.publish_tick(result)
 
     def _judge_zones(self, now: float, result: TickCommand) -> None:
-        """Keep each zone the vehicle is inside at this tick by its own estimate (the law's
-        clearance r - rho per zone, at the position and course it steered from), and say
-        when it enters one and when it is out of every zone again."""
+        """Judge the tick's position against the zones on the course the law steered from
+        (the law's own clearance r - rho per zone)."""
         clearance = result.step.law.clearance_m
+        self._judged_s = result.state.position_time_s
         if not self._inside and float(clearance.min()) >= 0.0:
             return
-        values = dict(zip(self.loop.controller.zones.names, clearance.tolist(), strict=True))
+        self._record(now, clearance.tolist())
+
+    def judge_position(self, now: float, state: VehicleState | None) -> None:
+        """Judge a position the law did not tick on (guidance paused or held, or a sample
+        between ticks) against the zones, on the course the law would take from it
+        (``GuidanceLoop.course_of``); one already judged at a tick is not judged again."""
+        if state is None or state.position_time_s == self._judged_s:
+            return
+        self._judged_s = state.position_time_s
+        zones = self.loop.controller.zones
+        clearance = zones.clearance_m(state.north_m, state.east_m, self.loop.course_of(state))
+        if not self._inside and float(clearance.min()) >= 0.0:
+            return
+        self._record(now, clearance.tolist())
+
+    def _record(self, now: float, clearance: list[float]) -> None:
+        """Keep each zone the vehicle is inside (clearance < 0) with its least clearance,
+        and say when it enters one and when it is out of every zone again."""
+        values = dict(zip(self.loop.controller.zones.names, clearance, strict=True))
         inside = tuple(name for name, c in values.items() if c < 0.0)
         for name in inside:
             self.zones_entered[name] = min(self.zones_entered.get(name, 0.0), values[name])

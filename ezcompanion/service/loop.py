@@ -138,6 +138,25 @@ class GuidanceLoop:
         """Below this ground speed the course is the yaw (half the flown speed)."""
         return _MIN_SPEED_FRACTION * self.flown_speed_m_s
 
+    @property
+    def rest_speed_m_s(self) -> float:
+        """Below this ground speed a vehicle starting guidance is at rest: its course is the
+        law's to pick (a tenth of the flown speed)."""
+        return _REST_SPEED_FRACTION * self.flown_speed_m_s
+
+    def course_of(self, state: VehicleState) -> float:
+        """The course a tick now would steer ``state`` from (what a start is checked on, and
+        a position the law does not tick on is judged on against the zones): over the
+        ground; below the speed floor the yaw, or the line from rest the tick picks (at a
+        start, at rest) or keeps. Picks nothing itself."""
+        minimum = self.speed_floor_m_s
+        course = state.course_rad(minimum)
+        if state.ground_speed_m_s >= minimum:
+            return course
+        speed = max(state.ground_speed_m_s, self.flown_speed_m_s)
+        rest = self._rest_line(state, course, speed, self.period_s, self._last_tick_s is None)
+        return rest if rest is not None else course
+
     def assume_abandon(self, *, turn_s: float, hold_s: float, brake_m_s2: float) -> bool:
         """Check every setpoint against what the vehicle flies if it is the last (a turn
         for ``turn_s``, straight for ``hold_s``, then braking), unless the scenario states
@@ -194,6 +213,7 @@ class GuidanceLoop:
         next tick starts from the measured turn."""
         self.controller.reset()
         self._last_tick_s = None
+        self._rest_course_rad = None  # (the next tick is a start: it picks afresh)
 
     def _resume_from(self, state: VehicleState, min_speed_m_s: float) -> None:
         """Start (or resume after a gap) from what the vehicle is doing: the actuator state
@@ -208,6 +228,12 @@ class GuidanceLoop:
 
     def _course_from_rest(self, state: VehicleState, yaw_rad: float, speed_m_s: float,
                           dt_s: float, start: bool) -> float | None:
+        """The line from rest (``_rest_line``), kept for the ticks after."""
+        self._rest_course_rad = self._rest_line(state, yaw_rad, speed_m_s, dt_s, start)
+        return self._rest_course_rad
+
+    def _rest_line(self, state: VehicleState, yaw_rad: float, speed_m_s: float, dt_s: float,
+                   start: bool) -> float | None:
         """A slow vehicle's course when it started from rest: on the first tick of a
         (re)start, slower than ``_REST_SPEED_FRACTION`` of the flown speed, the course
         ``GuidanceController.course_from_rest`` picks (the yaw, or the course nearest it
@@ -225,14 +251,11 @@ class GuidanceLoop:
         at = {"north_m": state.north_m, "east_m": state.east_m, "speed_m_s": speed_m_s,
               "dt_s": dt_s, "drift_m": drift}  # fmt: skip
         if start:  # a course just picked clears the same check by construction
-            resting = state.ground_speed_m_s < _REST_SPEED_FRACTION * self.flown_speed_m_s
-            self._rest_course_rad = (
-                controller.course_from_rest(yaw_rad=yaw_rad, **at) if resting else None
-            )
-            return self._rest_course_rad
+            resting = state.ground_speed_m_s < self.rest_speed_m_s
+            return controller.course_from_rest(yaw_rad=yaw_rad, **at) if resting else None
         kept = self._rest_course_rad
         if kept is not None and not controller.rest_line_clear(course_rad=kept, **at):
-            kept = self._rest_course_rad = None
+            return None
         return kept
 
     def tick(self, state: VehicleState | None, now_s: float) -> TickCommand | Hold:

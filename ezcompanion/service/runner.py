@@ -53,7 +53,7 @@ from ezcompanion.guidance import (
     kernels_cached,
 )
 from ezcompanion.guidance.scaling import GRAVITY_M_S2
-from ezcompanion.records import EventKind, Hold, TickCommand
+from ezcompanion.records import EventKind, Hold, TickCommand, VehicleState
 from ezcompanion.service.autopilots import AutopilotProfile
 from ezcompanion.service.clock import Clock, LockstepClock, ScaledClock
 from ezcompanion.service.ending import ExitReport, leave_vehicle
@@ -190,6 +190,7 @@ class CompanionService:
         # (PX4) setpoints may be streamed ahead of OFFBOARD: the scenario placed and the
         # frame latched, as at engage (the vehicle flies them once PX4 takes OFFBOARD)
         self._stream_ready = False
+        self._tick_awaited = False  # a position was taken that a tick is due on
         self._position_stamp_s: float | None = None  # the newest position sample's stamp
         self.exit_report: ExitReport | None = None  # where the vehicle was left (on_exit)
         self.placement: VehiclePlacement | None = None  # frame: vehicle, latched at engage
@@ -497,16 +498,37 @@ class CompanionService:
             return now
         if self._tlog is not None:
             self._tlog.write(bytes(frame.message.get_msgbuf()))
+        if self._tick_awaited and frame.kind in POSITIONS:
+            self._judge_position(now)  # the position a tick was due on, before the next
         used = self.session.on_frame(frame, now)
         self._follow_session(now)
         # A new position drives a tick at once (at most every half period; one per sample).
         if used in POSITIONS:
             self._position_stamp_s = int(frame.message.time_boot_ms) / 1000.0
+            due = False
             if self._ticking():
                 self.schedule.sample(self._position_stamp_s)
-                if tick and self.schedule.is_due(now):
+                due = self.schedule.is_due(now)
+                if tick and due:
                     self._tick(now)
+            # every position taken is judged against the zones, ticked on or not (paused,
+            # held, thinned): after its tick where one is due (the tick's own judgement)
+            if due and not tick:
+                self._tick_awaited = True
+            else:
+                self._judge_position(now)
         return now
+
+    def _judge_position(self, now: float, state: VehicleState | None = None) -> None:
+        """The newest position (``state``, default the telemetry's) against the zones, once
+        guidance has engaged and until it ends (``Engagement.judge_position``; one a tick
+        judged is not judged again)."""
+        self._tick_awaited = False
+        if self._engaged_at_s is None or self.engagement.done:
+            return
+        if state is None:
+            state = self.session.telemetry.snapshot(self.settings.stale_after_s, now)
+        self.engagement.judge_position(now, state)
 
     def _follow_session(self, now: float) -> None:
         """Move the phase along with what the session knows of the vehicle."""
@@ -808,7 +830,13 @@ class CompanionService:
         here = self._here(now)
         if here is None:
             return False
-        inside = here.inside(self.scenario.defenders)
+        # on the course the first tick steers from (at rest: the line it picks, or the yaw
+        # where no line is clear), not "inside for every course" as for an update at rest
+        # (the start check had taken a vehicle below half the flown speed as free to turn,
+        # the tick only below a tenth: drifting at 0.2 m/s with its nose into D2, a vehicle
+        # was let start, its first tick 2.1 m inside D2's zone)
+        inside = zone_entered(self.scenario.defenders, here.north_m, here.east_m,
+                              here.course_rad)  # fmt: skip
         if inside is None:
             return True
         name, clearance = inside
@@ -901,11 +929,11 @@ class CompanionService:
         state = self.session.telemetry.snapshot(stale_s, now)
         if state is None or state.age_s(now) > stale_s:
             return None
-        loop = self.loop  # its tick's own reading of the state
-        return _Here(state.north_m, state.east_m, state.course_rad(loop.speed_floor_m_s),
+        loop = self.loop  # its tick's own reading of the state: the course it would steer from
+        return _Here(state.north_m, state.east_m, loop.course_of(state),
                      max(state.ground_speed_m_s, loop.flown_speed_m_s),
                      float(loop.controller.accel_m_s2), state.course_rate_rad_s,
-                     at_rest=state.ground_speed_m_s < loop.speed_floor_m_s)  # fmt: skip
+                     at_rest=state.ground_speed_m_s < loop.rest_speed_m_s)  # fmt: skip
 
     def _tick(self, now: float) -> None:
         self.schedule.ticked(now)
@@ -922,6 +950,7 @@ class CompanionService:
             self.engagement.tick(now, snapshot, distrust)
             if observing:
                 self.identify.review_if_due(now)  # after the setpoint has left
+            self._judge_position(now, snapshot)  # where the tick did not (a hold: no command)
         if self.engagement.done:
             self.phase = Phase.DONE
 
@@ -974,8 +1003,9 @@ class _Here:
     speed_m_s: float
     accel_m_s2: float
     course_rate_rad_s: float | None
-    # slower than the law flies a course: it starts along a clear line of its own choice
-    # (``GuidanceLoop``'s course from rest), not along the nose
+    # at rest (slower than ``GuidanceLoop.rest_speed_m_s``): the law picks a clear line of
+    # its own at a start, so an update is refused only where the vehicle is inside a zone
+    # for every course
     at_rest: bool = False
 
     def inside(self, defenders: Sequence[Defender]) -> tuple[str, float] | None:

@@ -81,6 +81,7 @@ class VehicleView:
     last_event: dict[str, Any] | None = None
     outcome: str = "waiting"
     samples: int = 0
+    malformed: int = 0  # samples that were not objects (not taken)
     status: dict[str, Any] | None = None
 
 
@@ -101,6 +102,13 @@ class MonitorView:
         vehicle_id, leaf = vehicle_of(key_expr)
         view = self.vehicle(vehicle_id)
         view.samples += 1
+        if leaf != "alive" and not isinstance(payload, dict):
+            view.malformed += 1  # from the network: not an object, not taken
+            return
+        if leaf == "guidance":  # the zones as drawn: objects only
+            zones = payload.get("zones")
+            payload = {**payload, "zones": [z for z in zones if isinstance(z, dict)]
+                       if isinstance(zones, list) else []}  # fmt: skip
         if leaf == "alive":
             view.alive = bool(payload)
             if not view.alive and view.outcome in ("waiting", "guiding"):
@@ -163,7 +171,7 @@ def _vehicle_lines(view: VehicleView) -> list[str]:
     sat = ("r" if g.get("reference_saturated") else "") + ("c" if g.get("command_limited") else "")
     line = (
         f"{view.vehicle_id:<12.12} {'yes' if view.alive else 'no':<4} "
-        f"{_fmt(g.get('time_s'), '8.2f'):>8} {g.get('mode', '-'):<9} "
+        f"{_fmt(g.get('time_s'), '8.2f'):>8} {g.get('mode', '-')!s:<9} "
         f"{_fmt(g.get('range_to_target_m'), '8.3f'):>8} {_fmt(g.get('h_m'), '+7.3f'):>7} "
         f"{_fmt(g.get('alpha'), '5.2f'):>5} "
         + " ".join(
@@ -181,7 +189,8 @@ def _vehicle_lines(view: VehicleView) -> list[str]:
     lines = [line]
     zones = g.get("zones") or []
     if zones:
-        margins = "  ".join(f"{z['name']} {_fmt(z.get('margin_m'), '+.3f')}" for z in zones)
+        margins = "  ".join(f"{z.get('name', '?')} {_fmt(z.get('margin_m'), '+.3f')}"
+                            for z in zones)  # fmt: skip
         lines.append(f"  margin_m  {margins}")
     if view.last_event is not None:
         e = view.last_event

@@ -50,7 +50,7 @@ def _least_clearance(view: VehicleView) -> str:
     if not zones:
         return "-"
     nearest = min(zones, key=lambda z: z["clearance_m"])
-    return f"{nearest['name']} {nearest['clearance_m']:+.3f}"
+    return f"{nearest.get('name', '?')} {nearest['clearance_m']:+.3f}"
 
 
 def _saturation(view: VehicleView) -> str:
@@ -110,7 +110,8 @@ def _vehicle_notes(view: VehicleView) -> list[str]:
     zones = g.get("zones") or []
     if zones:
         each = "  ".join(
-            f"{z['name']} {_fmt(z.get('clearance_m'), '+.3f')} ({_fmt(z.get('margin_m'), '+.3f')})"
+            f"{z.get('name', '?')} {_fmt(z.get('clearance_m'), '+.3f')} "
+            f"({_fmt(z.get('margin_m'), '+.3f')})"
             for z in zones
         )
         notes.append(f"{view.vehicle_id} clearance_m (margin_m): {each}")

@@ -1,15 +1,18 @@
 """"Intercepted" is said by the vehicle's own estimate, whole (issue 11): within the
-intercept radius of the target, and outside every zone at every tick of the engagement.
+intercept radius of the target, and outside every zone at every position it reported from
+the engage to the end; and guidance starts only from a full state, outside every zone on
+the course its first tick steers from.
 
 The engagement is fed the positions a vehicle reports, tick by tick, as the service feeds
 it, with the law itself and the setpoint writer on a real UDP socket: a vehicle that
 reports a straight line through a zone to the target has reached the target but is not
 intercepted (the zone named, in and out, and in the end); the same target reached on a
-line clear of every zone is intercepted. Over real UDP, a loopback copter lagging 3 s (far
-beyond what the law is told at first) enters D2's zone by its own report: the service names
-it as it happens, as deep as the stub's truth went; so is a zone entered while a pilot
-has the vehicle (guidance paused, no tick), with the companion's ticks before and after
-the pass all outside.
+line clear of every zone is intercepted. Over real UDP with the loopback copter: one
+lagging 3 s (far beyond what the law is told at first) enters D2's zone by its own report
+and the service names it as it happens, as deep as the stub's truth went, at 50 Hz
+positions whatever the loop's rate; so is a zone entered while a pilot has the vehicle (no
+tick); a vehicle flying slowly into a zone is not let start there; and with no ATTITUDE
+nothing starts.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from conftest_sitl import Relay
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from test_service_loopback import fly
@@ -28,7 +32,7 @@ from ezcompanion import wire
 from ezcompanion.config import load_scenario
 from ezcompanion.config_checks import clearance_m
 from ezcompanion.records import EventKind, TickCommand, VehicleState
-from ezcompanion.service.demo import judge_truth
+from ezcompanion.service.demo import free_udp_port, judge_truth
 from ezcompanion.service.engagement import Engagement, EngagementOutcome
 from ezcompanion.service.events import EventLog
 from ezcompanion.service.loop import GuidanceLoop
@@ -183,6 +187,26 @@ def test_a_slow_vehicle_is_not_let_start_on_a_course_inside_a_zone(tmp_path: Pat
     (aborted,) = flight.events.of_kind(EventKind.ABORTED)
     assert aborted.data["cause"] == "inside" and "D2" in aborted.message
     assert not flight.events.of_kind(EventKind.ENGAGED) and flight.outcome.setpoints_sent == 0
+
+
+def test_no_guidance_before_an_attitude_has_come(tmp_path: Path) -> None:
+    """Issue 11: the first tick ran before any ATTITUDE, on yaw 0 (the first setpoint
+    pointed north). A relay drops every ATTITUDE the loopback copter sends: positions and
+    velocities come, the mode is GUIDED, and guidance waits, saying why."""
+    port = free_udp_port()
+    relay = Relay(port)
+    # MAVLink 2 (0xFD), the message id in bytes 7-9: ATTITUDE is 30
+    relay.tamper = lambda data: None if data[0] == 0xFD and data[7] == 30 and not any(
+        data[8:10]) else data
+    try:
+        flight = fly(CONFIG, tmp_path, port=port, stub_port=relay.vehicle_port, max_time_s=6.0,
+                     lockstep=True)  # fmt: skip
+    finally:
+        relay.close()
+    assert not flight.events.of_kind(EventKind.ENGAGED) and flight.outcome.setpoints_sent == 0
+    said = [e for e in flight.events.of_kind(EventKind.WARNING)
+            if e.data.get("waiting_for") == "attitude"]  # fmt: skip
+    assert len(said) == 1 and "no ATTITUDE" in said[0].message
 
 
 @settings(max_examples=200, deadline=None)

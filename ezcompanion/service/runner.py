@@ -98,6 +98,10 @@ __all__ = ["CompanionService", "EngagementOutcome", "Phase"]
 
 _HEARTBEAT_PERIOD_S = 1.0
 _WAKE_S = 0.1  # clock seconds: the session's checks run at least this often
+# Guidance starts only with an attitude at most this old (ATTITUDE is asked for at 10 Hz),
+# and says so once after waiting this long for one alone.
+_ATTITUDE_FRESH_S = 1.0
+_ATTITUDE_WAIT_SAID_S = 3.0
 # frames read at once, at most, before what fell due (beside a real autopilot): a socket that
 # filled while the companion was busy is taken whole before a tick
 _DRAIN_READS = 512
@@ -191,6 +195,8 @@ class CompanionService:
         # frame latched, as at engage (the vehicle flies them once PX4 takes OFFBOARD)
         self._stream_ready = False
         self._tick_awaited = False  # a position was taken that a tick is due on
+        self._attitude_wait_s: float | None = None  # a fresh position, no attitude, since
+        self._attitude_said = False
         self._position_stamp_s: float | None = None  # the newest position sample's stamp
         self.exit_report: ExitReport | None = None  # where the vehicle was left (on_exit)
         self.placement: VehiclePlacement | None = None  # frame: vehicle, latched at engage
@@ -591,6 +597,7 @@ class CompanionService:
             and not self._stream_ready
             and self._heading_loop_checked
             and session.frame_settled
+            and self._state_full(now)
             and self._placed(now)
             and (self._engaged_at_s is not None or self._outside_at_engage(now))
         ):
@@ -607,6 +614,7 @@ class CompanionService:
             and session.in_guided
             and not session.disarm_pending
             and session.frame_settled
+            and self._state_full(now)
             and self._placed(now)
             and (self._engaged_at_s is not None or self._outside_at_engage(now))
         ):
@@ -792,6 +800,29 @@ class CompanionService:
             turn_s=guidance.abandon_turn_s, hold_s=guidance.abandon_hold_s,
             brake_m_s2=guidance.abandon_brake_m_s2,
         )  # fmt: skip
+
+    def _state_full(self, now: float) -> bool:
+        """Guidance (and a placement) waits for a full state: a fresh position with its
+        velocity, and an attitude taken within ``_ATTITUDE_FRESH_S`` (its yaw is a hover's
+        course and turns a placed scenario; before, the first tick ran on yaw 0 before any
+        ATTITUDE had come: the first setpoint pointed north). Said once if the attitude is
+        all that is missing for ``_ATTITUDE_WAIT_SAID_S``."""
+        stale_s = self.settings.stale_after_s
+        state = self.session.telemetry.snapshot(stale_s, now)
+        if state is None or state.age_s(now) > stale_s:
+            self._attitude_wait_s = None
+            return False
+        if now - state.attitude_time_s <= _ATTITUDE_FRESH_S:
+            self._attitude_wait_s = None
+            return True
+        if self._attitude_wait_s is None:
+            self._attitude_wait_s = now
+        elif now - self._attitude_wait_s >= _ATTITUDE_WAIT_SAID_S and not self._attitude_said:
+            self._attitude_said = True
+            self.events.emit(EventKind.WARNING, now, f"no ATTITUDE from the vehicle in "
+                             f"{now - self._attitude_wait_s:.1f} s: guidance waits for its "
+                             "yaw (a hover's course)", waiting_for="attitude")  # fmt: skip
+        return False
 
     def _placed(self, now: float) -> bool:
         """``frame: vehicle``: the scenario is put on the vehicle as guidance engages, once

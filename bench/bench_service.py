@@ -77,6 +77,8 @@ CONFIG = Path(__file__).resolve().parents[1] / "config" / "paper_scenario1.yaml"
 # the service is measured from this far into the vehicle's track (vehicle and wall seconds)
 _MEASURED_FROM_S = 2.0
 TIMED = Path(__file__).with_name("_timed_companion.py")
+# the vehicle's nose, held (ATTITUDE at 10 Hz: the service starts only once one has come)
+_YAW_RAD = math.atan2(0.555, -0.832)
 ECHO = Path(__file__).with_name("_echo.py")
 _TICKS_PER_S = os.sysconf("SC_CLK_TCK")
 MODES = ("echo", "service", "telemetry")
@@ -225,7 +227,7 @@ def _fly(port: int, rate_hz: float, seconds: float, pid: int, launched: float,
         north, east = 8.0, -4.0
         vn, ve = -0.832, 0.555  # the straight track's; with ``follow``, the last setpoint's
         track: list[Sample] = []
-        boot_ms = 0
+        boot_ms = next_attitude_ms = 0
         while True:
             now = time.perf_counter()
             if now - start > seconds + 2.0:
@@ -251,6 +253,9 @@ def _fly(port: int, rate_hz: float, seconds: float, pid: int, launched: float,
                 boot_ms += round(period * 1000) or 1
                 north += vn * period
                 east += ve * period
+                if boot_ms >= next_attitude_ms:  # 10 Hz, as the service asks; the nose held
+                    link.send(mav.attitude_encode(boot_ms, 0.0, 0.0, _YAW_RAD, 0.0, 0.0, 0.0))
+                    next_attitude_ms = boot_ms + 100
                 frame = link.pack(
                     mav.local_position_ned_encode(boot_ms, north, east, -20.0, vn, ve, 0.0)
                 )
@@ -358,7 +363,7 @@ def _first_setpoint(port: int, rate_hz: float, timeout_s: float = 20.0) -> float
     with open_link(f"udpout:127.0.0.1:{port}", system_id=1, component_id=1) as link:
         mav = link.mav
         start = next_pos = next_hb = time.perf_counter()
-        boot_ms = 0
+        boot_ms = next_attitude_ms = 0
         while time.perf_counter() - start < timeout_s:
             now = time.perf_counter()
             if now >= next_hb:
@@ -374,6 +379,9 @@ def _first_setpoint(port: int, rate_hz: float, timeout_s: float = 20.0) -> float
             if now >= next_pos:
                 boot_ms += round(period * 1000) or 1
                 t = boot_ms / 1000.0
+                if boot_ms >= next_attitude_ms:
+                    link.send(mav.attitude_encode(boot_ms, 0.0, 0.0, _YAW_RAD, 0.0, 0.0, 0.0))
+                    next_attitude_ms = boot_ms + 100
                 link.send(mav.local_position_ned_encode(
                     boot_ms, 8.0 - 0.832 * t, -4.0 + 0.555 * t, -20.0, -0.832, 0.555, 0.0
                 ))  # fmt: skip

@@ -13,10 +13,10 @@ and the next fresh tick emits a ``resumed`` one. A plane flies on as its autopil
 with no new course (ArduPlane holds the last one).
 
 "Intercepted" is claimed by the vehicle's own estimate, whole: within the intercept radius
-of the target, and outside every zone at every position taken from the engage to the end
-(r - rho per zone, the zones then in force: at a tick the law's own, on the course it
-steered from; a position with no tick, :meth:`Engagement.judge_position`, on the course the
-law would take). A position inside a zone is a ``zone`` event when it enters and when it is
+of the target, and outside every zone at every position taken from the first setpoint to
+the end (r - rho per zone, the zones then in force: at a tick the law's own, on the course
+it steered from; a position with no tick, :meth:`Engagement.judge_position`, on the course
+the law would take). A position inside a zone is a ``zone`` event when it enters and when it is
 out again; an engagement that reached the target after one ends "not intercepted", naming
 the zone and how deep.
 """
@@ -99,7 +99,8 @@ class Engagement:
         self.zones_entered: dict[str, float] = {}  # zone: least clearance (< 0), estimated
         self._inside: tuple[str, ...] = ()  # the zones the last command's tick was inside
         self._inside_since_s = 0.0
-        self._judged_s = math.nan  # position_time_s of the last position judged
+        # the last position judged, by its values (a repeat of it is the same position)
+        self._judged: tuple[float, float, float, float] | None = None
         self.last_command: TickCommand | None = None
         self.outcome: EngagementOutcome | None = None
         self.failsafe_active = False
@@ -233,20 +234,24 @@ class Engagement:
         """Judge the tick's position against the zones on the course the law steered from
         (the law's own clearance r - rho per zone)."""
         clearance = result.step.law.clearance_m
-        self._judged_s = result.state.position_time_s
+        self._judged = _sample(result.state)
         if not self._inside and float(clearance.min()) >= 0.0:
             return
         self._record(now, clearance.tolist())
 
     def judge_position(self, now: float, state: VehicleState | None) -> None:
         """Judge a position the law did not tick on (guidance paused or held, or a sample
-        between ticks) against the zones, on the course the law would take from it
-        (``GuidanceLoop.course_of``); one already judged at a tick is not judged again."""
-        if state is None or state.position_time_s == self._judged_s:
+        between ticks) against the zones, on the course the law would take from it at
+        ``now`` (``GuidanceLoop.course_of``); one already judged (at a tick) is not judged
+        again. (By its values: the state's ``position_time_s`` is that of the last sample
+        that moved 2 cm, shared by every other sample of a slow vehicle, and a reviewer's
+        sample 6 cm inside a zone went unjudged as a repeat.)"""
+        if state is None or _sample(state) == self._judged:
             return
-        self._judged_s = state.position_time_s
+        self._judged = _sample(state)
         zones = self.loop.controller.zones
-        clearance = zones.clearance_m(state.north_m, state.east_m, self.loop.course_of(state))
+        clearance = zones.clearance_m(state.north_m, state.east_m,
+                                      self.loop.course_of(state, now))  # fmt: skip
         if not self._inside and float(clearance.min()) >= 0.0:
             return
         self._record(now, clearance.tolist())
@@ -355,3 +360,8 @@ class Engagement:
         self.events.emit(EventKind.ENDED, now, f"{verdict}; {detail}", intercepted=intercepted,
                          zones_entered=dict(self.zones_entered))  # fmt: skip
         return self.outcome
+
+
+def _sample(state: VehicleState) -> tuple[float, float, float, float]:
+    """A position sample's values: what makes it another one."""
+    return (state.north_m, state.east_m, state.velocity_north_m_s, state.velocity_east_m_s)

@@ -144,17 +144,19 @@ class GuidanceLoop:
         law's to pick (a tenth of the flown speed)."""
         return _REST_SPEED_FRACTION * self.flown_speed_m_s
 
-    def course_of(self, state: VehicleState) -> float:
-        """The course a tick now would steer ``state`` from (what a start is checked on, and
-        a position the law does not tick on is judged on against the zones): over the
-        ground; below the speed floor the yaw, or the line from rest the tick picks (at a
-        start, at rest) or keeps. Picks nothing itself."""
+    def course_of(self, state: VehicleState, now_s: float) -> float:
+        """The course a tick at ``now_s`` would steer ``state`` from (what a start is
+        checked on, and a position the law does not tick on is judged on against the
+        zones): over the ground; below the speed floor the yaw, or the line from rest the
+        tick picks (at a start, at rest) or keeps (checked over the step it would take).
+        Picks nothing itself."""
         minimum = self.speed_floor_m_s
         course = state.course_rad(minimum)
         if state.ground_speed_m_s >= minimum:
             return course
         speed = max(state.ground_speed_m_s, self.flown_speed_m_s)
-        rest = self._rest_line(state, course, speed, self.period_s, self._last_tick_s is None)
+        _, dt = self._step_s(now_s, speed)
+        rest = self._rest_line(state, course, speed, dt, self._last_tick_s is None)
         return rest if rest is not None else course
 
     def assume_abandon(self, *, turn_s: float, hold_s: float, brake_m_s2: float) -> bool:
@@ -258,6 +260,21 @@ class GuidanceLoop:
             return None
         return kept
 
+    def _step_s(self, now_s: float, speed_m_s: float) -> tuple[float, float]:
+        """(time since the last tick, the law's step) for a tick at ``now_s``."""
+        last = self._last_tick_s
+        longest = min(_LONGEST_STEP_PERIODS * self.period_s,
+                      longest_step_s(self.scenario.guidance.accel_max_m_s2, speed_m_s))  # fmt: skip
+        elapsed = self.period_s if last is None else min(max(now_s - last, 1e-4), longest)
+        # The law verifies its command over the step it is given, and the command is held
+        # until the next tick. Ticks on samples are at least half a period apart
+        # (``ticks``), so the law steps by the clock; only a late sample just after a
+        # deadline tick ticks sooner, and its command is then held half a period or more:
+        # its step is a period, not the 0.1 ms since (verified over 0.1 ms, it was flown
+        # for a period, and its shield step cost as 1 / dt: 12 ms at 0.1 ms).
+        soon = elapsed < _SOON_PERIODS * self.period_s - 2.0 * EPSILON_S  # (due within it)
+        return elapsed, (min(self.period_s, longest) if soon else elapsed)
+
     def tick(self, state: VehicleState | None, now_s: float) -> TickCommand | Hold:
         """One law step on ``state`` at clock time ``now_s``."""
         if self.captured:
@@ -272,17 +289,7 @@ class GuidanceLoop:
         last = self._last_tick_s
         if last is None:
             self._resume_from(state, minimum)
-        longest = min(_LONGEST_STEP_PERIODS * self.period_s,
-                      longest_step_s(self.scenario.guidance.accel_max_m_s2, speed))  # fmt: skip
-        elapsed = self.period_s if last is None else min(max(now_s - last, 1e-4), longest)
-        # The law verifies its command over the step it is given, and the command is held
-        # until the next tick. Ticks on samples are at least half a period apart
-        # (``ticks``), so the law steps by the clock; only a late sample just after a
-        # deadline tick ticks sooner, and its command is then held half a period or more:
-        # its step is a period, not the 0.1 ms since (verified over 0.1 ms, it was flown
-        # for a period, and its shield step cost as 1 / dt: 12 ms at 0.1 ms).
-        soon = elapsed < _SOON_PERIODS * self.period_s - 2.0 * EPSILON_S  # (due within it)
-        dt = min(self.period_s, longest) if soon else elapsed
+        elapsed, dt = self._step_s(now_s, speed)
         rate = state.course_rate_rad_s
         rest = None
         if state.ground_speed_m_s < minimum:

@@ -526,11 +526,13 @@ class CompanionService:
         return now
 
     def _judge_position(self, now: float, state: VehicleState | None = None) -> None:
-        """The newest position (``state``, default the telemetry's) against the zones, once
-        guidance has engaged and until it ends (``Engagement.judge_position``; one a tick
-        judged is not judged again)."""
+        """The newest position (``state``, default the telemetry's) against the zones, from
+        the first setpoint (PX4: streamed ahead of OFFBOARD, which its ticks are judged from
+        too) until the end (``Engagement.judge_position``; one a tick judged is not judged
+        again)."""
         self._tick_awaited = False
-        if self._engaged_at_s is None or self.engagement.done:
+        started = self._engaged_at_s is not None or self._stream_ready
+        if not started or self.engagement.done or self.phase is Phase.DONE:
             return
         if state is None:
             state = self.session.telemetry.snapshot(self.settings.stale_after_s, now)
@@ -961,7 +963,7 @@ class CompanionService:
         if state is None or state.age_s(now) > stale_s:
             return None
         loop = self.loop  # its tick's own reading of the state: the course it would steer from
-        return _Here(state.north_m, state.east_m, loop.course_of(state),
+        return _Here(state.north_m, state.east_m, loop.course_of(state, now),
                      max(state.ground_speed_m_s, loop.flown_speed_m_s),
                      float(loop.controller.accel_m_s2), state.course_rate_rad_s,
                      at_rest=state.ground_speed_m_s < loop.rest_speed_m_s)  # fmt: skip

@@ -38,7 +38,7 @@ import zenoh
 from rich.console import Console, Group
 from rich.live import Live
 
-from ezcompanion.telemetry.monitor_table import as_text, terminal_table
+from ezcompanion.telemetry.monitor_table import as_text, fmt_number, terminal_table
 from ezcompanion.telemetry.schema import decode, key, vehicle_of
 from ezcompanion.telemetry.settings import open_session, release
 
@@ -162,20 +162,17 @@ class MonitorView:
         return as_text(self.table(width, now), width)
 
 
-def _fmt(value: Any, spec: str) -> str:
-    return format(value, spec) if isinstance(value, int | float) else "-"
-
-
 def _vehicle_lines(view: VehicleView) -> list[str]:
     g = view.guidance or {}
     sat = ("r" if g.get("reference_saturated") else "") + ("c" if g.get("command_limited") else "")
     line = (
         f"{view.vehicle_id:<12.12} {'yes' if view.alive else 'no':<4} "
-        f"{_fmt(g.get('time_s'), '8.2f'):>8} {g.get('mode', '-')!s:<9} "
-        f"{_fmt(g.get('range_to_target_m'), '8.3f'):>8} {_fmt(g.get('h_m'), '+7.3f'):>7} "
-        f"{_fmt(g.get('alpha'), '5.2f'):>5} "
+        f"{fmt_number(g.get('time_s'), '8.2f'):>8} {g.get('mode', '-')!s:<9} "
+        f"{fmt_number(g.get('range_to_target_m'), '8.3f'):>8} "
+        f"{fmt_number(g.get('h_m'), '+7.3f'):>7} "
+        f"{fmt_number(g.get('alpha'), '5.2f'):>5} "
         + " ".join(
-            f"{_fmt(g.get(name), '+6.2f'):>6}"
+            f"{fmt_number(g.get(name), '+6.2f'):>6}"
             for name in (
                 "accel_safety_m_s2",
                 "accel_intercept_m_s2",
@@ -189,12 +186,12 @@ def _vehicle_lines(view: VehicleView) -> list[str]:
     lines = [line]
     zones = g.get("zones") or []
     if zones:
-        margins = "  ".join(f"{z.get('name', '?')} {_fmt(z.get('margin_m'), '+.3f')}"
+        margins = "  ".join(f"{z.get('name', '?')} {fmt_number(z.get('margin_m'), '+.3f')}"
                             for z in zones)  # fmt: skip
         lines.append(f"  margin_m  {margins}")
     if view.last_event is not None:
         e = view.last_event
-        lines.append(f"  event     [{_fmt(e.get('time_s'), '8.3f')} s] {e.get('kind')}: "
+        lines.append(f"  event     [{fmt_number(e.get('time_s'), '8.3f')} s] {e.get('kind')}: "
                      f"{e.get('message')}")  # fmt: skip
     return lines
 
@@ -314,5 +311,5 @@ def _is_scenario_event(payload: Any) -> bool:
 def _decode(raw: bytes, enc: str) -> Any:
     try:
         return decode(raw, enc)
-    except ValueError:
+    except (ValueError, RecursionError):  # (JSON nested deeper than Python recurses)
         return {"undecodable": raw.decode("utf-8", "replace")}

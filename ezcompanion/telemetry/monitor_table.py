@@ -22,11 +22,18 @@ from rich.text import Text
 if TYPE_CHECKING:
     from ezcompanion.telemetry.monitor import VehicleView
 
-__all__ = ["as_text", "terminal_table"]
+__all__ = ["as_text", "fmt_number", "terminal_table"]
 
 
-def _fmt(value: Any, spec: str) -> str:
-    return format(value, spec) if isinstance(value, int | float) else "-"
+def fmt_number(value: Any, spec: str) -> str:
+    """``value`` by ``spec`` if it is a number a float holds, else "-" (a sample's field is
+    whatever a peer on the network put there: a JSON integer of 400 digits had raised)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return "-"
+    try:
+        return format(float(value), spec)
+    except (OverflowError, ValueError):
+        return "-"
 
 
 @dataclass(frozen=True)
@@ -40,7 +47,7 @@ class _Column:
 
 
 def _guidance(name: str, spec: str) -> Callable[[VehicleView], str]:
-    return lambda view: _fmt((view.guidance or {}).get(name), spec)
+    return lambda view: fmt_number((view.guidance or {}).get(name), spec)
 
 
 def _least_clearance(view: VehicleView) -> str:
@@ -50,7 +57,7 @@ def _least_clearance(view: VehicleView) -> str:
     if not zones:
         return "-"
     nearest = min(zones, key=lambda z: z["clearance_m"])
-    return f"{nearest.get('name', '?')} {nearest['clearance_m']:+.3f}"
+    return f"{nearest.get('name', '?')} {fmt_number(nearest['clearance_m'], '+.3f')}"
 
 
 def _saturation(view: VehicleView) -> str:
@@ -110,14 +117,14 @@ def _vehicle_notes(view: VehicleView) -> list[str]:
     zones = g.get("zones") or []
     if zones:
         each = "  ".join(
-            f"{z.get('name', '?')} {_fmt(z.get('clearance_m'), '+.3f')} "
-            f"({_fmt(z.get('margin_m'), '+.3f')})"
+            f"{z.get('name', '?')} {fmt_number(z.get('clearance_m'), '+.3f')} "
+            f"({fmt_number(z.get('margin_m'), '+.3f')})"
             for z in zones
         )
         notes.append(f"{view.vehicle_id} clearance_m (margin_m): {each}")
     if view.last_event is not None:
         e = view.last_event
-        notes.append(f"{view.vehicle_id} event [{_fmt(e.get('time_s'), '.3f')} s] "
+        notes.append(f"{view.vehicle_id} event [{fmt_number(e.get('time_s'), '.3f')} s] "
                      f"{e.get('kind')}: {e.get('message')}")  # fmt: skip
     return notes
 

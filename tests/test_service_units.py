@@ -10,6 +10,7 @@ import pytest
 
 from ezcompanion.config import GeoOrigin, Target, load_scenario
 from ezcompanion.errors import ConfigError
+from ezcompanion.records import VehicleState
 from ezcompanion.service.events import LINK_EVENTS_PER_S, Event, EventKind, EventLog
 from ezcompanion.service.inbox import ScenarioInbox
 from ezcompanion.service.loop import GuidanceLoop, Hold, TickCommand
@@ -464,20 +465,30 @@ def test_the_vehicles_texts_and_refusals_are_passed_on_at_a_bounded_rate() -> No
     assert len(log.of_kind(EventKind.COMMAND_ACK)) - before <= 9 * LINK_EVENTS_PER_S
 
 
-def test_a_vehicle_at_rest_is_inside_a_zone_only_if_inside_it_for_every_course() -> None:
-    """A reviewer: a copter hovering 2 m south of D1, its nose on D1, is inside D1's zone on
-    its yaw (clearance -1.05 m) and outside facing away (+1.05 m); the law flies it from
-    rest along a clear line of its own choice, not along the nose. At rest, an engage or an
-    update is refused only where the vehicle is inside a zone for every course."""
+def test_a_vehicle_at_rest_is_judged_on_the_line_the_law_picks_not_its_nose() -> None:
+    """A copter hovering 3 m south of D1, its nose on D1, is inside D1's zone on its yaw;
+    the law flies it from rest along the nearest line clear of every zone (45 degrees off
+    the nose), and a start or an update is checked on that line
+    (``GuidanceLoop.course_of``): outside. 2 m south of D1 no line is clear, the law flies
+    the yaw, and the vehicle is inside on it. (Before, at rest only a vehicle inside a zone
+    for every course was refused: the law was let start there, inside D1 on its course.)"""
     scenario = load_scenario(CONFIG)
+    loop = GuidanceLoop(scenario, loop_rate_hz=50.0, stale_after_s=0.25)
     d1 = scenario.defenders[0]
-    north, east = d1.north_m - 2.0, d1.east_m
-    facing = _Here(north, east, 0.0, 1.0, 0.0, None)
-    assert facing.inside(scenario.defenders) is not None  # flying at it
-    resting = dataclasses.replace(facing, at_rest=True)
-    assert resting.inside(scenario.defenders) is None
-    on_it = dataclasses.replace(resting, north_m=d1.north_m, east_m=d1.east_m)
-    name, _ = on_it.inside(scenario.defenders) or ("", 0.0)
+
+    def hover(north: float, east: float) -> _Here:
+        state = VehicleState(north_m=north, east_m=east, down_m=-20.0, velocity_north_m_s=0.0,
+                             velocity_east_m_s=0.0, yaw_rad=0.0, position_time_s=0.0,
+                             attitude_time_s=0.0, position_source="local")  # fmt: skip
+        return _Here(north, east, loop.course_of(state, 0.0), 1.0, 0.0, None, at_rest=True)
+
+    facing = _Here(d1.north_m - 3.0, d1.east_m, 0.0, 1.0, 0.0, None)
+    assert facing.inside(scenario.defenders) is not None  # along its nose
+    three_south = hover(d1.north_m - 3.0, d1.east_m)
+    assert three_south.course_rad != 0.0 and three_south.inside(scenario.defenders) is None
+    two_south = hover(d1.north_m - 2.0, d1.east_m)
+    assert two_south.course_rad == 0.0  # no line clear: the yaw
+    name, _ = two_south.inside(scenario.defenders) or ("", 0.0)
     assert name == "D1"
 
 

@@ -6,13 +6,14 @@ import argparse
 import io
 import json
 import socket
+import tempfile
 import threading
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from test_telemetry import (  # type: ignore[import-not-found]
     CONFIG,
@@ -35,6 +36,7 @@ from ezcompanion.telemetry.cli import (
     run_router,
     run_telemetry_command,
 )
+from ezcompanion.telemetry.mcap_recording import McapRecorder
 from ezcompanion.telemetry.monitor import MonitorView, run_monitor
 from ezcompanion.telemetry.recording import read_recording, recorded_scenario
 
@@ -286,6 +288,23 @@ def test_any_payload_from_the_network_is_drawn_or_dropped_never_a_crash(leaf: st
     view.update(f"ezcompanion/uav/{leaf}", payload)
     assert isinstance(view.render(), str)
     assert isinstance(view.render_table(120), str) and isinstance(view.render_table(40), str)
+
+
+@settings(max_examples=150, deadline=None)
+@given(leaf=st.sampled_from(["event", "guidance", "state", "status"]),
+       payload=sample_like | st.builds(lambda d, z: {**d, "zones": z}, sample_like, zone_lists)
+       | st.fixed_dictionaries({"north_m": json_values, "east_m": json_values,
+                                "message": st.binary(max_size=4) | json_values}))
+@example(leaf="guidance", payload={"north_m": 10**400, "east_m": 1.0})  # a reviewer's two
+@example(leaf="event", payload={"kind": "x", "message": b"\xff"})
+def test_any_payload_is_recorded_or_refused_never_a_crash(leaf: str, payload: Any) -> None:
+    """The monitor's sinks (``--record FILE.mcap``, the Foxglove bridge) and its JSON lines
+    take whatever the view takes (a reviewer's 400-digit ``north_m`` raised out of the
+    MCAP recorder, MessagePack's bytes out of ``--json``)."""
+    with tempfile.TemporaryDirectory() as folder, McapRecorder(Path(folder) / "r.mcap") as rec:
+        rec.take(f"ezcompanion/uav/{leaf}", payload, 1.0)
+    line = json.loads(monitor_module.json_line(f"ezcompanion/uav/{leaf}", "", payload, 1.0))
+    assert line["key"] == f"ezcompanion/uav/{leaf}"
 
 
 def test_a_payload_nested_deeper_than_python_recurses_is_undecodable_not_a_crash() -> None:

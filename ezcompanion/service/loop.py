@@ -144,20 +144,30 @@ class GuidanceLoop:
         law's to pick (a tenth of the flown speed)."""
         return _REST_SPEED_FRACTION * self.flown_speed_m_s
 
-    def course_of(self, state: VehicleState, now_s: float) -> float:
-        """The course a tick at ``now_s`` would steer ``state`` from (what a start is
-        checked on, and a position the law does not tick on is judged on against the
-        zones): over the ground; below the speed floor the yaw, or the line from rest the
-        tick picks (at a start, at rest) or keeps (checked over the step it would take).
-        Picks nothing itself."""
+    def course_of(self, state: VehicleState, now_s: float,
+                  controller: GuidanceController | None = None) -> float:
+        """The course a tick at ``now_s`` would steer ``state`` from (what a start and an
+        update are checked on, and a position the law does not tick on is judged on against
+        the zones): over the ground; below the speed floor the yaw, or the line from rest
+        the tick picks (at a start, at rest) or keeps (checked over the step it would take);
+        with ``controller`` (``controller_for`` an update), the one it would steer after
+        that update. Picks nothing itself."""
         minimum = self.speed_floor_m_s
         course = state.course_rad(minimum)
         if state.ground_speed_m_s >= minimum:
             return course
         speed = max(state.ground_speed_m_s, self.flown_speed_m_s)
         _, dt = self._step_s(now_s, speed)
-        rest = self._rest_line(state, course, speed, dt, self._last_tick_s is None)
+        rest = self._rest_line(state, course, speed, dt, self._last_tick_s is None,
+                               controller or self.controller)  # fmt: skip
         return rest if rest is not None else course
+
+    def controller_for(self, scenario: Scenario) -> GuidanceController:
+        """The law ``update_scenario(scenario)`` would fly (with what is assumed of the
+        vehicle); nothing changes."""
+        scenario = self._with_assumed(scenario)
+        return GuidanceController(zones=scenario.zones(), target=scenario.target,
+                                  params=scenario.guidance, law=self.controller.law)  # fmt: skip
 
     def assume_abandon(self, *, turn_s: float, hold_s: float, brake_m_s2: float) -> bool:
         """Check every setpoint against what the vehicle flies if it is the last (a turn
@@ -199,14 +209,8 @@ class GuidanceLoop:
         old, new = self.scenario.target, scenario.target
         if (old.north_m, old.east_m) != (new.north_m, new.east_m):
             self.miss_distance_m = math.inf
-        scenario = self._with_assumed(scenario)
-        self.scenario = scenario
-        self.controller = GuidanceController(
-            zones=scenario.zones(),
-            target=scenario.target,
-            params=scenario.guidance,
-            law=self.controller.law,
-        )
+        self.controller = self.controller_for(scenario)
+        self.scenario = self._with_assumed(scenario)
         self.controller.reset(accel)
         self.captured = False
 
@@ -231,11 +235,12 @@ class GuidanceLoop:
     def _course_from_rest(self, state: VehicleState, yaw_rad: float, speed_m_s: float,
                           dt_s: float, start: bool) -> float | None:
         """The line from rest (``_rest_line``), kept for the ticks after."""
-        self._rest_course_rad = self._rest_line(state, yaw_rad, speed_m_s, dt_s, start)
+        self._rest_course_rad = self._rest_line(state, yaw_rad, speed_m_s, dt_s, start,
+                                                self.controller)  # fmt: skip
         return self._rest_course_rad
 
     def _rest_line(self, state: VehicleState, yaw_rad: float, speed_m_s: float, dt_s: float,
-                   start: bool) -> float | None:
+                   start: bool, controller: GuidanceController) -> float | None:
         """A slow vehicle's course when it started from rest: on the first tick of a
         (re)start, slower than ``_REST_SPEED_FRACTION`` of the flown speed, the course
         ``GuidanceController.course_from_rest`` picks (the yaw, or the course nearest it
@@ -248,7 +253,6 @@ class GuidanceLoop:
         3`` entered, by up to 0.014 m, and 1 of 1,291 of ``--seed 2 --abandon-check``, by
         0.092 m, where this way none did. Picked only at a start: once the vehicle moves, a
         new course each tick would not be the line it flies."""  # fmt: skip
-        controller = self.controller
         drift = state.ground_speed_m_s * self.scenario.guidance.response_lag_s
         at = {"north_m": state.north_m, "east_m": state.east_m, "speed_m_s": speed_m_s,
               "dt_s": dt_s, "drift_m": drift}  # fmt: skip

@@ -38,16 +38,12 @@ from typing import TYPE_CHECKING, Any
 from ezcompanion import __version__
 from ezcompanion.config import Scenario, scenario_to_dict, scenario_update
 from ezcompanion.config_checks import (
-    clearance_m,
-    inside_for_every_course,
     zone_entered,
-    zone_names,
 )
 from ezcompanion.errors import ConfigError, PrecisionError
 from ezcompanion.field import VehiclePlacement, place_fixed, placement_warnings
 from ezcompanion.guidance import (
     Defender,
-    GuidanceController,
     KinematicState,
     LawName,
     kernels_cached,
@@ -281,10 +277,8 @@ class CompanionService:
         law = self.loop.controller.law
         if law is not LawName.BACKUP or here.at_rest:  # (at rest: the law's own course)
             return
-        params = self.loop.scenario.guidance  # with what is assumed of the vehicle
-        trial = GuidanceController(zones=placed.zones(), target=placed.target, params=params,
-                                   law=law)  # fmt: skip
-        bound = 0.999 * params.accel_max_m_s2
+        trial = self.loop.controller_for(placed)  # with what is assumed of the vehicle
+        bound = 0.999 * trial.params.accel_max_m_s2
         trial.reset(min(max(here.accel_m_s2, -bound), bound))
         try:
             best, theta = trial.backup_certificate_m(
@@ -868,8 +862,7 @@ class CompanionService:
         # (the start check had taken a vehicle below half the flown speed as free to turn,
         # the tick only below a tenth: drifting at 0.2 m/s with its nose into D2, a vehicle
         # was let start, its first tick 2.1 m inside D2's zone)
-        inside = zone_entered(self.scenario.defenders, here.north_m, here.east_m,
-                              here.course_rad)  # fmt: skip
+        inside = here.inside(self.scenario.defenders)
         if inside is None:
             return True
         name, clearance = inside
@@ -924,15 +917,19 @@ class CompanionService:
     def _take_pending_scenario(self, now: float) -> None:
         """Fly against the newest update accepted, checked again here, once guidance has
         engaged, against the vehicle as the telemetry has it now (it was checked where the
-        vehicle last ticked; it has moved since): refused with a warning where that fails;
-        kept until a fresh position comes where there is none (a newer update replaces
-        it). Before the first engage it is taken as it is: the engage checks the vehicle
-        against it."""
+        vehicle last ticked; it has moved since), on the course the next tick would steer
+        from under it (a hover's kept line may not be clear of the new zones: a reviewer's
+        updates, accepted, put 32 of 3,000 next ticks inside a zone on the yaw): refused
+        with a warning where that fails; kept until a fresh position comes where there is
+        none (a newer update replaces it). Before the first setpoint it is taken as it is:
+        the start checks the vehicle against it."""
         scenario = self.scenario_inbox.take()
         if scenario is None:
             return
-        if self._engaged_at_s is not None:  # (before, the engage's own check covers it)
-            here = self._here(now)
+        # (before the first setpoint, the start's own check covers it)
+        if self._engaged_at_s is not None or self._stream_ready:
+            placed = self.placement.zones(scenario) if self.placement is not None else scenario
+            here = self._here(now, placed)
             if here is None:  # kept until there is a fresh position to check it against
                 self.scenario_inbox.restore(scenario)
                 return
@@ -955,15 +952,17 @@ class CompanionService:
             defenders=len(scenario.defenders),
         )
 
-    def _here(self, now: float) -> _Here | None:
-        """The vehicle as the law would start from it now (the fresh position, the measured
-        course, speed and course rate, the actuator state), or None without a fresh one."""
+    def _here(self, now: float, update: Scenario | None = None) -> _Here | None:
+        """The vehicle as the law would start from it now (the fresh position, the course
+        a tick now would steer from, after ``update`` if given, the speed and course rate,
+        the actuator state), or None without a fresh one."""
         stale_s = self.settings.stale_after_s
         state = self.session.telemetry.snapshot(stale_s, now)
         if state is None or state.age_s(now) > stale_s:
             return None
         loop = self.loop  # its tick's own reading of the state: the course it would steer from
-        return _Here(state.north_m, state.east_m, loop.course_of(state, now),
+        trial = loop.controller_for(update) if update is not None else None
+        return _Here(state.north_m, state.east_m, loop.course_of(state, now, trial),
                      max(state.ground_speed_m_s, loop.flown_speed_m_s),
                      float(loop.controller.accel_m_s2), state.course_rate_rad_s,
                      at_rest=state.ground_speed_m_s < loop.rest_speed_m_s)  # fmt: skip
@@ -1036,20 +1035,14 @@ class _Here:
     speed_m_s: float
     accel_m_s2: float
     course_rate_rad_s: float | None
-    # at rest (slower than ``GuidanceLoop.rest_speed_m_s``): the law picks a clear line of
-    # its own at a start, so an update is refused only where the vehicle is inside a zone
-    # for every course
+    # at rest (slower than ``GuidanceLoop.rest_speed_m_s``): its course is a line the law
+    # picked, clear by construction, so no certificate is asked of an update there
     at_rest: bool = False
 
     def inside(self, defenders: Sequence[Defender]) -> tuple[str, float] | None:
-        """The zone the vehicle is inside, with its clearance, or None: on its course, or,
-        at rest, for every course (its course is then the law's to choose)."""
-        if not self.at_rest:
-            return zone_entered(defenders, self.north_m, self.east_m, self.course_rad)
-        for name, defender in zip(zone_names(defenders), defenders, strict=True):
-            if inside_for_every_course(defender, self.north_m, self.east_m):
-                return name, clearance_m(defender, self.north_m, self.east_m, self.course_rad)
-        return None
+        """The zone the vehicle is inside on its course (the one the law steers from: at
+        rest, the line it picks), with its clearance, or None."""
+        return zone_entered(defenders, self.north_m, self.east_m, self.course_rad)
 
     @classmethod
     def of(cls, last: TickCommand) -> _Here:

@@ -137,7 +137,7 @@ class FoxgloveTelemetry:
                 self._on_guidance(vehicle, payload, unix_s)
             elif leaf == "event":
                 self._on_event(vehicle, payload, unix_s)
-        except ValueError as exc:
+        except (ValueError, TypeError, OverflowError) as exc:  # (a 400-digit integer raised)
             self.refused += 1
             self._once(vehicle, f"refused {leaf}", "%s sample skipped: %s", leaf, exc)
 

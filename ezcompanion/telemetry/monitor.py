@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import queue
+import reprlib
 import sys
 import threading
 import time
@@ -42,7 +43,7 @@ from ezcompanion.telemetry.monitor_table import as_text, fmt_number, terminal_ta
 from ezcompanion.telemetry.schema import decode, key, vehicle_of
 from ezcompanion.telemetry.settings import open_session, release
 
-__all__ = ["MonitorView", "SampleSink", "VehicleView", "run_monitor", "sample_line"]
+__all__ = ["MonitorView", "SampleSink", "VehicleView", "json_line", "run_monitor", "sample_line"]
 
 _STATUS_TIMEOUT_S = 2.0
 _HEADER = (
@@ -68,6 +69,20 @@ def sample_line(
         "received_unix_s": received_unix_s,
         "payload": payload,
     }
+
+
+def json_line(key_expr: str, encoding: str, payload: Any, received_unix_s: float) -> str:
+    """``sample_line`` as one line of JSON; a payload JSON cannot hold (MessagePack's bytes
+    or a map keyed by arrays, from a peer on the router) as its bounded repr instead."""
+    try:
+        return json.dumps(sample_line(key_expr, encoding, payload, received_unix_s))
+    except (TypeError, ValueError, RecursionError):
+        shown = {"unencodable": _REPR.repr(payload)}
+        return json.dumps(sample_line(key_expr, encoding, shown, received_unix_s))
+
+
+_REPR = reprlib.Repr()  # (Python 3.11 takes no keywords here)
+_REPR.maxlevel, _REPR.maxstring, _REPR.maxother = 4, 200, 200
 
 
 @dataclass
@@ -281,7 +296,7 @@ def run_monitor(
                     for each in sinks:
                         each.take(key_expr, payload, received_unix_s)
                     if recording is not None or json_lines:
-                        line = json.dumps(sample_line(key_expr, enc, payload, received_unix_s))
+                        line = json_line(key_expr, enc, payload, received_unix_s)
                         if recording is not None:
                             recording.write(line + "\n")
                         if json_lines:

@@ -20,8 +20,10 @@ from __future__ import annotations
 import dataclasses
 import math
 import random
+import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 import yaml
@@ -29,7 +31,7 @@ from conftest_sitl import Relay
 from test_service_loopback import fly
 
 from ezcompanion import wire
-from ezcompanion.config import GeoOrigin, load_scenario
+from ezcompanion.config import GeoOrigin, load_scenario, scenario_update
 from ezcompanion.config_checks import clearance_m, zone_entered
 from ezcompanion.records import EventKind, TickCommand, VehicleState
 from ezcompanion.service.demo import free_udp_port, judge_truth
@@ -265,6 +267,40 @@ def test_an_update_is_checked_on_the_course_the_next_tick_steers_from() -> None:
         assert checked_inside == (float(command.step.law.clearance_m.min()) < 0.0)
         inside_refused += checked_inside
     assert inside_refused > 10  # some updates put the vehicle inside: refused
+
+
+def test_an_update_taken_while_hovering_never_puts_the_next_tick_inside(tmp_path: Path) -> None:
+    """The loopback copter, hovering in LOITER, is handed to GUIDED; just after the first
+    tick, as it hovers on the line the law picked, an update moves D1 to 2.95 m along its
+    nose. On that line it is outside the moved zone, but the line is no longer clear of it
+    and the next tick would steer along the yaw, inside: the update is refused. (Checked on
+    the old law's course, it was taken, and the next tick was 0.10 m inside D1. Should the
+    machine be slow enough that the copter has sped up along the line by then, the update
+    is checked on that course instead; either way no accepted update puts a tick inside.)"""
+    data = yaml.safe_load(CONFIG.read_text())
+    data["sitl_stub"] = {"pilot_modes": [[2.0, "GUIDED"]]}
+    config = tmp_path / "hover.yaml"
+    config.write_text(yaml.safe_dump(data))
+
+    def operator(service: Any, *_: Any) -> None:
+        while service.last_command is None and service.phase.value != "done":
+            time.sleep(0.001)
+        state = service.last_command.state
+        defenders = [dict(d) for d in data["defenders"]]
+        defenders[0].update(north_m=state.north_m + 2.95 * math.cos(state.yaw_rad),
+                            east_m=state.east_m + 2.95 * math.sin(state.yaw_rad))
+        update = scenario_update(service.scenario, {"defenders": defenders,
+                                                    "target": data["target"]})  # fmt: skip
+        with service.scenario_inbox._lock:  # as if the offer's check had passed
+            service.scenario_inbox._pending = update
+
+    flight = fly(config, tmp_path, start_mode="LOITER", engage=False, lockstep=True,
+                 max_time_s=6.0, during=operator)  # fmt: skip
+    refused = [e for e in flight.events.of_kind(EventKind.WARNING)
+               if e.message.startswith("scenario update not taken")]  # fmt: skip
+    taken = [e for e in flight.events.of_kind(EventKind.SCENARIO) if "new scenario" in e.message]
+    assert len(refused) + len(taken) == 1
+    assert not flight.events.of_kind(EventKind.ZONE) and not flight.outcome.zones_entered
 
 
 def test_no_guidance_before_an_attitude_has_come(tmp_path: Path) -> None:

@@ -378,7 +378,8 @@ class CompanionService:
             if self._time_up(now, started_s, max_time_s):
                 break
             link.wait_readable(clock.wait_wall_s(self._due_s(now) - now))
-            self._take_pending_scenario(clock.now_s())
+            if not self._ticking():  # (while ticking, each tick takes it: _tick)
+                self._take_pending_scenario(clock.now_s())
             if not self._take_frames(link, started_s, max_time_s):
                 break
             self._due_work(clock.now_s())
@@ -968,6 +969,11 @@ class CompanionService:
                      at_rest=state.ground_speed_m_s < loop.rest_speed_m_s)  # fmt: skip
 
     def _tick(self, now: float) -> None:
+        # an update is checked on the very sample this tick flies it from (taken before the
+        # frames were read, it was checked on the one before: a reviewer's hover, its
+        # velocity a few cm/s off by the next sample, dropped the line checked clear and
+        # ticked inside a zone on its yaw, 3 of 1,162 accepted updates)
+        self._take_pending_scenario(now)
         self.schedule.ticked(now)
         session = self.session
         distrust = session.distrust(now)

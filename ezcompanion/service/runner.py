@@ -1041,8 +1041,9 @@ class _Here:
     speed_m_s: float
     accel_m_s2: float
     course_rate_rad_s: float | None
-    # at rest (slower than ``GuidanceLoop.rest_speed_m_s``): its course is a line the law
-    # picked, clear by construction, so no certificate is asked of an update there
+    # at rest (slower than ``GuidanceLoop.rest_speed_m_s``): no backup certificate is asked
+    # of an update there; its course is the line the law picks, clear of every zone by
+    # construction, or, where none is clear, the yaw, checked only to be outside
     at_rest: bool = False
 
     def inside(self, defenders: Sequence[Defender]) -> tuple[str, float] | None:

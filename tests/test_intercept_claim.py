@@ -362,3 +362,17 @@ def test_the_course_a_position_is_judged_on_is_the_one_the_law_steers_from() -> 
             north += speed * gap_s * math.cos(heading)
             east += speed * gap_s * math.sin(heading)
     assert kept > 100  # the kept lines were tried
+
+
+def test_the_zone_set_clearance_is_the_laws() -> None:
+    """``ZoneSet.clearance_m`` (numpy, judging a position with no tick) is the clearance the
+    law and the start checks compute, zone by zone, on 2,000 random states."""
+    scenario = load_scenario(CONFIG)
+    zones = scenario.zones()
+    rng = random.Random(11)
+    for _ in range(2000):
+        north, east = rng.uniform(-5.0, 12.0), rng.uniform(-8.0, 8.0)
+        course = rng.uniform(-math.pi, math.pi)
+        got = zones.clearance_m(north, east, course)
+        want = [clearance_m(d, north, east, course) for d in scenario.defenders]
+        assert got.tolist() == pytest.approx(want, abs=1e-9)

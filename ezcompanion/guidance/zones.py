@@ -126,15 +126,12 @@ class ZoneSet:
     def __len__(self) -> int:
         return int(self.north_m.shape[1])
 
-    def clearance_m(self, north_m: float, east_m: float, course_rad: float | None) -> FloatArray:
+    def clearance_m(self, north_m: float, east_m: float, course_rad: float) -> FloatArray:
         """r - rho(sigma) per zone of the first row (> 0 outside), for a vehicle at
-        (``north_m``, ``east_m``) on ``course_rad``; None: at rest, whatever its course,
-        r - rho(pi) (inside only where inside for every course, rho(pi) = R + c - mu R)."""
+        (``north_m``, ``east_m``) on ``course_rad``: the law's own clearance, in numpy."""
         dn = self.north_m[0] - north_m
         de = self.east_m[0] - east_m
         r = np.hypot(dn, de)
-        if course_rad is None:
-            return np.asarray(r - (self.reach_m[0] - self.mu_range_m[0]))
         cos_sigma = (math.cos(course_rad) * dn + math.sin(course_rad) * de) / np.maximum(r, 1e-12)
         rho = self.mu_range_m[0] * (cos_sigma + np.sqrt(cos_sigma * cos_sigma
                                                         + self.reach_term[0]))  # fmt: skip

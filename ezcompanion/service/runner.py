@@ -859,10 +859,9 @@ class CompanionService:
         if here is None:
             return False
         # on the course the first tick steers from (at rest: the line it picks, or the yaw
-        # where no line is clear), not "inside for every course" as for an update at rest
-        # (the start check had taken a vehicle below half the flown speed as free to turn,
-        # the tick only below a tenth: drifting at 0.2 m/s with its nose into D2, a vehicle
-        # was let start, its first tick 2.1 m inside D2's zone)
+        # where no line is clear; the start check had taken a vehicle below half the flown
+        # speed as free to turn, the tick only below a tenth: drifting at 0.2 m/s with its
+        # nose into D2, a vehicle was let start, its first tick 2.1 m inside D2's zone)
         inside = here.inside(self.scenario.defenders)
         if inside is None:
             return True

@@ -280,8 +280,8 @@ zone_lists = st.lists(st.fixed_dictionaries({}, optional={
                                                      sample_like, zone_lists))
 def test_any_payload_from_the_network_is_drawn_or_dropped_never_a_crash(leaf: str,
                                                                        payload: Any) -> None:
-    """A sample is whatever a peer on the router put there: the monitor takes it or counts
-    it malformed, and every view of it draws (a reviewer's list on the event key, a number
+    """A sample is whatever a peer on the router put there: the monitor takes it or drops
+    it, and every view of it draws (a reviewer's list on the event key, a number
     on the guidance key, a zone that is a string, had raised)."""
     view = MonitorView()
     view.update("ezcompanion/uav/guidance", {"time_s": 1.0, "zones": [{"name": "D1"}]})

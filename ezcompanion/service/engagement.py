@@ -28,6 +28,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+import numpy as np
+import numpy.typing as npt
+
 from ezcompanion.records import EventKind, Hold, TickCommand, VehicleState
 from ezcompanion.service.events import EventLog
 from ezcompanion.service.loop import GuidanceLoop
@@ -233,11 +236,8 @@ class Engagement:
     def _judge_zones(self, now: float, result: TickCommand) -> None:
         """Judge the tick's position against the zones on the course the law steered from
         (the law's own clearance r - rho per zone)."""
-        clearance = result.step.law.clearance_m
         self._judged = _sample(result.state)
-        if not self._inside and float(clearance.min()) >= 0.0:
-            return
-        self._record(now, clearance.tolist())
+        self._record(now, result.step.law.clearance_m)
 
     def judge_position(self, now: float, state: VehicleState | None) -> None:
         """Judge a position the law did not tick on (guidance paused or held, or a sample
@@ -250,20 +250,18 @@ class Engagement:
             return
         self._judged = _sample(state)
         zones = self.loop.controller.zones
-        clearance = zones.clearance_m(state.north_m, state.east_m,
-                                      self.loop.course_of(state, now))  # fmt: skip
-        if not self._inside and float(clearance.min()) >= 0.0:
-            return
-        self._record(now, clearance.tolist())
+        self._record(now, zones.clearance_m(state.north_m, state.east_m,
+                                            self.loop.course_of(state, now)))  # fmt: skip
 
-    def _record(self, now: float, clearance: list[float]) -> None:
-        """Keep each zone the vehicle is inside (clearance < 0) with its least clearance,
-        and say when it enters one and when it is out of every zone again."""
-        values = dict(zip(self.loop.controller.zones.names, clearance, strict=True))
+    def _record(self, now: float, clearance: npt.NDArray[np.float64]) -> None:
+        """Keep each zone the vehicle is inside (``clearance``, per zone, < 0) with its least
+        clearance, and say when it enters one and when it is out of every zone again."""
+        if not self._inside and float(clearance.min()) >= 0.0:
+            return  # (the usual case: outside, and was)
+        values = dict(zip(self.loop.controller.zones.names, clearance.tolist(), strict=True))
         inside = tuple(name for name, c in values.items() if c < 0.0)
         for name in inside:
             self.zones_entered[name] = min(self.zones_entered.get(name, 0.0), values[name])
-        for name in inside:
             if name not in self._inside:
                 self.events.emit(
                     EventKind.ZONE, now, f"inside the engagement zone of {name} by "

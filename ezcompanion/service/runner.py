@@ -513,9 +513,10 @@ class CompanionService:
                 if tick and due:
                     self._tick(now)
             # every position taken is judged against the zones, ticked on or not (paused,
-            # held, thinned): after its tick where one is due (the tick's own judgement)
-            if due and not tick:
-                self._tick_awaited = True
+            # held, thinned): one due a tick by that tick (at once, or once the frames read
+            # together are taken: _due_work), the others here
+            if due:
+                self._tick_awaited = not tick
             else:
                 self._judge_position(now)
         return now

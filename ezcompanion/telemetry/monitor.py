@@ -96,7 +96,6 @@ class VehicleView:
     last_event: dict[str, Any] | None = None
     outcome: str = "waiting"
     samples: int = 0
-    malformed: int = 0  # samples that were not objects (not taken)
     status: dict[str, Any] | None = None
 
 
@@ -118,8 +117,7 @@ class MonitorView:
         view = self.vehicle(vehicle_id)
         view.samples += 1
         if leaf != "alive" and not isinstance(payload, dict):
-            view.malformed += 1  # from the network: not an object, not taken
-            return
+            return  # from the network, not an object: not taken
         if leaf == "guidance":  # the zones as drawn: objects only
             zones = payload.get("zones")
             payload = {**payload, "zones": [z for z in zones if isinstance(z, dict)]

@@ -130,6 +130,22 @@ def test_a_forged_disarmed_heartbeat_between_armed_ones_never_confirms() -> None
         assert session.disarmed is None and not session.rebooted
 
 
+def test_forged_disarmed_heartbeats_that_trip_the_burst_rule_never_confirm() -> None:
+    """A reviewer's forger, sharing the vehicle's address, sent disarmed copies of its
+    heartbeats three times a second: the burst rule then refused every heartbeat, the
+    vehicle's armed ones too, and the forged disarmed ones it let through confirmed a
+    disarm of an armed vehicle (guidance ended, its end mode skipped, "disarmed"). An armed
+    heartbeat from the vehicle's address still counts against a disarm when it is refused."""
+    with session_and_vehicle() as (session, _):
+        engaged(session)
+        for t in range(3, 12):  # the vehicle at 1 Hz, armed; a forger 3 times a second
+            session.on_frame(heartbeat(armed=True), float(t))
+            assert not session.disarm_pending
+            for k in (1, 2, 3):
+                session.on_frame(heartbeat(armed=False), t + 0.3 * k)
+        assert session.disarmed is None and not session.rebooted
+
+
 def test_a_vehicle_disarmed_before_guidance_started_is_not_an_end() -> None:
     with session_and_vehicle() as (session, _):
         for t in (0.0, 1.0, 2.0):

@@ -22,6 +22,7 @@ from typing import Any
 
 import pytest
 import yaml
+from conftest_sitl import Relay
 
 from ezcompanion.config import load_scenario
 from ezcompanion.service.demo import free_udp_port, judge_truth, run_loopback
@@ -430,12 +431,25 @@ def test_telemetry_freeze_stops_the_setpoints_and_the_autopilot_timeout_takes_ov
     assert min(judge_truth(load_scenario(config), flight.truth)[3]) > 0.0
 
 
-def test_link_loss_and_recovery(tmp_path: Path) -> None:
+@pytest.mark.parametrize("signed", [False, True])
+def test_link_loss_and_recovery(tmp_path: Path, signed: bool) -> None:
+    """The vehicle killed mid-engagement and started again: guided again once heard. Its new
+    process speaks from a new port. Unsigned, a vehicle is known only by its address, so it
+    is heard again from there only (a stranger on another port was otherwise taken for it,
+    tests/test_trust_link.py): here it restarts behind a relay that keeps its address, as
+    behind a router. Signed, it is known by its key, and taken again from its new port."""
     config = CONFIG / "paper_scenario1.yaml"
+    companion: dict[str, Any] = {}
+    if signed:
+        config = scenario_file(tmp_path, sitl_stub={"signing_key_hex": KEY_A})
+        companion["signing_key_hex"] = KEY_A
     second_truth = tmp_path / "truth2.csv"
+    port = free_udp_port()
+    relay = None if signed else Relay(port)
+    vehicle_port = port if relay is None else relay.vehicle_port
 
     def cut_and_restore(
-        service: CompanionService, stub: subprocess.Popen[bytes], port: int, _truth: Path
+        service: CompanionService, stub: subprocess.Popen[bytes], _port: int, _truth: Path
     ) -> None:
         engaged = threading.Event()
         lost = threading.Event()
@@ -446,14 +460,19 @@ def test_link_loss_and_recovery(tmp_path: Path) -> None:
         stub.wait()
         assert lost.wait(20.0)
         with stub_process(
-            config, port, second_truth, "--profile", "copter", "--initial-mode", "GUIDED"
+            config, vehicle_port, second_truth, "--profile", "copter", "--initial-mode", "GUIDED"
         ):
             while service.phase.value != "done" and not service._stop.is_set():
                 if service.events.of_kind(EventKind.ENDED):
                     break
                 threading.Event().wait(0.05)
 
-    flight = fly(config, tmp_path, during=cut_and_restore, max_time_s=60.0)
+    try:
+        flight = fly(config, tmp_path, port=port, stub_port=vehicle_port,
+                     during=cut_and_restore, max_time_s=60.0, **companion)  # fmt: skip
+    finally:
+        if relay is not None:
+            relay.close()
     kinds = [e.kind for e in flight.events.events]
     lost_at = kinds.index(EventKind.LINK_LOST)
     assert EventKind.LINK_RESTORED in kinds[lost_at:]

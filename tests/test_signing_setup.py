@@ -329,11 +329,14 @@ def test_signing_off_is_not_taken_from_a_stranger_on_the_path(
 def test_the_key_goes_to_the_autopilot_alone(tmp_path: Path) -> None:
     """On udpin: pymavlink answers every address it has heard: a reviewer's spy, sending the
     port a byte every 20 ms, received SETUP_SIGNING and the key in it. Now the link is
-    locked to the autopilot's address once its heartbeats are heard."""
+    locked to the autopilot's address once its heartbeats are heard. (The spy sends a
+    ground station's heartbeat: a sender of no valid frame is not answered at all.)"""
     key = _key_file(tmp_path, "a.hex", KEY_A)
     port = _free_port()
     config = make_config(port, speedup=5.0, start_armed=False)
-    with SitlStub(config), _third_party(port, b"\x00") as received:
+    spy = _frame(M.MAVLink_heartbeat_message(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3),
+                 None, system=255, component=190)  # fmt: skip
+    with SitlStub(config), _third_party(port, spy) as received:
         code = main(["setup-signing", "--connect", f"udpin:127.0.0.1:{port}",
                      "--signing-key-file", str(key)])  # fmt: skip
     assert code == ExitCode.OK

@@ -30,7 +30,7 @@ from ezcompanion.guidance import Defender
 from ezcompanion.service.demo import free_udp_port, judge_truth
 from ezcompanion.service.events import EventKind
 from ezcompanion.wire import Link
-from ezcompanion.wire.link import DATAGRAM_FRAMES_MAX
+from ezcompanion.wire.link import DATAGRAM_FRAMES_MAX, UDP_CLIENTS_MAX
 from ezcompanion.wire.projection import ARDUPILOT_M_PER_DEG
 
 SCENARIO = CONFIG / "paper_scenario1.yaml"
@@ -276,6 +276,110 @@ def test_heartbeats_acks_and_a_stranger_on_the_port_steer_nothing(tmp_path: Path
     assert flight.outcome.setpoints_sent > 80  # guidance went on (4 s at 20 Hz)
     _, clearance = assert_honest(flight)
     assert clearance > 0.0
+
+
+def test_before_the_lock_only_a_few_senders_of_valid_frames_are_answered() -> None:
+    """pymavlink's udpin answers every address it has heard. Every source was kept before
+    anything of its datagram was read: a reviewer's million spoofed one-byte datagrams
+    held a core sending each a heartbeat a second, and 42 MB. Now only a sender of a valid
+    frame is answered, and at most UDP_CLIENTS_MAX of them, the most recently heard."""
+    port = free_udp_port()
+    senders = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(20)]
+    mav = forger()
+    hb = M.MAVLink_heartbeat_message(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3)
+    try:
+        with Link(f"udpin:127.0.0.1:{port}", system_id=1, component_id=191) as link:
+            for sock in senders:
+                sock.bind(("127.0.0.1", 0))
+                sock.settimeout(0.2)
+
+            def answered() -> list[int]:
+                while link.recv():  # take everything sent so far
+                    pass
+                link.send(hb)
+                heard = []
+                for i, sock in enumerate(senders):
+                    with contextlib.suppress(OSError):
+                        if sock.recv(65535):
+                            heard.append(i)
+                return heard
+
+            for sock in senders:  # junk: no frame
+                sock.sendto(b"\x00", ("127.0.0.1", port))
+            time.sleep(0.1)
+            assert answered() == []
+            for sock in senders:  # a valid frame each, in turn
+                sock.sendto(frame(mav, hb), ("127.0.0.1", port))
+                time.sleep(0.005)
+            time.sleep(0.1)
+            assert answered() == list(range(len(senders) - UDP_CLIENTS_MAX, len(senders)))
+    finally:
+        for sock in senders:
+            sock.close()
+
+
+@pytest.mark.parametrize("target_system", [0, 1])
+def test_a_stranger_on_another_port_is_not_taken_for_the_vehicle_after_a_lost_link(
+    tmp_path: Path, target_system: int
+) -> None:
+    """A reviewer's attack: the vehicle falls silent (a radio drop-out: the relay drops what
+    it sends, while it still hears the companion), the link is lost, and a stranger on
+    another port sends heartbeats of the vehicle's id (GUIDED, armed) and positions at the
+    target. With the lock released after the lost link the stranger was taken for the
+    vehicle, guided, and the engagement ended "intercepted" with the vehicle 5.7 m from the
+    target. Unsigned, the vehicle is heard again from its own address only: the stranger's
+    frames are refused, named, and once the vehicle is heard again it is guided again."""
+    port = free_udp_port()
+    relay = Relay(port)
+    stranger = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    stranger.bind(("127.0.0.1", 0))
+    stranger.setblocking(False)
+    got: list[bytes] = []
+    mav = forger()
+    target = load_scenario(SCENARIO).target
+
+    def attack(service: Any, *_: Any) -> None:
+        assert wait_for(service, EventKind.ENGAGED)
+        time.sleep(1.0 / SPEEDUP)
+        relay.tamper = lambda _data: None  # the vehicle falls silent
+        try:
+            assert wait_for(service, EventKind.LINK_LOST)
+            boot_ms, end = 10_000_000, time.monotonic() + 8.0 / SPEEDUP
+            hb = M.MAVLink_heartbeat_message(
+                M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | M.MAV_MODE_FLAG_SAFETY_ARMED, 4,
+                M.MAV_STATE_ACTIVE, 3)  # fmt: skip
+            while time.monotonic() < end and service.phase.value != "done":
+                boot_ms += round(1000 * SPEEDUP * 0.01)
+                for msg in (hb, M.MAVLink_local_position_ned_message(
+                        boot_ms, target.north_m, target.east_m, -10.0, 0.0, 0.0, 0.0),
+                        M.MAVLink_attitude_message(boot_ms, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)):
+                    stranger.sendto(frame(mav, msg), ("127.0.0.1", port))
+                with contextlib.suppress(OSError):
+                    got.append(stranger.recv(65535))
+                time.sleep(0.01)
+            # heard from its own address only: nothing restored the link meanwhile
+            assert not service.events.of_kind(EventKind.LINK_RESTORED)
+        finally:
+            relay.tamper = None  # heard again
+
+    try:
+        flight = fly(SCENARIO, tmp_path, port=port, stub_port=relay.vehicle_port, during=attack,
+                     max_time_s=60.0, target_system=target_system, **LIGHT)  # fmt: skip
+    finally:
+        stranger.close()
+        relay.close()
+    parser = M.MAVLink(None)
+    received = [m.get_type() for data in got for m in parser.parse_buffer(data) or []]
+    assert not received  # nothing reached the stranger: the peer stayed locked
+    alarms = [e for e in flight.events.of_kind(EventKind.ALARM)
+              if e.data["cause"] == "foreign_address"]  # fmt: skip
+    assert alarms and "link lost" in alarms[0].message
+    assert not flight.events.of_kind(EventKind.VEHICLE_REFUSED)
+    restored = flight.events.of_kind(EventKind.LINK_RESTORED)
+    assert restored and restored[0].time_s > alarms[-1].time_s
+    intercepted, _ = assert_honest(flight)
+    assert flight.outcome.intercepted and intercepted  # guided again, to the real target
 
 
 @pytest.mark.parametrize("mavlink1", [False, True])

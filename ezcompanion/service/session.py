@@ -217,6 +217,8 @@ class VehicleSession(StreamRequests):
             return None
         if not self.locked or (msg.get_srcSystem(), msg.get_srcComponent()) != self.target:
             return None
+        if not self.connected:  # the link lost: nothing is taken before its heartbeat
+            return None  # (whose silence before it tells a reboot from a disarm)
         if frame.source != self.address:
             self._refuse_foreign(frame, now)
             return None
@@ -287,12 +289,15 @@ class VehicleSession(StreamRequests):
 
     def _refuse_foreign(self, frame: Frame, now: float) -> None:
         self.refused_frames += 1
+        lost = "" if self.connected else (
+            " (link lost: an unsigned vehicle is heard again from its own address only; "
+            "one restarted on a new port needs the companion restarted, or a signed link)")
         self.alarms.say(
             "foreign_address",
             now,
             f"{frame.message.get_type()} claiming the vehicle's id "
             f"{self._name(self.target, frame.source)} refused: the vehicle is at "
-            f"{_address(self.address)}",
+            f"{_address(self.address)}{lost}",
         )
 
     def _on_heartbeat(self, frame: Frame, now: float) -> None:
@@ -302,6 +307,15 @@ class VehicleSession(StreamRequests):
         source = (msg.get_srcSystem(), msg.get_srcComponent())
         if not self.locked:  # discovering (at start, or after a lost link)
             self._discover(frame, source, now)
+            return
+        if not self.connected and source == self.target:
+            # the link lost, the lock kept (unsigned: _check_link): the vehicle is awaited
+            # where it was, and found again there as discovery finds it; the vehicle's id
+            # from any other address is refused
+            if frame.source == self.address:
+                self._found_again(msg, now)
+            else:
+                self._refuse_foreign(frame, now)
             return
         if (source, frame.source) != (self.target, self.address) and self._second_candidate(
             frame, source, now
@@ -321,6 +335,14 @@ class VehicleSession(StreamRequests):
         if conflict is not None:
             self.refused_frames += 1
             self.alarms.hold(Hold.SPOOF, now, conflict, hold_s=_SPOOF_HOLD_S)
+            if msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED:
+                # refused, it still says armed from the vehicle's address: no disarm is
+                # confirmed over it (a reviewer's forger, its disarmed copies of the
+                # vehicle's heartbeats 3 a second, had the burst rule refuse the vehicle's
+                # armed ones and confirmed a disarm of an armed vehicle; a forged armed one
+                # beside a vehicle that did disarm clears it instead: setpoints to a vehicle
+                # that flies none, held by the distrust until that ends guidance, named)
+                self._disarm_seen = None
             return
         self._take_heartbeat(msg, now)
 
@@ -359,9 +381,18 @@ class VehicleSession(StreamRequests):
                 system=source[0],
                 component=source[1],
             )
-        elif self.parameters.unanswered:  # found again, after a lost link:
-            self.parameters.ask_again(now)  # what is still unanswered, afresh (a reviewer's
-            # link lost while asking: the vehicle's later answer was refused as too late)
+            self._judge.lock(msg)
+            self._take_heartbeat(msg, now)
+        else:
+            self._found_again(msg, now)
+
+    def _found_again(self, msg: Message, now: float) -> None:
+        """The vehicle heard again after a lost link (``msg``, its heartbeat): its clock and
+        heartbeats judged afresh (a reboot restarts them), and what is still unanswered of
+        its parameters asked for again (a reviewer's link lost while asking: the vehicle's
+        later answer was refused as too late)."""
+        if self.parameters.unanswered:
+            self.parameters.ask_again(now)
         self._judge.lock(msg)
         self._take_heartbeat(msg, now)
 
@@ -527,11 +558,17 @@ class VehicleSession(StreamRequests):
     def _check_link(self, now: float) -> None:
         if self.connected and now - self.last_heartbeat_s > self.settings.link_lost_after_s:
             self.connected = False
-            # Discover again, the same id only: a restarted vehicle may speak from a new
-            # port. The runner stops guidance and emits link_lost (it knows what was sent).
-            self.address, self.locked = None, False
-            self._link.lock_peer(None)
-            self._discovery_until_s = None
+            # The runner stops guidance and emits link_lost (it knows what was sent). A
+            # signed vehicle is known by its key: it is discovered again, the same id only,
+            # from wherever it speaks (a restarted one may speak from a new port). An
+            # unsigned one is known only by its address, so it is heard again from there
+            # only: a stranger on another port, its heartbeats of the vehicle's id taken
+            # once the lock was released, had been guided to a forged position at the
+            # target and the engagement ended "intercepted" 5.7 m from it (a reviewer).
+            if self._link.authenticated:
+                self.address, self.locked = None, False
+                self._link.lock_peer(None)
+                self._discovery_until_s = None
             self.telemetry.forget_motion()
 
 

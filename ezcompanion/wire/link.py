@@ -22,6 +22,9 @@ _DEFAULT_BAUD = 57600
 # stranger's 65 KB datagram of 3,000 heartbeats took 17 ms to parse, and 512 of them
 # froze the service for 14 s
 DATAGRAM_FRAMES_MAX = 256
+# senders of valid frames answered on udpin: before a peer is locked (the vehicle, a
+# router, a ground station sharing the port: a handful), the least recently heard given up
+UDP_CLIENTS_MAX = 8
 
 
 def is_serial_device(url: str) -> bool:
@@ -220,6 +223,13 @@ class Link:
         """Back to unsigned frames, accepting unsigned input."""
         self._conn.disable_signing()
 
+    @property
+    def authenticated(self) -> bool:
+        """Every frame taken is signed with the key (signing on, unsigned input refused):
+        the sender is known by the key, not by its address."""
+        signing = self._conn.mav.signing
+        return signing.secret_key is not None and signing.allow_unsigned_callback is None
+
     # receive
     def wait_readable(self, timeout_s: float, *extra_fds: int) -> list[int]:
         """Wait until this link (or one of ``extra_fds``) is readable; the readable fds. A
@@ -259,7 +269,10 @@ class Link:
             if chunk is None:
                 break
             data, source = chunk
+            taken = len(out)
             self._parse(data, source, out)
+            if source is not None and len(out) > taken:
+                self._heard(source)
         return out
 
     # the peer
@@ -292,12 +305,6 @@ class Link:
             if not data:
                 return None
             address = (str(source[0]), int(source[1]))
-            if self._peer is None:  # pymavlink's own bookkeeping of whom to answer
-                if conn.udp_server:
-                    conn.clients.add(address)
-                    conn.clients_last_alive[address] = time.time()
-                elif conn.broadcast:
-                    conn.last_address = address
             # never mix bytes of two datagrams in the parser
             self._reset_parser()
             return bytes(data), address
@@ -315,6 +322,27 @@ class Link:
         if not data:
             return None
         return bytes(data), None
+
+    def _heard(self, address: tuple[str, int]) -> None:
+        """pymavlink's own bookkeeping of whom to answer, before a peer is locked: only a
+        sender of a valid frame (signed, where signing is on), and on ``udpin:`` at most
+        ``UDP_CLIENTS_MAX`` of them, the least recently heard given up. (Every source
+        address was kept, before anything of its datagram was read: a reviewer's million
+        spoofed one-byte datagrams held a core answering each with a heartbeat a second,
+        and 42 MB.)"""
+        conn = self._conn
+        if self._peer is not None:
+            return
+        if conn.udp_server:
+            alive = conn.clients_last_alive
+            if address not in conn.clients and len(conn.clients) >= UDP_CLIENTS_MAX:
+                stalest = min(conn.clients, key=lambda known: alive.get(known, 0.0))
+                conn.clients.discard(stalest)
+                alive.pop(stalest, None)
+            conn.clients.add(address)
+            alive[address] = time.time()
+        elif conn.broadcast:
+            conn.last_address = address
 
     def _parse(self, chunk: bytes, source: Address, out: list[Frame]) -> None:
         mav = self._conn.mav

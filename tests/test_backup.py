@@ -1090,17 +1090,25 @@ def test_a_screen_that_stops_at_the_first_zone_below_its_level_decides_as_the_fu
             assert alone(which) == value
 
 
-@pytest.mark.parametrize("law", [LawName.BACKUP, LawName.ROBUST])
+# a lag and an abandon path with a lag: a reviewer found the latter's sampling set by a
+# fixed length (1 mm), the paths 3% of a turn radius apart at L = 1/128
+_LAGGED = {"response_lag_s": 0.5}
+_ABANDONED = {"response_lag_s": 0.5, "abandon_hold_s": 1.0, "abandon_brake_m_s2": 2.5}
+
+
+@pytest.mark.parametrize(("law", "guidance"), [(LawName.BACKUP, {}), (LawName.ROBUST, {}),
+                                               (LawName.BACKUP, _LAGGED),
+                                               (LawName.BACKUP, _ABANDONED)])  # fmt: skip
 @pytest.mark.parametrize(
     ("length", "time"), [(2.0**-7, 2.0**-3), (2.0**7, 2.0**2), (2.0**13, 2.0**3), (2.0**5, 2.0**-1)]
 )
 def test_a_rescaled_engagement_flies_the_same_trajectory_rescaled(
-    law: LawName, length: float, time: float
+    law: LawName, guidance: dict[str, float], length: float, time: float
 ) -> None:
     """Lengths times L, times times T (powers of two, so that every floating-point operation
     scales exactly and the shield's comparisons come out the same), L from 1/128 to 8192:
     the same trajectory, scaled, to round-off."""
-    a, b = _scaled_runs(law, length, time)
+    a, b = _scaled_runs(law, length, time, **guidance)
     assert len(a.t_s) == len(b.t_s)
     np.testing.assert_allclose(b.north_m / length, a.north_m, rtol=0, atol=1e-12)
     np.testing.assert_allclose(b.east_m / length, a.east_m, rtol=0, atol=1e-12)
@@ -1120,10 +1128,12 @@ def test_a_plane_sized_engagement_flies_the_paper_trajectory() -> None:
         assert b.clearance_m.min() / length > 0.0
 
 
-def _scaled_runs(law: LawName, length: float, time: float) -> tuple[SimResult, SimResult]:
+def _scaled_runs(law: LawName, length: float, time: float, **guidance: float
+                 ) -> tuple[SimResult, SimResult]:  # fmt: skip
     base = load_scenario(CONFIG / "paper_scenario1.yaml")
     base = dataclasses.replace(
-        base, simulation=dataclasses.replace(base.simulation, dt_s=0.02, duration_s=5.0)
+        base, simulation=dataclasses.replace(base.simulation, dt_s=0.02, duration_s=5.0),
+        guidance=dataclasses.replace(base.guidance, **guidance),
     )
     big = scale_scenario(base, ScaleFactors(length=length, time=time))  # the package's
     return simulate(base, law), simulate(big, law)

@@ -32,10 +32,13 @@ FloatArray = npt.NDArray[np.float64]
 
 # A lagging vehicle's turn on to its last velocity setpoint is sampled this many times per
 # lag (at most this many samples), for as long as what is left of it could cost more than
-# this in the closed form that follows.
+# this share of the shield's margin in the closed form that follows (1 mm at the default
+# 0.1 m: a length of the engagement's, so that it scales with it; a fixed 1 mm, a reviewer
+# found, flew a lagging abandon-checked engagement scaled to L = 1/128 3% of a turn radius
+# off the same one unscaled).
 _LEAD_SAMPLES_PER_LAG = 6
 _LEAD_MAX_SAMPLES = 64
-_LEAD_TOL_M = 1e-3
+_LEAD_TOL_MARGINS = 1e-2
 # A course setpoint's turn-on (ArduPlane SITL, five kills mid-engagement at 22.9 m/s, leads
 # 7-40 degrees): the course came back against the turn by at most 0.02 degrees in 0.1 s (its
 # ground velocity's centimetre resolution) and went past the course sent by 3.5% of the lead
@@ -187,10 +190,11 @@ def _lagged_straight(
     the model's lag with the command gone) its course is h + L (1 - e^(-t / tau)):
     monotone, within [h, h + L].
 
-    - Until T = min(hold, k tau), k the e-folds that leave at most ``_LEAD_TOL_M`` of the
-      bound below to the turn still to come: the course in closed form, the position by
-      Simpson's rule on it, sampled every tau / ``_LEAD_SAMPLES_PER_LAG``, each sample less
-      its second-order dip (lateral acceleration at most |a_v|, its rate |a_v| / tau).
+    - Until T = min(hold, k tau), k the e-folds that leave at most ``_LEAD_TOL_MARGINS``
+      of the margin of the bound below to the turn still to come: the course in closed
+      form, the position by Simpson's rule on it, sampled every tau /
+      ``_LEAD_SAMPLES_PER_LAG``, each sample less its second-order dip (lateral
+      acceleration at most |a_v|, its rate |a_v| / tau).
     - From T to the stop (the rest of the hold at v, then braking): every course lies
       within beta / 2 of the middle one h_m, beta = |L| (e^(-T / tau) - e^(-t_stop / tau)),
       so each look-ahead point p + lambda mu R u (lambda = v' / v) lies within
@@ -206,7 +210,7 @@ def _lagged_straight(
     for i in range(zmur.shape[1]):
         mur_max = max(mur_max, zmur[kz, i])
     length = speed * hold_s + (0.5 * speed * speed / brake if brake > 0.0 else 0.0)
-    folds = math.log(max(abs(lead) * (length + mur_max) / _LEAD_TOL_M, 1.0))
+    folds = math.log(max(abs(lead) * (length + mur_max) / (_LEAD_TOL_MARGINS * margin_m), 1.0))
     sampled_t = min(hold_s, folds * lag_s)
     count = min(_LEAD_MAX_SAMPLES, math.ceil(_LEAD_SAMPLES_PER_LAG * sampled_t / lag_s - 1e-9))
     if count <= 0:

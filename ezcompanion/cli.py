@@ -12,9 +12,13 @@ made inside each command).
 from __future__ import annotations
 
 import argparse
+import contextlib
+import logging
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import NoReturn
 
 from ezcompanion.cli_args import (
     OneLineParser,
@@ -364,14 +368,36 @@ def _dispatch(args: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``ezcompanion`` console script; returns the exit code."""
+    """Entry point of the ``ezcompanion`` console script; returns the exit code (as the
+    process's entry, with no ``argv``, after zenoh was loaded: exits with it, see
+    ``_exit_unfinalized``)."""
+    entry = argv is None
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         args = _parser().parse_args(argv)
     except SystemExit as exc:  # --help, --version, or a usage error (already printed)
         return exc.code if isinstance(exc.code, int) else ExitCode.BAD_INPUT
     configure_logging(args)
-    return guarded("ezcompanion", lambda: _dispatch(args))
+    code = guarded("ezcompanion", lambda: _dispatch(args))
+    if entry and "zenoh" in sys.modules:
+        _exit_unfinalized(code)
+    return code
+
+
+def _exit_unfinalized(code: int) -> NoReturn:
+    """Exit with ``code`` without finalizing the interpreter. zenoh's own threads call into
+    Python (subscribers', queries' and queryables' callbacks, and their drops); one doing so
+    while the interpreter finalizes is torn down by CPython, and the process aborted
+    ("FATAL: exception not rethrown", exit -6) after a run had ended and printed its
+    outcome: once in some thirty ``make test`` runs, on a loaded machine
+    (``tests/test_mcap.py``'s ``run --record``). Every file the command writes is closed
+    by now (the service's ``ExitStack``, the recorder's ``close``); what is buffered is
+    flushed here."""
+    logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(OSError, ValueError):
+            stream.flush()
+    os._exit(int(code))
 
 
 if __name__ == "__main__":

@@ -187,6 +187,14 @@ CHECKS: dict[str, Check] = {
     "ezcompanion validate --runs 2000 --seed 2026 --law backup --rate-filter 0.1 "
     "--map-runs 500 --chatter-runs 0 --abandon px4 --no-figures --workers 1 "
     "--out validation-out-rate-filter-reserve": Check.PARSE,
+    "ezcompanion validate --runs 2000 --seed 2026 --law backup --map-runs 500 --chatter-runs 0 "
+    "--no-figures --workers 1 --out validation-out-jitter-0": Check.PARSE,
+    **{
+        "ezcompanion validate --runs 2000 --seed 2026 --law backup --map-runs 500 "
+        f"--chatter-runs 0 --no-figures --workers 1 --hold-jitter {j} "
+        f"--out validation-out-jitter-{j}": Check.PARSE
+        for j in ("0.1", "0.25", "0.4")
+    },
 }
 # Python blocks, by doc: run, or (needing certificates, a router and a scenario to send)
 # only compiled.

@@ -10,6 +10,7 @@ import pytest
 
 from ezcompanion.config import GeoOrigin, Target, load_scenario
 from ezcompanion.errors import ConfigError
+from ezcompanion.guidance.single import law_step_s
 from ezcompanion.records import VehicleState
 from ezcompanion.service.events import LINK_EVENTS_PER_S, Event, EventKind, EventLog
 from ezcompanion.service.inbox import ScenarioInbox
@@ -231,6 +232,27 @@ def test_a_tick_soon_after_the_last_takes_a_step_of_a_period() -> None:
         assert isinstance(command, TickCommand)
         steps.append(command.law_dt_s)
     assert steps[1:] == pytest.approx([0.01] * 5)  # the first: a period, from a reset
+
+
+def test_ticks_of_a_jittered_stream_step_the_law_by_the_same_step() -> None:
+    """A reviewer's closed loop broke the shield's claim with the step told the law changing
+    from tick to tick (0.020, 0.022 s), as the time since the last tick does with a jittered
+    stream: the argument carries a certificate to the next step only at the same step. A
+    tick from 2/3 to 3/2 of a period after the last steps the law by a period, one at half
+    a period (a stream twice the loop's rate) by half of one, a stall by the time elapsed."""
+    scenario = load_scenario(CONFIG)
+    loop = GuidanceLoop(scenario, loop_rate_hz=50.0, stale_after_s=0.25)
+    t = known_origin()
+    now, steps = 1.0, []
+    for k, gap_s in enumerate((0.02, 0.014, 0.029, 0.021, 0.017, 0.0101, 0.0125, 0.031, 0.05)):
+        now += gap_s
+        t.update(local(1000 + 20 * k, 8.0 - 0.0166 * k, -4.0 + 0.011 * k, -0.83, 0.55), now)
+        command = loop.tick(t.snapshot(0.25, now), now)
+        assert isinstance(command, TickCommand)
+        steps.append(command.law_dt_s)
+    assert steps[1:] == pytest.approx([0.02, 0.02, 0.02, 0.02, 0.01, 0.01, 0.031, 0.05])
+    assert [law_step_s(0.02, s) for s in (1e-4, 0.0099, 0.0134, 0.0133, 0.0299, 0.0301)] == (
+        pytest.approx([0.02, 0.02, 0.02, 0.01, 0.02, 0.0301]))
 
 
 def _command(

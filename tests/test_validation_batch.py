@@ -10,9 +10,16 @@ import pytest
 
 from ezcompanion.commands import CONFIG_DIR, PAPER_SCENARIOS
 from ezcompanion.config import Scenario, SimulationSettings, load_scenario
+from ezcompanion.errors import ConfigError
 from ezcompanion.guidance import Defender, GuidanceParams, LawName, Target
 from ezcompanion.sim.engine import simulate
-from ezcompanion.validation.batch import BatchSettings, RunMetrics, law_policy, simulate_batch
+from ezcompanion.validation.batch import (
+    BatchSettings,
+    RunMetrics,
+    _holds,
+    law_policy,
+    simulate_batch,
+)
 from ezcompanion.validation.campaign import CampaignSpec, run_campaign
 from ezcompanion.validation.escape import escape_margin_m
 from ezcompanion.validation.fixed import from_scenarios, to_scenario
@@ -155,8 +162,10 @@ class _Recording:
         self.policy = policy
         self.courses: list[np.ndarray] = []
         self.rates: list[np.ndarray] = []
+        self.steps: list[float] = []
 
     def step(self, state: object, dt: float) -> object:
+        self.steps.append(dt)
         self.courses.append(np.array(state.course_rad))  # type: ignore[attr-defined]
         self.rates.append(np.array(state.course_rate_rad_s))  # type: ignore[attr-defined]
         return self.policy.step(state, dt)  # type: ignore[attr-defined]
@@ -187,6 +196,30 @@ def test_the_course_rate_is_measured_as_the_service_measures_it(filter_s: float)
     for k, turn in enumerate(turned / dt):
         expected[k + 1] = expected[k] + gain * (turn - expected[k])
     np.testing.assert_allclose(rates, expected, atol=1e-12)
+
+
+@pytest.mark.parametrize("jitter", [0.1, 0.4])
+def test_jittered_holds_are_reproducible_and_the_law_told_the_services_step(jitter: float
+                                                                            ) -> None:  # fmt: skip
+    """``hold_jitter``: each command held dt (1 + j u), the same holds for the same batch; the
+    law told the step the service tells it for a tick that long after the last
+    (``single.law_step_s``): dt within [2/3, 3/2] of it, else the hold or half a step."""
+    drawn = draw_scenarios(ScenarioDistribution(ideal_response_probability=1.0), 5, 0, 1)
+    settings = BatchSettings(duration_s=2.0, hold_jitter=jitter)
+    dt = settings.dt_s
+    holds = _holds(settings, int(drawn.run_index[0]))
+    assert np.all(np.abs(holds / dt - 1.0) <= jitter) and np.ptp(holds) > jitter * dt
+    np.testing.assert_array_equal(holds, _holds(settings, int(drawn.run_index[0])))
+    recording = _Recording(law_policy(drawn, PARAMS, LawName.BACKUP))
+    simulate_batch(drawn, recording, accel_max_m_s2=PARAMS.accel_max_m_s2,  # type: ignore[arg-type]
+                   settings=settings)  # fmt: skip
+    told = np.array(recording.steps)
+    assert told[0] == dt
+    expected = np.where(holds > 1.5 * dt, holds, np.where(holds < 2.0 * dt / 3.0, 0.5 * dt, dt))
+    np.testing.assert_array_equal(told[1:], expected[: len(told) - 1])
+    assert (jitter > 0.34) == bool(np.any(told != dt))
+    with pytest.raises(ConfigError, match="hold_jitter"):
+        BatchSettings(hold_jitter=0.6)
 
 
 def test_the_rate_filter_changes_nothing_for_an_ideal_vehicle() -> None:

@@ -76,6 +76,20 @@ for reserve in no_reserve reserve; do
     cp "$OUT-rate-filter-$reserve/tables.md" "$OUT-rate-filter-$reserve/summary.txt" \
         "docs/validation/rate_filter_2k/$reserve/"
 done
+# the holds jittered, the law told the service's step (docs/validation.md, "A jittered stream")
+"$BIN/ezcompanion" validate --runs 2000 --seed 2026 --law backup --map-runs 500 --chatter-runs 0 \
+    --no-figures --workers 1 --no-progress --out "$OUT-jitter-0"
+"$BIN/ezcompanion" validate --runs 2000 --seed 2026 --law backup --map-runs 500 --chatter-runs 0 \
+    --no-figures --workers 1 --hold-jitter 0.1 --no-progress --out "$OUT-jitter-0.1"
+"$BIN/ezcompanion" validate --runs 2000 --seed 2026 --law backup --map-runs 500 --chatter-runs 0 \
+    --no-figures --workers 1 --hold-jitter 0.25 --no-progress --out "$OUT-jitter-0.25"
+"$BIN/ezcompanion" validate --runs 2000 --seed 2026 --law backup --map-runs 500 --chatter-runs 0 \
+    --no-figures --workers 1 --hold-jitter 0.4 --no-progress --out "$OUT-jitter-0.4"
+for jitter in 0 0.1 0.25 0.4; do
+    mkdir -p "docs/validation/jitter_2k/$jitter"
+    cp "$OUT-jitter-$jitter/tables.md" "$OUT-jitter-$jitter/summary.txt" \
+        "docs/validation/jitter_2k/$jitter/"
+done
 # the chattering ratio with the shield's reserve (the default) and without it, 100 runs
 "$BIN/ezcompanion" validate --runs 100 --seed 2027 --law backup --map-runs 0 --chatter-runs 100 \
     --no-figures --workers 1 --no-progress --out "$OUT-chatter-reserve"

@@ -14,9 +14,13 @@ from ezcompanion.config import Scenario
 from ezcompanion.errors import ConfigError, PrecisionError
 from ezcompanion.guidance import GuidanceController, KinematicState, LawName
 from ezcompanion.guidance.abandon import abandon_gap
-from ezcompanion.guidance.single import check_precision, least_speed_m_s, longest_step_s
+from ezcompanion.guidance.single import (
+    check_precision,
+    law_step_s,
+    least_speed_m_s,
+    longest_step_s,
+)
 from ezcompanion.records import Hold, TickCommand, VehicleState
-from ezcompanion.service.ticks import EPSILON_S
 
 __all__ = ["GuidanceLoop", "Hold", "TickCommand"]
 
@@ -34,9 +38,6 @@ _LEAST_SPEED_FACTOR = 0.5
 # ... and a step at most this many periods long (a late tick's, however late), nor longer
 # than a revolution at the bound (``single.longest_step_s``).
 _LONGEST_STEP_PERIODS = 5.0
-# A tick sooner than this after the last (only a late sample's, just after a deadline tick:
-# ticks on samples are at least half a period apart) steps the law by a period.
-_SOON_PERIODS = 0.5
 
 
 class GuidanceLoop:
@@ -271,13 +272,14 @@ class GuidanceLoop:
                       longest_step_s(self.scenario.guidance.accel_max_m_s2, speed_m_s))  # fmt: skip
         elapsed = self.period_s if last is None else min(max(now_s - last, 1e-4), longest)
         # The law verifies its command over the step it is given, and the command is held
-        # until the next tick. Ticks on samples are at least half a period apart
-        # (``ticks``), so the law steps by the clock; only a late sample just after a
-        # deadline tick ticks sooner, and its command is then held half a period or more:
-        # its step is a period, not the 0.1 ms since (verified over 0.1 ms, it was flown
-        # for a period, and its shield step cost as 1 / dt: 12 ms at 0.1 ms).
-        soon = elapsed < _SOON_PERIODS * self.period_s - 2.0 * EPSILON_S  # (due within it)
-        return elapsed, (min(self.period_s, longest) if soon else elapsed)
+        # until the next tick: the step is the one the loop's period says (a period, or
+        # half of one for a stream twice as fast), the same at every tick whatever the
+        # stream's jitter (``single.law_step_s``); only a stall's is the time elapsed. (A
+        # late sample just after a deadline tick, 0.1 ms after it, is a period's: verified
+        # over 0.1 ms, it was flown for a period, and its shield step cost as 1 / dt: 12 ms
+        # at 0.1 ms. Told the time elapsed at every tick, the law broke the shield's
+        # argument, which carries a certificate to the next step only at the same step.)
+        return elapsed, min(law_step_s(self.period_s, elapsed), longest)
 
     def tick(self, state: VehicleState | None, now_s: float) -> TickCommand | Hold:
         """One law step on ``state`` at clock time ``now_s``."""

@@ -30,6 +30,7 @@ import numpy.typing as npt
 
 from ezcompanion.errors import ConfigError
 from ezcompanion.guidance import GuidanceController, GuidanceParams, KinematicState, LawName
+from ezcompanion.guidance.single import law_step_s
 from ezcompanion.sim.kinematics import rk4_step, unicycle_rates
 from ezcompanion.validation.response import flown_accel_m_s2
 from ezcompanion.validation.scenarios import ScenarioBatch
@@ -62,13 +63,19 @@ class BatchSettings:
     time at the bound. ``rate_filter_s``: the controller's course rate is measured as the
     service measures it (``ezcompanion.service.state``: the course change over the last
     step, then a first-order filter of this time constant) instead of given exactly
-    (0, the default).
+    (0, the default). ``hold_jitter``: each command is held for dt (1 + j u), u uniform in
+    [-1, 1] and the same for every run at a step (seeded by the batch's first run), and the
+    law is told the step the service tells it for a tick that long after the last
+    (``single.law_step_s``: dt itself within [2/3, 3/2] of it; 0, the default: every hold
+    dt). A hold other than the step verified is outside the shield's argument
+    (docs/guidance.md, assumption 3); this measures what it costs.
     """
 
     dt_s: float = 0.02
     duration_s: float = 40.0
     bound_ratio: float = 0.9
     rate_filter_s: float = 0.0
+    hold_jitter: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("dt_s", "duration_s", "bound_ratio"):
@@ -78,6 +85,10 @@ class BatchSettings:
         rate = self.rate_filter_s
         if not (isinstance(rate, int | float) and math.isfinite(rate) and 0.0 <= rate <= 10.0):
             raise ConfigError("rate_filter_s", rate, "must be a number in [0, 10]")
+        jitter = self.hold_jitter
+        if not (isinstance(jitter, int | float) and math.isfinite(jitter)
+                and 0.0 <= jitter <= 0.5):  # fmt: skip
+            raise ConfigError("hold_jitter", jitter, "must be a number in [0, 0.5]")
         if self.dt_s > self.duration_s:
             raise ConfigError("dt_s", self.dt_s, "must not exceed duration_s")
         if self.bound_ratio > 1.0:
@@ -303,12 +314,13 @@ def simulate_batch(
     lag = scenarios.response_lag_s.copy()
     flown = np.zeros(size)  # a_f, the flown lateral acceleration
     measuring = settings.rate_filter_s > 0.0
-    gain = dt / (dt + settings.rate_filter_s)
     measured = np.zeros(size)  # the course rate as measured, when ``measuring``
+    holds = _holds(settings, int(scenarios.run_index[0]) if size else 0)
+    told = dt  # the step the law is told: the hold before (the service's clock since)
     for k in range(steps + 1):
         rate = measured if measuring else flown / speed
         state = KinematicState(x[0], x[1], x[2], speed, rate)
-        out = policy.step(state, dt)
+        out = policy.step(state, told)
         rows = index[live]
         if abandon is not None and k >= check_from:
             chosen = params if params is not None else GuidanceParams()
@@ -350,14 +362,17 @@ def simulate_batch(
             index, x, speed, a0, a1 = index[live], x[:, live], speed[live], a0[live], a1[live]
             lag, flown, measured = lag[live], flown[live], measured[live]
             live = np.ones(remaining, dtype=bool)
-        slope = (a1 - a0) / dt
-        x_next = _advance(x, speed, a0, slope, flown, lag, k * dt, dt)
+        hold = float(holds[k])
+        slope = (a1 - a0) / hold
+        x_next = _advance(x, speed, a0, slope, flown, lag, k * dt, hold)
         if measuring:  # the course change over the step, filtered
             turned = np.remainder(x_next[2] - x[2] + math.pi, 2.0 * math.pi) - math.pi
-            turned /= dt
+            turned /= hold
+            gain = hold / (hold + settings.rate_filter_s)
             measured = np.where(live, measured + gain * (turned - measured), measured)
         x = np.where(live, x_next, x)
-        flown = np.where(live, flown_accel_m_s2(a0, slope, flown, lag, dt), flown)
+        flown = np.where(live, flown_accel_m_s2(a0, slope, flown, lag, hold), flown)
+        told = law_step_s(dt, hold)  # the next tick comes a hold after this one
     return RunMetrics(
         run_index=scenarios.run_index.copy(),
         intercepted=intercepted,
@@ -371,6 +386,17 @@ def simulate_batch(
         accel_variation_m_s2=variation,
         abandon_unsafe_steps=unsafe_steps,
     )
+
+
+def _holds(settings: BatchSettings, first_run: int) -> FloatArray:
+    """How long each step's command is held: dt, or with ``hold_jitter`` j, dt (1 + j u) with
+    u uniform in [-1, 1] drawn from the batch's first run index (the same holds whatever
+    cluster flies it)."""
+    dt, count = settings.dt_s, settings.steps + 1
+    if settings.hold_jitter <= 0.0:
+        return np.full(count, dt)
+    u = np.random.default_rng([first_run, 0x5EED]).uniform(-1.0, 1.0, count)
+    return dt * (1.0 + settings.hold_jitter * u)
 
 
 def _advance(

@@ -54,6 +54,11 @@ def add_validate_parser(subparsers: Any) -> None:
         "--rate-filter", type=float, default=BatchSettings().rate_filter_s, metavar="S",
         help="measure the course rate as the service does, filtered over S s (default 0: exact)",
     )  # fmt: skip
+    p.add_argument(
+        "--hold-jitter", type=float, default=BatchSettings().hold_jitter, metavar="J",
+        help="hold each command dt (1 + J u), u uniform in [-1, 1], the law told the hold before "
+             "(the service's clock since its last tick; default 0: every hold dt)",
+    )  # fmt: skip
     p.add_argument("--map-runs", type=int, default=2000, help="failure-map starts (0: none)")
     p.add_argument(
         "--workers", type=int, default=0,
@@ -121,7 +126,7 @@ def spec_from_args(args: argparse.Namespace) -> CampaignSpec:
         params=params,
         distribution=dist,
         settings=BatchSettings(dt_s=args.dt, duration_s=args.duration,
-                               rate_filter_s=args.rate_filter),
+                               rate_filter_s=args.rate_filter, hold_jitter=args.hold_jitter),
         map_runs=args.map_runs,
         workers=args.workers,
         chunk_runs=args.chunk_runs,

@@ -146,6 +146,28 @@ def test_forged_disarmed_heartbeats_that_trip_the_burst_rule_never_confirm() -> 
         assert session.disarmed is None and not session.rebooted
 
 
+def test_one_refused_armed_heartbeat_after_a_disarm_delays_it_only() -> None:
+    """A second reviewer's forger: one armed heartbeat of another type from the vehicle's
+    address, refused, after the vehicle disarmed. It had left the session disarmed with
+    the pending disarm cleared, so that no later disarmed heartbeat was heard as one: the
+    vehicle never confirmed disarmed, and guidance went back to it. Now the next disarmed
+    heartbeats confirm it."""
+    with session_and_vehicle() as (session, _):
+        engaged(session)
+        session.on_frame(heartbeat(armed=False), 3.0)
+        assert session.disarm_pending
+        forged = M.MAVLink_heartbeat_message(
+            M.MAV_TYPE_HEXAROTOR, M.MAV_AUTOPILOT_ARDUPILOTMEGA,
+            M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | M.MAV_MODE_FLAG_SAFETY_ARMED, 4,
+            M.MAV_STATE_ACTIVE, 3)  # fmt: skip
+        refused = session.refused_frames
+        session.on_frame(vehicle_frame(forged), 3.5)
+        assert session.refused_frames == refused + 1 and not session.disarm_pending
+        for t in range(4, 30):  # the vehicle, disarmed, at 1 Hz
+            session.on_frame(heartbeat(armed=False), float(t))
+        assert session.disarmed is not None and session.disarmed[0] == 4.0
+
+
 def test_a_vehicle_disarmed_before_guidance_started_is_not_an_end() -> None:
     with session_and_vehicle() as (session, _):
         for t in (0.0, 1.0, 2.0):

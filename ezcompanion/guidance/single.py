@@ -139,16 +139,22 @@ def law_step_s(period_s: float, elapsed_s: float) -> float:
     rate, whatever its jitter, since the shield's argument carries a certificate from one
     step to the next only at the same step (docs/guidance.md, assumption 3):
 
-    - within [2/3, 3/2] of a period, a period (a stream at the loop's rate, jittered);
-    - within [1/2, 2/3) of one, half a period (a faster stream, ticked every half period:
-      the law's time stays the clock's);
+    - within [2/3, 3/2] of a period, a period (a stream at the loop's rate, jittered, and a
+      deadline tick, 1.1 periods after the last);
+    - within [1/2, 2/3) of one, half a period (a faster stream, ticked every half period);
     - sooner, a period (a late sample just after a deadline tick: its command is held half
       a period or more);
     - later, the time elapsed (a stall: a changing step, outside the argument).
 
     Told the time since the last tick instead, the law flew 1 and 4 of 1,879 oracle-safe
     campaign runs into a zone with the holds jittered by 10% and 25% of the step (0 with
-    none), and told this, none (docs/validation.md)."""
+    none), and told this, none (docs/validation.md). What is left is the hold: steady holds
+    of 1.3 to 1.45 periods told a period (ticks persistently late) flew one of those runs
+    0.9 m into a zone, a reviewer found; with the band's top at 6/5 instead, those were
+    told as they came and kept out, but holds jittered by 25% and 40% then crossed it,
+    changing the step told, and flew 2 and 1 in. A band cannot serve both (an estimate of
+    the stream's own interval might: not built).
+    """
     soonest, half, latest = _STEP_BAND
     if elapsed_s > latest * period_s:
         return elapsed_s

@@ -339,10 +339,13 @@ class VehicleSession(StreamRequests):
                 # refused, it still says armed from the vehicle's address: no disarm is
                 # confirmed over it (a reviewer's forger, its disarmed copies of the
                 # vehicle's heartbeats 3 a second, had the burst rule refuse the vehicle's
-                # armed ones and confirmed a disarm of an armed vehicle; a forged armed one
-                # beside a vehicle that did disarm clears it instead: setpoints to a vehicle
-                # that flies none, held by the distrust until that ends guidance, named)
+                # armed ones and confirmed a disarm of an armed vehicle). Taken as armed, so
+                # that the vehicle's next disarmed heartbeat is a disarm heard again (left
+                # disarmed, one forged armed heartbeat had switched the judgement off for
+                # good, a second reviewer found); a forger who keeps it from confirming so
+                # is held by the distrust, which ends guidance, named.
                 self._disarm_seen = None
+                self.armed = True
             return
         self._take_heartbeat(msg, now)
 

@@ -316,7 +316,7 @@ def simulate_batch(
     measuring = settings.rate_filter_s > 0.0
     measured = np.zeros(size)  # the course rate as measured, when ``measuring``
     holds = _holds(settings, int(scenarios.run_index[0]) if size else 0)
-    told = dt  # the step the law is told: the hold before (the service's clock since)
+    told = dt  # the step the law is told (the service's, for a tick a hold after the last)
     for k in range(steps + 1):
         rate = measured if measuring else flown / speed
         state = KinematicState(x[0], x[1], x[2], speed, rate)

@@ -56,8 +56,8 @@ def add_validate_parser(subparsers: Any) -> None:
     )  # fmt: skip
     p.add_argument(
         "--hold-jitter", type=float, default=BatchSettings().hold_jitter, metavar="J",
-        help="hold each command dt (1 + J u), u uniform in [-1, 1], the law told the hold before "
-             "(the service's clock since its last tick; default 0: every hold dt)",
+        help="hold each command dt (1 + J u), u uniform in [-1, 1], the law told the step the "
+             "service tells it for a tick that long after the last (default 0: every hold dt)",
     )  # fmt: skip
     p.add_argument("--map-runs", type=int, default=2000, help="failure-map starts (0: none)")
     p.add_argument(

@@ -59,8 +59,8 @@ def summary_text(result: CampaignResult) -> str:
         f"limit {spec.settings.duration_s} s, "
         + (f"course rate measured through a {spec.settings.rate_filter_s} s filter, "
            if spec.settings.rate_filter_s > 0.0 else "")
-        + (f"holds jittered by +-{spec.settings.hold_jitter:g} of dt (the law told the hold "
-           "before), " if spec.settings.hold_jitter > 0.0 else "")
+        + (f"holds jittered by +-{spec.settings.hold_jitter:g} of dt (the law told the "
+           "service's step), " if spec.settings.hold_jitter > 0.0 else "")
         + f"policies {', '.join(spec.policies)}; "
         f"{result.wall_s:.1f} s wall ({result.cluster}).\nRates: % of runs [95% Wilson "
         "interval], a zero count as 0/N (< its one-sided 95% upper bound); 'entered|safe "

@@ -278,6 +278,15 @@ def forger(system_id: int = 1, component_id: int = 1) -> Any:
     return M.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
 
 
+def stranger_socket() -> socket.socket:
+    """A UDP socket of its own on 127.0.0.1 (another address than the vehicle's), not
+    blocking: a stranger on the companion's port."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    sock.setblocking(False)
+    return sock
+
+
 def frame(mav: Any, msg: Any, *, mavlink1: bool = False) -> bytes:
     """``msg`` packed by ``mav`` (advancing its sequence number)."""
     return bytes(msg.pack(mav, force_mavlink1=mavlink1))

@@ -13,13 +13,12 @@ from __future__ import annotations
 
 import os
 import random
-import socket
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from conftest_sitl import M, Relay, forger, frame
+from conftest_sitl import M, Relay, forger, frame, stranger_socket
 from test_service_loopback import fly
 from test_trust_link import LIGHT, SCENARIO, assert_honest, wait_for
 
@@ -114,9 +113,7 @@ def fuzz_engagement(where: Path, rng: random.Random, frames: int) -> Fuzzed:
     arrive from a stranger and through a relay on the vehicle's own address."""
     port = free_udp_port()
     relay = Relay(port)
-    stranger = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    stranger.bind(("127.0.0.1", 0))
-    stranger.setblocking(False)
+    stranger = stranger_socket()
     to_stranger: list[bytes] = []
     sent = {"stranger": 0, "relay": 0}
 

@@ -21,7 +21,7 @@ from typing import Any
 
 import pytest
 import yaml
-from conftest_sitl import M, Relay, forger, frame
+from conftest_sitl import M, Relay, forger, frame, stranger_socket
 from test_service_loopback import CONFIG, SPEEDUP, Flight, fly, scenario_file
 
 from ezcompanion.config import load_scenario, scenario_update
@@ -331,9 +331,7 @@ def test_a_stranger_on_another_port_is_not_taken_for_the_vehicle_after_a_lost_li
     frames are refused, named, and once the vehicle is heard again it is guided again."""
     port = free_udp_port()
     relay = Relay(port)
-    stranger = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    stranger.bind(("127.0.0.1", 0))
-    stranger.setblocking(False)
+    stranger = stranger_socket()
     got: list[bytes] = []
     mav = forger()
     target = load_scenario(SCENARIO).target

@@ -37,9 +37,7 @@ from typing import TYPE_CHECKING, Any
 
 from ezcompanion import __version__
 from ezcompanion.config import Scenario, scenario_to_dict, scenario_update
-from ezcompanion.config_checks import (
-    zone_entered,
-)
+from ezcompanion.config_checks import zone_entered
 from ezcompanion.errors import ConfigError, PrecisionError
 from ezcompanion.field import VehiclePlacement, place_fixed, placement_warnings
 from ezcompanion.guidance import (

@@ -94,12 +94,12 @@ def step_times_us(states: list[tuple[Any, ...]]) -> np.ndarray:
 
 def part_times_us(states: list[tuple[Any, ...]]) -> dict[str, float]:
     """The mean time a step (us) of each part of ``shield_one`` on these states, each part
-    timed alone on its own inputs where the step runs it: the nominal held one step and
-    its certificates (``_ahead``), the preview where that passes, the certificates at the
-    state where the nominal's weight is below 1, the lower rungs and the plan where no
-    backup is certified there, the blend's check where the weight is strictly between 0
-    and 1 (the branches as ``shield_one`` takes them; the blend with the backup held
-    before the step, which the step may have changed)."""
+    timed alone on its own inputs where the step runs it: the nominal held one step (and
+    3/2 of one) and its certificates (``_ahead_held``), the preview where that passes, the
+    certificates at the state where the nominal's weight is below 1, the lower rungs and
+    the plan where no backup is certified there, the blend's check where the weight is
+    strictly between 0 and 1 (the branches as ``shield_one`` takes them; the blend with the
+    backup held before the step, which the step may have changed)."""
     clock = time.perf_counter
     parts = dict.fromkeys(("one step ahead", "preview", "certificates here", "lower rungs",
                            "plan", "blend check"), 0.0)  # fmt: skip
@@ -108,10 +108,10 @@ def part_times_us(states: list[tuple[Any, ...]]) -> dict[str, float]:
             state)  # fmt: skip
         z = (zn, ze, zmur, zreach, kz)
         theta = bk.acceptance_level_m(s, zmur, zreach, kz, speed, dt)
-        accept = theta + (s[bk.S_ROBUST] if s[bk.S_TAU] > 0.0 else 0.0)
+        accept = bk.accept_level_m(s, theta)
         certs = np.full(bk.N_POLICIES, -math.inf)
         start = clock()
-        ahead = bk._ahead(s, *z, nominal, n, e, h, a, av, speed, dt, dt, accept, accept, certs)[0]
+        ahead = bk._ahead_held(s, *z, nominal, n, e, h, a, av, speed, dt, accept, certs)[0]
         parts["one step ahead"] += clock() - start
         weight = 0.0
         if ahead >= accept:
@@ -144,7 +144,7 @@ def part_times_us(states: list[tuple[Any, ...]]) -> dict[str, float]:
             flies = bk.plan_policy(plan) if current == bk.BACKUP_PLAN else current
             blended = weight * nominal + (1.0 - weight) * bk.backup_command(s, flies, a)
             start = clock()
-            bk._ahead(s, *z, blended, n, e, h, a, av, speed, dt, dt, accept, accept, certs)
+            bk._ahead_held(s, *z, blended, n, e, h, a, av, speed, dt, accept, certs)
             parts["blend check"] += clock() - start
     return {name: 1e6 * spent / len(states) for name, spent in parts.items()}
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -73,6 +74,14 @@ def defenders(draw: st.DrawFn, count: int) -> list[Defender]:
             )
         )
     return out
+
+
+def zones_of(defenders: Sequence[Sequence[float]]) -> ZoneSet:
+    """Zones from defenders given as (north, east, range, capture radius, speed ratio)."""
+    return ZoneSet.from_defenders([
+        Defender(north_m=n, east_m=e, range_m=r, capture_radius_m=c, speed_ratio=mu)
+        for n, e, r, c, mu in defenders
+    ])  # fmt: skip
 
 
 @st.composite
@@ -298,16 +307,17 @@ def run_shield(
     nominal: list[float],
     dt: float,
     speed: float = 1.0,
+    held: int = bk.BACKUP_NONE,
 ) -> tuple[float, list[float], list[float], list[float]]:
     """Fly ``shield_one`` with the given nominal commands (one per step) from ``start``
-    (north, east, course, a): the least true gap, and per step the shield's weight, the
-    held backup's certificate (NaN where the nominal passed whole) and the best certificate
-    one step ahead on the nominal."""
+    (north, east, course, a), holding backup ``held`` there: the least true gap, and per
+    step the shield's weight, the held backup's certificate (NaN where the nominal passed
+    whole) and the best certificate one step ahead on the nominal."""
     s = settings_for(params)
     north, east, course, a = start
     vehicle = Vehicle(north, east, course, a, speed, params.response_lag_s)
     out = np.empty((1, 6))
-    current = bk.BACKUP_NONE
+    current = held
     weight = math.nan
     plan = np.zeros(bk.PLAN_SIZE, dtype=np.int64)
     least = true_gap(zones, north, east, course)
@@ -331,11 +341,19 @@ def run_shield(
 def start_certificate(
     zones: ZoneSet, params: GuidanceParams, start: tuple[float, float, float, float], dt: float
 ) -> float:
+    return start_certificate_at(zones, params, start, dt, 1.0)
+
+
+def start_certificate_at(
+    zones: ZoneSet, params: GuidanceParams, start: tuple[float, float, float, float], dt: float,
+    speed: float,
+) -> float:
+    """The best single backup's certificate at ``start`` (north, east, course, a = a_v)."""
     certs = np.empty(3)
     n, e, h, a = start
     bk.backup_certificates(
         settings_for(params), zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0,
-        n, e, h, a, a, 1.0, dt, math.inf, -math.inf, certs,
+        n, e, h, a, a, speed, dt, math.inf, -math.inf, certs,
     )  # fmt: skip
     return float(certs.max())
 
@@ -399,6 +417,34 @@ def test_the_nominal_weight_falls_no_faster_than_its_rate_unless_the_check_refus
         assert (weight == 1.0) == math.isnan(cert)  # the backup computed only where used
 
 
+def test_with_no_lag_a_nominal_that_leaves_nothing_certified_if_held_late_is_refused() -> None:
+    """``backup._ahead_held``: with no lag, the nominal is flown only where, held for the
+    step and for 3/2 of it (the latest tick told as one step), it leaves a backup certified
+    by theta. On drawn states and commands where the step alone would pass and the late
+    hold would not, the shield refuses the nominal (weight 0), though its weight was 1 the
+    step before (its memory would otherwise keep it at 0.98 or more)."""
+    dt = 0.02
+    rng = np.random.default_rng(46)
+    out = np.empty((1, 6))
+    refused = 0
+    for s, z, n, e, h, a, av in _random_states(20000, 46):
+        if s[bk.S_TAU] > 0.0:
+            continue
+        command = float(rng.uniform(-1.0, 1.0)) * PARAMS.command_limit_m_s3
+        theta = bk.acceptance_level_m(s, z[2], z[3], 0, 1.0, dt)
+        certs = np.full(bk.N_POLICIES, -math.inf)
+        one, late = (bk._ahead(s, *z, command, n, e, h, a, av, 1.0, dt, hold, theta, theta,
+                               certs)[0] for hold in (dt, 1.5 * dt))  # fmt: skip
+        if not one >= theta > late:
+            continue
+        plan = np.zeros(bk.PLAN_SIZE, dtype=np.int64)
+        bk.shield_one(s, *z, n, e, h, a, av, 1.0, command, dt, bk.BACKUP_STRAIGHT, 1.0, plan,
+                      out, 0)  # fmt: skip
+        assert out[0, 3] == 0.0, (one, late, theta, out[0])
+        refused += 1
+    assert refused >= 3
+
+
 @settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(case=engagements())
 def test_the_nominal_flies_only_where_it_leaves_the_reserve(case: Engagement) -> None:
@@ -415,6 +461,89 @@ def test_the_nominal_flies_only_where_it_leaves_the_reserve(case: Engagement) ->
     flown = [(w, ahead) for w, ahead in zip(weights, aheads, strict=True) if w > 0.0]
     assume(flown)
     assert all(ahead >= level for _, ahead in flown), (level, flown)
+
+
+# starts that entered a zone under jittered holds with the nominal checked over one step
+# only (defenders as north, east, range, capture radius, speed ratio; speed; north, east,
+# course, a; the seed of the holds); all with no lag, the law told 0.02 s
+JITTERED_STARTS = {
+    "random holds": ([(-3.395460518561705, -2.484952188071579, 2.4396412006915984,
+                       0.08137674444380771, 0.5158597259197589)], 1.2826856161381466,
+                     (-4.798725036763788, 3.2207533979819623, 0.6180105262079749,
+                      -0.7249141893962483), 6),
+    "adversarial holds": ([(1.091506157211966, -0.8542431205988255, 1.0689620754523312,
+                            0.8201277844705229, 0.8318319565871596),
+                           (0.4709629661916841, 3.2278134956106843, 2.0200391864461458,
+                            0.8257179397683935, 0.7247781033467756),
+                           (-2.3802939927514477, -1.1062096455572679, 2.1149474212754105,
+                            0.6729052873424741, 0.7400339578222673)], 1.628490126171706,
+                          (3.073173030522465, -0.25698908514275054, -1.4614045124568575,
+                           0.6993810652263481), 0),
+}  # fmt: skip
+
+
+def fly_with_jittered_holds(
+    zones: ZoneSet, params: GuidanceParams, speed: float,
+    start: tuple[float, float, float, float], adversarial: bool, seed: int,
+) -> float:
+    """Fly ``shield_one`` from ``start`` for 8 v / a_max, the law told 0.02 s and each
+    command held 25% sooner or later (drawn with ``seed``, or in ``adversarial`` chosen),
+    the nominal a greedy one-step adversary: of -C, 0 and +C, the command that leaves the
+    vehicle nearest a zone at the end of the hold. The least true gap."""
+    s, z = settings_for(params), (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
+    dt, jitter, cmd = 0.02, 0.25, params.command_limit_m_s3
+    rng = np.random.default_rng(seed)
+    north, east, course, a = start
+    vehicle = Vehicle(north, east, course, a, speed, 0.0)
+    current, weight = bk.BACKUP_NONE, math.nan
+    plan = np.zeros(bk.PLAN_SIZE, dtype=np.int64)
+    least = true_gap(zones, north, east, course)
+    elapsed = 0.0
+    while elapsed < 8.0 * speed / params.accel_max_m_s2:
+        n, e, h, av = vehicle.x
+        steps = {}
+        for command in (-cmd, 0.0, cmd):
+            out, trial = np.empty((1, 6)), plan.copy()
+            bk.shield_one(s, *z, n, e, h, a, av, speed, command, dt, current, weight, trial,
+                          out, 0)  # fmt: skip
+            steps[command] = (out, trial)
+        holds = ((dt * (1 - jitter), dt, dt * (1 + jitter)) if adversarial
+                 else (dt * (1 + jitter * rng.uniform(-1.0, 1.0)),))  # fmt: skip
+        worst = (math.inf, 0.0, dt)
+        for hold in holds:
+            for command, (out, _) in steps.items():
+                trial_vehicle = Vehicle(n, e, h, av, speed, 0.0)
+                trial_vehicle.fly(a, float(out[0, 0]), hold, zones, substeps=4)
+                gap = true_gap(zones, *trial_vehicle.x[:3]) + 1e-4 * rng.uniform()
+                if gap < worst[0]:
+                    worst = (gap, command, hold)
+        _, command, hold = worst
+        out, plan = steps[command]
+        a_next = float(out[0, 0])
+        least = min(least, vehicle.fly(a, a_next, hold, zones))
+        a, current, weight = a_next, int(out[0, 2]), float(out[0, 3])
+        elapsed += hold
+    return least
+
+
+@pytest.mark.parametrize("name", sorted(JITTERED_STARTS))
+def test_a_certified_start_stays_out_when_each_command_is_held_a_quarter_off_the_step(
+    name: str,
+) -> None:
+    """Off the model: the service tells the law its period, and the vehicle flies each
+    command until the next tick, 25% sooner or later. A greedy one-step adversary picks the
+    nominal, and in the adversarial case the hold too (``fly_with_jittered_holds``). With
+    the nominal checked held 3/2 of the step too (``backup._ahead_held``), these starts
+    stay out; checked over one step, the first entered a zone by 0.18 m and the second by
+    0.45 m (docs/validation.md, "A jittered stream")."""
+    defenders, speed, start, seed = JITTERED_STARTS[name]
+    zones = zones_of(defenders)
+    theta = bk.acceptance_level_m(settings_for(PARAMS), zones.mu_range_m, zones.reach_m, 0,
+                                  speed, 0.02)  # fmt: skip
+    assert start_certificate_at(zones, PARAMS, start, 0.02, speed) >= theta
+    least = fly_with_jittered_holds(zones, PARAMS, speed, start,
+                                    name.startswith("adversarial"), seed)  # fmt: skip
+    assert least > 0.0
 
 
 @pytest.mark.parametrize("number", [1, 2])
@@ -488,6 +617,35 @@ def test_a_held_backup_that_enters_a_zone_gives_way_to_the_least_entry() -> None
     assert -PARAMS.shield_margin_m < certs[bk.BACKUP_STRAIGHT] < 0.0
     assert theta > certs[bk.BACKUP_RIGHT] > certs[bk.BACKUP_STRAIGHT] + 2.0 * theta
     assert held == bk.BACKUP_STRAIGHT
+
+
+def test_a_held_backup_short_of_theta_gives_way_to_a_certified_one_at_once() -> None:
+    """Off the model (a step flown longer than the law was told: the hold-jitter review's
+    closed loop, a greedy adversary for the nominal, steps told 0.020 s and flown 0.022 s),
+    the held LEFT came out 0.004 m below theta while RIGHT was certified. Kept by the
+    2-theta hysteresis (RIGHT was better by less than that), LEFT's rule turned on until
+    STRAIGHT was certified again, 308 steps, circling 0.74 m into a zone. A held backup that
+    is not certified gives way to a certified one at once; from here, RIGHT flies out and
+    stays out by the margin (docs/guidance.md, step 5)."""
+    zones = zones_of([
+        (5.1090877910747725, 0.7621031255002801, 2.066426137754554, 0.5607404285179801,
+         0.6004247037615041),
+        (-2.1403195698753024, 3.8608505706852583, 1.4431183105579823, 0.49566730052352803,
+         0.5230214022786295),
+    ])  # fmt: skip
+    speed, dt, a = 1.2142610373617257, 0.02, -0.9726280082952949
+    state = (-4.054225363032797, 3.5156015338025, 1.7174809300669767)
+    s, z = settings_for(PARAMS), (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
+    theta = bk.acceptance_level_m(s, zones.mu_range_m, zones.reach_m, 0, speed, dt)
+    certs = np.empty(3)
+    bk.backup_certificates(s, *z, *state, a, a, speed, dt, math.inf, -math.inf, certs)
+    left, right = certs[bk.BACKUP_LEFT], certs[bk.BACKUP_RIGHT]
+    assert left < theta <= right < left + 2.0 * theta  # the hysteresis alone would keep LEFT
+    assert certs[bk.BACKUP_STRAIGHT] < theta  # RIGHT turns first
+    least, _w, held_certs, _a = run_shield(zones, PARAMS, (*state, a), [math.nan] * 400, dt,
+                                           speed, held=bk.BACKUP_LEFT)  # fmt: skip
+    assert held_certs[0] == right  # RIGHT taken at the first step
+    assert least >= PARAMS.shield_margin_m
 
 
 def best_value(
@@ -956,6 +1114,38 @@ def test_a_backup_the_check_certified_is_held_or_left_only_for_a_certified_one()
             assert out[0, 4] >= theta, (policy, int(out[0, 2]), out[0, 4], checked, theta)
             held += 1
     assert held > 5000
+
+
+def test_a_backup_the_shield_holds_as_certified_is_certified_by_its_exact_certificate() -> None:
+    """The held backup's value decides whether it is kept; a turn asked after a better
+    one may stop early, at a value only known to be below that one's (docs/guidance.md,
+    step 5), which can read above theta where the turn's own flight does not. Of 20,000
+    drawn states, 170 read LEFT > RIGHT >= theta within the 2-theta hysteresis, and RIGHT
+    asked with theta as its floor fell below theta in many (one read 0.286 m and was
+    -0.008 m). Held there, RIGHT was kept as certified. Now, wherever the shield leaves a
+    single backup held with a value >= theta, its exact certificate reaches theta."""
+    dt = 0.02
+    out = np.empty((1, 6))
+    checked = short = 0
+    for s, z, n, e, h, a, av in [*_random_states(1000, 18), *_random_states(1000, 19)]:
+        theta = bk.acceptance_level_m(s, z[2], z[3], 0, 1.0, dt)
+        certs = np.empty(3)
+        bk.backup_certificates(s, *z, n, e, h, a, av, 1.0, dt, math.inf, -math.inf, certs)
+        right_short = bk._floor_certificate(s, *z, bk.BACKUP_RIGHT, n, e, h, a, av, 1.0, dt,
+                                            theta) < theta <= certs[bk.BACKUP_RIGHT]  # fmt: skip
+        short += bool(right_short)
+        for held in (bk.BACKUP_LEFT, bk.BACKUP_RIGHT, bk.BACKUP_STRAIGHT):
+            plan = np.zeros(bk.PLAN_SIZE, dtype=np.int64)
+            bk.shield_one(s, *z, n, e, h, a, av, 1.0, math.nan, dt, held, math.nan, plan, out,
+                          0)  # fmt: skip
+            flown = int(out[0, 2])
+            if out[0, 4] >= theta and flown in (bk.BACKUP_LEFT, bk.BACKUP_RIGHT,
+                                                 bk.BACKUP_STRAIGHT):  # (a plan: its own value)
+                exact = bk._floor_certificate(s, *z, flown, n, e, h, a, av, 1.0, dt, theta)
+                assert exact >= theta, (held, flown, out[0, 4], exact, theta)
+                checked += 1
+    assert short >= 5  # the states that broke it are among those drawn
+    assert checked > 1000
 
 
 def test_a_nominal_that_is_not_a_number_is_refused_and_the_backup_flies() -> None:
@@ -1448,10 +1638,7 @@ def test_an_abandon_check_keeps_a_backup_only_where_its_plain_certificate_holds(
     out by the margin (+0.21 and +0.23 m). Kept where
     ``backup_certificates``' plain value reached theta instead (an early stop's value, or
     STRAIGHT's in a turn's slot), the same flights entered a zone (-0.04 and -0.07 m)."""
-    zones = ZoneSet.from_defenders([
-        Defender(north_m=n, east_m=e, range_m=r, capture_radius_m=c, speed_ratio=mu)
-        for n, e, r, c, mu in defenders
-    ])  # fmt: skip
+    zones = zones_of(defenders)
     params = dataclasses.replace(PARAMS, response_lag_s=tau)
     dt = 0.02
     theta = bk.acceptance_level_m(settings_for(params), zones.mu_range_m, zones.reach_m, 0,

@@ -116,6 +116,9 @@ IntArray = npt.NDArray[np.int64]
 
 # Backup policies (``GuidanceStep`` reports them; -1: none, the law is not shielded)
 BACKUP_NONE, BACKUP_LEFT, BACKUP_RIGHT, BACKUP_STRAIGHT = -1, 0, 1, 2
+# the longest hold, in control steps, of a tick the service tells the law as one step
+# (single.law_step_s): the nominal is checked held this long too (``_ahead_held``)
+LATE_HOLD_STEPS = 1.5
 _N_BACKUPS = 3
 # Where no backup is certified, the turns are tried again leaving for STRAIGHT at lower
 # levels, theta - r RUNG_STEP eps for r = 1 .. ``shield_rungs`` (eps the margin; 6 by
@@ -359,6 +362,16 @@ def acceptance_level_m(s: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: 
         dist = zreach[kz, i] + s[S_EPS]
         theta = max(theta, dip(zmur[kz, i], dist, speed, s[S_AMAX], rate, step))
     return theta
+
+
+@jit_inline
+def accept_level_m(s: FloatArray, theta: float) -> float:
+    """What the nominal (or a blend) must leave one step on to be flown: a backup certified
+    by theta, and with a lag a reserve above it, ``shield_robust_m``, so that a state whose
+    measured a_v is a little off keeps the exits its certificate counts on (with no lag
+    a_v = a, the actuator state: nothing measured; docs/guidance.md, "Assumption 4 and the
+    measured a_v")."""
+    return float(theta + (s[S_ROBUST] if s[S_TAU] > 0.0 else 0.0))
 
 
 @jit_inline
@@ -1108,6 +1121,31 @@ def _ahead(
 
 
 @jit_borrow
+def _ahead_held(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, command: float, n: float, e: float, h: float, a: float, av: float, speed: float,
+    dt: float, accept: float, certs: FloatArray,
+) -> tuple[float, int, float, float]:
+    """``_ahead`` for ``command`` held one step; with no lag, where that reaches ``accept``,
+    the least of it and the same command held ``LATE_HOLD_STEPS`` steps: the latest tick
+    the service tells the law as one step (``single.law_step_s``) holds the command that
+    long, and the shield's argument, which carries a certificate over the step it was
+    told, does not cover it. Under jittered holds and an adversarial nominal, checked at
+    one step only, certified starts with no lag entered zones; with a lag none did (the
+    reserve, ``accept_level_m``, kept them out), and checked late too, lagging vehicles
+    around the paper's layout intercepted far less (80.8% to 55.8%: a lag's certificate
+    is sensitive to a_v, docs/guidance.md, "Assumption 4 and the measured a_v"), so with
+    a lag it is not checked (docs/validation.md, "A jittered stream")."""
+    ahead, which, a1, av1 = _ahead(s, zn, ze, zmur, zreach, kz, command, n, e, h, a, av, speed,
+                                   dt, dt, accept, accept, certs)  # fmt: skip
+    if ahead >= accept and s[S_TAU] == 0.0:
+        late, _, _, _ = _ahead(s, zn, ze, zmur, zreach, kz, command, n, e, h, a, av, speed, dt,
+                               LATE_HOLD_STEPS * dt, accept, accept, certs)  # fmt: skip
+        ahead = min(ahead, late)
+    return ahead, which, a1, av1
+
+
+@jit_borrow
 def backup_command(s: FloatArray, policy: int, a: float) -> float:
     """The actuator command of a backup policy at actuator state ``a``."""
     cmd = s[S_CMD]
@@ -1387,19 +1425,16 @@ def _shield_step(
     """``shield_one``'s step with the certificates of ``s`` (with its abandon profile, if
     any)."""
     theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
-    # what the nominal (or a blend) must leave to be flown: theta, and with a lag a reserve
-    # above it, so that a state whose measured a_v is a little off keeps the exits its
-    # certificate counts on (with no lag a_v = a, the actuator state: nothing measured)
-    accept = theta + (s[S_ROBUST] if s[S_TAU] > 0.0 else 0.0)
+    accept = accept_level_m(s, theta)
     band = s[S_BAND]
     certs = np.full(N_POLICIES, -math.inf)
     # held for one step, the nominal must keep a certificate >= accept to be flown at all;
     # where it does, the nominal held for the preview sets its weight (where it does not,
     # the weight is 0 whatever the preview says, so the preview is not flown)
     if math.isfinite(nominal):
-        ahead, which, a_next, av_next = _ahead(s, zn, ze, zmur, zreach, kz, nominal, n, e, h, a,
-                                               av, speed, dt, dt, accept, accept,
-                                               certs)  # fmt: skip
+        ahead, which, a_next, av_next = _ahead_held(s, zn, ze, zmur, zreach, kz, nominal, n, e,
+                                                    h, a, av, speed, dt, accept,
+                                                    certs)  # fmt: skip
     else:  # refused: a flight of NaN keeps no gap, so it would beat every level (fail closed)
         # (an infinite one the actuator clips, but no law means it)
         ahead, which, a_next, av_next = -math.inf, current, a, av
@@ -1416,11 +1451,13 @@ def _shield_step(
         weight = max(weight, min(weight_before - fall * dt, 1.0))
     cert_now = math.nan  # computed only where the backup's command is used
     if weight < 1.0:
-        # the held backup: kept unless another is certified (>= theta) and better by 2 theta;
-        # or, where the held one's own flight now enters a zone (the vehicle has left the
-        # model: along its own flow, under the model, it stays within theta and the tail's
-        # widening of where it started, >= theta), to any better by 2 theta, certified or
-        # not: the least predicted entry
+        # the held backup: kept unless another is certified (>= theta) and either better by
+        # 2 theta or the held one is not certified (off the model: a step flown longer than
+        # told can leave it just below theta, and its rule may then circle through a zone
+        # that the certified one keeps out of); or, where the held one's own flight now
+        # enters a zone (the vehicle has left the model: along its own flow, under the
+        # model, it stays within theta and the tail's widening of where it started,
+        # >= theta), to any better by 2 theta, certified or not: the least predicted entry
         backup_certificates(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, math.inf,
                             -math.inf, certs)  # fmt: skip
         single = max(certs[BACKUP_LEFT], certs[BACKUP_RIGHT], certs[BACKUP_STRAIGHT])
@@ -1433,12 +1470,17 @@ def _shield_step(
                 planned = _plan_step(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
                                      theta, current, certs, plan)  # fmt: skip
         best = int(np.argmax(certs))
+        if (current == BACKUP_RIGHT and theta <= certs[BACKUP_RIGHT] < certs[BACKUP_LEFT]
+                and certs[BACKUP_LEFT] <= certs[BACKUP_RIGHT] + 2.0 * theta):
+            # kept by the hysteresis below, and asked after LEFT: RIGHT's value may be an
+            # early stop's, above its own flight's; asked again with theta as its floor
+            certs[BACKUP_RIGHT] = _floor_certificate(s, zn, ze, zmur, zreach, kz, BACKUP_RIGHT,
+                                                     n, e, h, a, av, speed, dt, theta)  # fmt: skip
         if planned:
             current = BACKUP_PLAN  # found better by 2 theta than every other, at >= floor
-        elif not 0 <= current < N_POLICIES or (
-            (certs[best] >= theta or certs[current] < -s[S_EPS])
-            and certs[best] > certs[current] + 2.0 * theta
-        ):
+        elif not 0 <= current < N_POLICIES or (certs[best] >= theta and (
+            certs[current] < theta or certs[best] > certs[current] + 2.0 * theta
+        )) or (certs[current] < -s[S_EPS] and certs[best] > certs[current] + 2.0 * theta):
             current = best
         if current != BACKUP_STRAIGHT and certs[BACKUP_STRAIGHT] >= exit_level_m(s, current,
                                                                                 theta):
@@ -1450,9 +1492,9 @@ def _shield_step(
         if weight > 0.0:
             # blend with the held backup's command, held over the step, and verify the blend
             blended = weight * nominal + (1.0 - weight) * backup_command(s, flies, a)
-            check, which_b, a_b, av_b = _ahead(s, zn, ze, zmur, zreach, kz, blended, n, e, h, a,
-                                               av, speed, dt, dt, accept, accept,
-                                               certs)  # fmt: skip
+            check, which_b, a_b, av_b = _ahead_held(s, zn, ze, zmur, zreach, kz, blended, n, e,
+                                                    h, a, av, speed, dt, accept,
+                                                    certs)  # fmt: skip
             if check >= accept:
                 accepted = True
                 which, a_next, av_next = which_b, a_b, av_b

@@ -24,7 +24,7 @@ from ezcompanion.config_limits import MAGNITUDE_LIMIT
 from ezcompanion.errors import PrecisionError, StateError
 from ezcompanion.guidance._jit import jit
 from ezcompanion.guidance.actuator import advance_one
-from ezcompanion.guidance.backup import BACKUP_NONE, S_SIZE, shield_one
+from ezcompanion.guidance.backup import BACKUP_NONE, LATE_HOLD_STEPS, S_SIZE, shield_one
 from ezcompanion.guidance.law import (
     O_AC,
     O_ALPHA,
@@ -129,7 +129,7 @@ def longest_step_s(accel_max_m_s2: float, speed_m_s: float) -> float:
 
 # A tick this close to a period after the last is a period's step, and one this close to
 # half a period half a period's (below); sooner than half a period, a period's.
-_STEP_BAND = (0.5, 2.0 / 3.0, 1.5)
+_STEP_BAND = (0.5, 2.0 / 3.0, LATE_HOLD_STEPS)
 _STEP_EPSILON_S = 2e-6  # (ticks' due times are float sums of periods: a microsecond off)
 
 
@@ -152,8 +152,9 @@ def law_step_s(period_s: float, elapsed_s: float) -> float:
     of 1.3 to 1.45 periods told a period (ticks persistently late) flew one of those runs
     0.9 m into a zone, a reviewer found; with the band's top at 6/5 instead, those were
     told as they came and kept out, but holds jittered by 25% and 40% then crossed it,
-    changing the step told, and flew 2 and 1 in. A band cannot serve both (an estimate of
-    the stream's own interval might: not built).
+    changing the step told, and flew 2 and 1 in. So the band's top stays, and the shield
+    checks the nominal held that long too (``backup.LATE_HOLD_STEPS``, with no lag): none
+    of those runs enters since.
     """
     soonest, half, latest = _STEP_BAND
     if elapsed_s > latest * period_s:

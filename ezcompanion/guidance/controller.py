@@ -127,7 +127,8 @@ class GuidanceStep:
     that is not the best stops once below the best's certificate, with a value that may be
     above its own), the best one; with an abandon profile, its certificate with the abandon path,
     or where that leaves nothing safe to abandon its plain one) and
-    ``certificate_ahead_m`` (the best one step ahead on the nominal: exact where it
+    ``certificate_ahead_m`` (the best one step ahead on the nominal, and with no lag the
+    least of that and the best after the step's setpoint held 3/2 of a step: exact where it
     reaches the acceptance level, theta and with a lag the reserve; below it, a value
     below it, since nothing short of it is flown); NaN for other laws.
     """

@@ -1126,12 +1126,25 @@ def _ahead(
     held = int(np.int64(-1))  # the command held (not the literal -1: one compile of _fly_step)
     gap, n1, e1, h1, a1, av1 = _fly_step(s, zn, ze, zmur, zreach, kz, held, command, n, e, h, a,
                                          av, speed, fly_s)  # fmt: skip
-    backup_certificates(s, zn, ze, zmur, zreach, kz, n1, e1, h1, a1, av1, speed, dt, enough,
-                        accept, certs)  # fmt: skip
+    value, which = _best_after(s, zn, ze, zmur, zreach, kz, gap, n1, e1, h1, a1, av1, speed, dt,
+                               accept, enough, certs)  # fmt: skip
+    return value, which, a1, av1
+
+
+@jit_borrow
+def _best_after(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, gap: float, n: float, e: float, h: float, a: float, av: float, speed: float,
+    dt: float, accept: float, enough: float, certs: FloatArray,
+) -> tuple[float, int]:
+    """After a flight whose own least gap was ``gap``, ending in this state: the best
+    single backup's certificate (as ``_ahead`` says) with that gap, and which backup it is."""
+    backup_certificates(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, enough, accept,
+                        certs)  # fmt: skip
     which = int(np.argmax(certs[:_N_BACKUPS]))
     # (the certificates are -inf for an overflow already; the flight's own gap, NaN or
     # +inf, would leave min() the certificate)
-    return min(certs[which], _or_none(gap)), which, a1, av1
+    return min(certs[which], _or_none(gap)), which
 
 
 @jit_borrow
@@ -1159,9 +1172,8 @@ def _ahead_held(
     if ahead >= accept and s[S_TAU] == 0.0:
         gap, n2, e2, h2, av2 = _fly_ramp(s, zn, ze, zmur, zreach, kz, n, e, h, a, a1, av, speed,
                                          LATE_HOLD_STEPS * dt)  # fmt: skip
-        backup_certificates(s, zn, ze, zmur, zreach, kz, n2, e2, h2, a1, av2, speed, dt, accept,
-                            accept, certs)  # fmt: skip
-        late = min(certs[int(np.argmax(certs[:_N_BACKUPS]))], _or_none(gap))
+        late, _ = _best_after(s, zn, ze, zmur, zreach, kz, gap, n2, e2, h2, a1, av2, speed, dt,
+                              accept, accept, certs)  # fmt: skip
         ahead = min(ahead, late)
     return ahead, which, a1, av1
 

@@ -12,6 +12,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 import yaml
 from test_service_loopback import fly as fly_service
@@ -117,3 +118,39 @@ def test_a_plane_too_soft_to_turn_as_the_law_asks_is_refused_before_guided(
         assert event.data["cause"] == "heading_loop"
     else:
         assert asked and flight.outcome.setpoints_sent > 0
+
+
+def test_a_plane_is_guided_at_the_rate_it_streams_one_tick_a_sample(tmp_path: Path) -> None:
+    """ArduPlane streams positions at 40 Hz at most, as the loopback plane does. On the
+    default 50 Hz loop each sample ticked twice (a deadline tick on the last position, 1.1
+    periods after the last tick, then the sample's own just after it), each step told 20
+    ms: the law's time ran 1.6 times the clock's in real time, and in lockstep some ticks
+    came at the same clock time. The loop now ticks at the rate positions are asked for,
+    says so, and every tick is a step of 25 ms, one a sample."""
+    data = yaml.safe_load((CONFIG / "paper_scenario1_plane22.yaml").read_text())
+    config = tmp_path / "plane.yaml"
+    config.write_text(yaml.safe_dump(data))
+    ticks: list[tuple[float, float]] = []
+
+    def observe(service: Any, *_: Any) -> None:
+        tick = service.loop.tick
+
+        def recorded(state: Any, now_s: float) -> Any:
+            out = tick(state, now_s)
+            if hasattr(out, "law_dt_s"):
+                ticks.append((now_s, out.law_dt_s))
+            return out
+
+        service.loop.tick = recorded
+
+    flight = fly_service(config, tmp_path, profile="plane", start_mode="GUIDED",
+                         max_time_s=4.0, lockstep=True, during=observe, loop_rate_hz=50.0,
+                         telemetry_rate_hz=50.0)  # fmt: skip
+    said = [e for e in flight.events.of_kind(EventKind.STREAMS_REQUESTED)
+            if "loop_rate_hz" in e.data]  # fmt: skip
+    assert [e.data["loop_rate_hz"] for e in said] == [40.0]
+    assert len(ticks) > 100  # 4 s of guidance at 40 Hz
+    assert {law_dt for _, law_dt in ticks} == {0.025}
+    times = np.array([t for t, _ in ticks])
+    assert np.diff(times).min() > 0.9 * 0.025
+    assert len(ticks) <= 40.0 * (times[-1] - times[0]) + 1.5

@@ -2,16 +2,20 @@
 positions are converted only when needed, and the cross-check still holds.
 
 Units on :class:`TelemetryState`; the stream requests over a real UDP socket on loopback,
-read back by a listening link."""
+read back by a listening link; a stream slower than the loop, on the loopback vehicle."""
 
 from __future__ import annotations
 
+import math
 import time
+from pathlib import Path
 
+import yaml
+from test_service_loopback import fly
 from test_service_units import CONFIG, ORIGIN, known_origin, local
 
 from ezcompanion.config import load_scenario
-from ezcompanion.records import Hold
+from ezcompanion.records import EventKind, Hold
 from ezcompanion.service.events import EventLog
 from ezcompanion.service.session import VehicleSession
 from ezcompanion.service.settings import companion_settings
@@ -146,3 +150,23 @@ def test_a_freeze_right_after_a_skipped_global_position_is_still_frozen() -> Non
     # the position's time is that of the last sample that moved: stale, whichever source
     assert state.position_time_s <= last_moving_s + 1e-9
     assert state.age_s(now) > 0.25
+
+
+def test_positions_slower_than_the_loop_are_said_with_the_loop_rate_that_ticks_once_each(
+    tmp_path: Path,
+) -> None:
+    """The loopback copter streams at 30 Hz at most (the companion's 50 Hz request DENIED,
+    its stream groups clamped to 30 Hz on the retry after ``rate_low``), on a 50 Hz loop:
+    each sample comes after the loop's deadline, 1.1 periods on, so it ticks twice. The
+    companion says so once, naming the loop rate that ticks once a sample."""
+    data = yaml.safe_load(CONFIG.read_text())
+    data.setdefault("sitl_stub", {})["max_stream_rate_hz"] = 30.0
+    config = tmp_path / "slow.yaml"
+    config.write_text(yaml.safe_dump(data))
+    flight = fly(config, tmp_path, max_time_s=6.0, lockstep=True, loop_rate_hz=50.0,
+                 telemetry_rate_hz=50.0)  # fmt: skip
+    assert flight.events.of_kind(EventKind.RATE_LOW)  # 10 Hz, the stub's default, at first
+    (said,) = [e for e in flight.events.of_kind(EventKind.WARNING) if "loop_rate_hz" in e.data]
+    assert said.data["loop_rate_hz"] == 50.0 and 27.0 <= said.data["rate_hz"] <= 31.0
+    assert f"companion.loop_rate_hz to {math.floor(said.data['rate_hz'])} or less" in (
+        said.message)

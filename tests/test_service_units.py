@@ -140,7 +140,8 @@ def test_a_scenario_too_slow_for_the_loop_rate_is_refused_at_start_naming_the_sp
     1e-9 m/s ran its first step for hours. Refused when the loop is made, the scenario's
     speed and its least value at the loop's rate named; a scenario at that least value is
     taken, and a tick late by five periods, at the least speed fed, steps no further than
-    a revolution (a late step is capped, as it was at five periods)."""
+    a revolution (a late step is capped, as it was at five periods). A loop slowed later
+    (``use_loop_rate``) is refused the same way."""
     scenario = load_scenario(CONFIG)
     rate_hz = 2.0
     least = 2.0 * scenario.guidance.accel_max_m_s2 / rate_hz / (2.0 * math.pi)
@@ -158,6 +159,11 @@ def test_a_scenario_too_slow_for_the_loop_rate_is_refused_at_start_naming_the_sp
     start = dataclasses.replace(scenario.start, speed_m_s=least)
     loop = GuidanceLoop(dataclasses.replace(scenario, start=start), loop_rate_hz=rate_hz,
                         stale_after_s=5.0)  # fmt: skip
+    # the loop slowed to a vehicle's stream rate (the service, as the vehicle is found) is
+    # refused the same way, and keeps its rate
+    with pytest.raises(ConfigError, match=r"m/s at a 1\.5 Hz loop") as caught:
+        loop.use_loop_rate(1.5)
+    assert caught.value.field == "vehicle.speed_m_s" and loop.period_s == 1.0 / rate_hz
     loop.assume_speed_factor(0.0)  # the least the law is fed: half the nominal
     t = known_origin()
     t.update(local(1000, 8.0, -4.0, 0.0, 0.0), now_s=1.0)

@@ -58,7 +58,7 @@ class GuidanceLoop:
             params=scenario.guidance,
             law=LawName(law if law is not None else scenario.law),
         )
-        self.period_s = 1.0 / loop_rate_hz
+        self.period_s = math.inf  # (use_loop_rate's, below)
         self.stale_after_s = stale_after_s
         self.nominal_speed_m_s = scenario.start.speed_m_s
         self.captured = False
@@ -68,19 +68,8 @@ class GuidanceLoop:
         self._assumed: dict[str, float] = {}  # guidance fields found from the vehicle
         self._measured: dict[str, float] = {}  # measured in flight: over the scenario's if worse
         self.speed_factor = 1.0  # flown over commanded speed, as measured (identify_monitor)
-        # A tick on time must be a step the law can take at the least speed it is fed
-        # (slower, a step turns more than a revolution: ``single.least_speed_m_s``): a
-        # scenario too slow for the loop's rate is refused here, not at a tick.
+        self.use_loop_rate(loop_rate_hz)
         start = scenario.start
-        least = least_speed_m_s(scenario.guidance.accel_max_m_s2, self.period_s)
-        if _LEAST_SPEED_FACTOR * start.speed_m_s < least:
-            shown = f"{least / _LEAST_SPEED_FACTOR * (1.0 + 5e-6):.6g}"  # rounded up
-            raise ConfigError(
-                "vehicle.speed_m_s", start.speed_m_s,
-                f"must be >= {shown} m/s at a {loop_rate_hz:g} Hz "
-                f"loop (the law is fed half of it at the least, and a step of one period "
-                f"must not turn more than a revolution at accel_max_m_s2): raise the rate",
-            )  # fmt: skip
         # The positions must lie within the law's precision radius at the least speed it is
         # fed (``single.check_precision``): a scenario whose zones lie farther out for its
         # speed is refused here (a vehicle that flies out of it is held at a tick: RANGE).
@@ -106,6 +95,26 @@ class GuidanceLoop:
         abandon_gap(zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0, start.north_m,
                     start.east_m, start.course_rad, 0.0, 0.0, start.speed_m_s, 0.0, 0.0, 1.0,
                     0.0, 0.0, math.inf)  # fmt: skip
+
+    def use_loop_rate(self, loop_rate_hz: float) -> None:
+        """Tick at ``loop_rate_hz``: the law's step is its period. Only before guidance
+        starts (the step is one and the same throughout: docs/guidance.md, assumption 3).
+        A tick on time must be a step the law can take at the least speed it is fed
+        (slower, a step turns more than a revolution: ``single.least_speed_m_s``): a
+        scenario too slow for the rate is refused with a ``ConfigError``, not at a tick,
+        and the rate is left as it was."""
+        period = 1.0 / loop_rate_hz
+        least = least_speed_m_s(self.scenario.guidance.accel_max_m_s2, period)
+        speed = self.scenario.start.speed_m_s
+        if _LEAST_SPEED_FACTOR * speed < least:
+            shown = f"{least / _LEAST_SPEED_FACTOR * (1.0 + 5e-6):.6g}"  # rounded up
+            raise ConfigError(
+                "vehicle.speed_m_s", speed,
+                f"must be >= {shown} m/s at a {loop_rate_hz:g} Hz "
+                f"loop (the law is fed half of it at the least, and a step of one period "
+                f"must not turn more than a revolution at accel_max_m_s2): raise the rate",
+            )  # fmt: skip
+        self.period_s = period
 
     def assume_response_lag(self, lag_s: float) -> None:
         """Give the law the vehicle's response lag ``lag_s`` (its autopilot's measured

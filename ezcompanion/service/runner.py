@@ -570,6 +570,8 @@ class CompanionService:
             if self._engaged_at_s is None and not self._place_fixed(now):
                 return
             if self.engagement.setpoints is None:
+                if not self._tick_at_stream_rate(now):
+                    return
                 self.engagement.setpoints = self._make_setpoints()
                 profile = session.profile  # the autopilot's measured response
                 if profile is not None:
@@ -636,6 +638,35 @@ class CompanionService:
                 f"autopilot's: put it back in {guided} to resume)",
                 left_for=session.mode,
             )  # fmt: skip
+
+    def _tick_at_stream_rate(self, now: float) -> bool:
+        """The loop ticks no faster than positions are asked for (``telemetry_rate_hz``, 40
+        Hz at most on a plane): set once, as the vehicle is found, before guidance first
+        starts (the step is one and the same throughout, docs/guidance.md assumption 3).
+        Faster, each sample ticked twice: a deadline tick on a position most of a period
+        old, then the sample's own just after it, each step told a period (a plane's 40 Hz
+        on the default 50 Hz loop: 80 ticks a second, the law's time 1.6 times the clock's,
+        its commands held 2.5 and 22.5 ms in turn). False if the scenario is too slow for
+        that rate (refused, named)."""
+        configured = self.settings.loop_rate_hz
+        rate = self.session.loop_rate_hz
+        if rate >= configured:
+            return True
+        try:
+            self.loop.use_loop_rate(rate)
+        except ConfigError as exc:
+            self.events.emit(EventKind.ABORTED, now, f"{exc}; guidance ticks no faster than "
+                             f"positions are asked for, {rate:g} Hz on this vehicle: not "
+                             "guided", cause="loop_rate", loop_rate_hz=rate)  # fmt: skip
+            self.engagement.done = True
+            self.phase = Phase.DONE
+            return False
+        self.schedule = TickSchedule(self.loop.period_s)
+        self.events.emit(EventKind.STREAMS_REQUESTED, now, f"guidance ticks at {rate:g} Hz, "
+                         f"the rate positions are asked for (companion.loop_rate_hz "
+                         f"{configured:g}: faster, a tick between samples would step the law "
+                         "on a position a period old)", loop_rate_hz=rate)  # fmt: skip
+        return True
 
     def _end_disarmed(self, now: float, disarmed: tuple[float, float]) -> None:
         """The vehicle disarmed (or rebooted: it came back disarmed after a silence) after

@@ -5,12 +5,15 @@ Only what the state uses: LOCAL_POSITION_NED and GLOBAL_POSITION_INT at the conf
 (40 Hz at most on a fixed wing, which ArduPlane would deny), ATTITUDE at 10 Hz at most, by
 SET_MESSAGE_INTERVAL; ArduPilot's stream groups (REQUEST_DATA_STREAM) only on the one retry
 after a low rate. Two seconds after asking, the position must arrive at half the rate at
-least (else ``rate_low`` and one retry). While local positions are fresh, the global one
-is asked at the cross-check's rate only, and at the full rate again once they are stale.
+least (else ``rate_low`` and one retry), and at 0.9 of the guidance loop's rate at least
+(else a warning naming the loop rate that would tick once a sample). While local positions
+are fresh, the global one is asked at the cross-check's rate only, and at the full rate
+again once they are stale.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 from ezcompanion.records import EventKind
@@ -22,6 +25,9 @@ from ezcompanion.wire import Link, Message, mavlink
 __all__ = ["POSITIONS", "StreamRequests"]
 
 _RATE_CHECK_AFTER_S = 2.0
+# positions slower than this share of the loop's rate come later than its deadline (1.1
+# periods after the last tick): said, with the loop rate that would tick once a sample
+_LOOP_SHARE_MIN = 0.9
 _PLANE_MAX_RATE_HZ = 40.0
 _ATTITUDE_RATE_HZ = 10.0  # ATTITUDE at most this often: yaw is used only when slow
 _GLOBAL_REPACE_S = 1.0  # the global position's rate changes at most this often
@@ -137,3 +143,21 @@ class StreamRequests:
             if self._rate_checks == 0 and self.connected:
                 self.request_streams(now, groups=True)
             self._rate_checks += 1
+        elif rate < _LOOP_SHARE_MIN * self.loop_rate_hz:
+            self.events.emit(
+                EventKind.WARNING,
+                now,
+                f"positions arrive at {rate:.1f} Hz, slower than the {self.loop_rate_hz:g} Hz "
+                "guidance loop: a sample more than 1.1 periods after the last tick ticks "
+                "twice (a deadline tick on the last position, then its own), each a step of a "
+                "period, and the law's time runs ahead of the clock; set "
+                f"companion.loop_rate_hz to {math.floor(rate):g} or less",
+                rate_hz=rate,
+                loop_rate_hz=self.loop_rate_hz,
+            )
+
+    @property
+    def loop_rate_hz(self) -> float:
+        """The rate guidance ticks at: the configured loop's, no faster than positions are
+        asked for (``CompanionService._tick_at_stream_rate``)."""
+        return min(self.settings.loop_rate_hz, self.requested_rate_hz)

@@ -15,8 +15,9 @@ is the engagement's (:mod:`ezcompanion.service.engagement`).
    never starts (or stops) and the service ends.
 2. Ask for the telemetry the state uses, and only that (:mod:`ezcompanion.service.streams`):
    SET_MESSAGE_INTERVAL for
-   LOCAL_POSITION_NED and GLOBAL_POSITION_INT at the configured rate (capped at 40 Hz for
-   fixed wing, which ArduPlane would deny) and ATTITUDE at ``_ATTITUDE_RATE_HZ`` at most
+   LOCAL_POSITION_NED and GLOBAL_POSITION_INT at the configured rate (for fixed wing a
+   whole number of ArduPlane's 50 Hz loops apart, 25 Hz at most) and ATTITUDE at
+   ``_ATTITUDE_RATE_HZ`` at most
    (its yaw stands in for the course only when the vehicle is slow); check two seconds
    later that the position arrives at least at half that rate. If not, ask again once,
    and from ArduPilot also REQUEST_DATA_STREAM for the groups that carry those messages
@@ -156,6 +157,7 @@ class VehicleSession(StreamRequests):
         self._streams_requested_s: float | None = None
         self._rate_checks = 0
         self._counts_at_request: dict[str, int] = {}
+        self._counts_settled: tuple[float, dict[str, int]] | None = None
         self.received: dict[str, int] = {}
         self.acks: dict[int, tuple[int, float]] = {}  # command -> (result, time) of its last ack
         self._next_engage_s = 0.0

@@ -9,7 +9,7 @@ Layout (every key optional)::
       target_system: 0               # the vehicle; 0 = the first autopilot heard
       target_component: 0            # 0 = the component that sent that heartbeat
       loop_rate_hz: 50.0             # guidance ticks per second (at most the rate
-                                     # positions are asked at: 40 Hz on a plane)
+                                     # positions are asked at: 25 Hz on a plane)
       telemetry_rate_hz: 50.0        # what is requested of each streamed message
       setpoint: auto                 # auto | velocity | course (see docs/service.md)
       stale_after_s: 0.25            # position older than this is never fed to the law

@@ -2,7 +2,8 @@
 :class:`ezcompanion.service.session.VehicleSession`, which owns the state).
 
 Only what the state uses: LOCAL_POSITION_NED and GLOBAL_POSITION_INT at the configured rate
-(40 Hz at most on a fixed wing, which ArduPlane would deny), ATTITUDE at 10 Hz at most, by
+(on a fixed wing a whole number of ArduPlane's 50 Hz loops apart, 25 Hz at most:
+``plane_rate_hz``), ATTITUDE at 10 Hz at most, by
 SET_MESSAGE_INTERVAL; ArduPilot's stream groups (REQUEST_DATA_STREAM) only on the one retry
 after a low rate. Two seconds after asking, the position must arrive at half the rate at
 least (else ``rate_low`` and one retry), and at 0.9 of the guidance loop's rate at least
@@ -22,18 +23,32 @@ from ezcompanion.service.settings import CompanionSettings
 from ezcompanion.service.state import CROSS_CHECK_PERIOD_S, TelemetryState
 from ezcompanion.wire import Link, Message, mavlink
 
-__all__ = ["POSITIONS", "StreamRequests"]
+__all__ = ["POSITIONS", "StreamRequests", "plane_rate_hz"]
 
 _RATE_CHECK_AFTER_S = 2.0
 # positions slower than this share of the loop's rate come later than its deadline (1.1
 # periods after the last tick): said, with the loop rate that would tick once a sample
 _LOOP_SHARE_MIN = 0.9
-_PLANE_MAX_RATE_HZ = 40.0
+# ... measured from this long after asking (the vehicle's old interval runs out first: on
+# ArduPlane SITL the 2 s from the request counted 45 positions of a 25 Hz stream)
+_RATE_SETTLE_S = 0.5
+# ArduPlane sends its streams once a main loop (50 Hz, SCHED_LOOP_RATE), 40 Hz at most: asked
+# 40 Hz, 4.5.1 SITL sent them 20, 20, 20 and 40 ms apart (a helper's three runs), and a 40 Hz
+# loop ticked twice in each 40 ms gap. A plane is asked a whole number of its loops apart:
+# 25 Hz (every other loop) at most, evenly spaced on a main loop of 50, 100, 200, 300 or 400 Hz
+_PLANE_LOOP_HZ = 50.0
 _ATTITUDE_RATE_HZ = 10.0  # ATTITUDE at most this often: yaw is used only when slow
 _GLOBAL_REPACE_S = 1.0  # the global position's rate changes at most this often
 # ArduPilot stream groups asked on the retry: positions, then attitude
 _GROUPS = (mavlink.MAV_DATA_STREAM_POSITION, mavlink.MAV_DATA_STREAM_EXTRA1)
 POSITIONS = frozenset({"LOCAL_POSITION_NED", "GLOBAL_POSITION_INT"})
+
+
+def plane_rate_hz(rate_hz: float) -> float:
+    """The stream rate a plane is asked for ``rate_hz``: a whole number (at least two) of
+    ArduPlane's 50 Hz main loops apart, at most ``rate_hz`` (25 Hz for 50 or 40, 16.7 Hz
+    for 20, 10 Hz for 10)."""
+    return _PLANE_LOOP_HZ / max(2, math.ceil(_PLANE_LOOP_HZ / rate_hz - 1e-9))
 
 
 class StreamRequests:
@@ -53,6 +68,7 @@ class StreamRequests:
     _send: Callable[[Message], object]
     _streams_requested_s: float | None
     _counts_at_request: dict[str, int]
+    _counts_settled: tuple[float, dict[str, int]] | None  # (when, counts) _RATE_SETTLE_S on
     _global_paced_s: float
     _rate_checks: int
 
@@ -63,7 +79,7 @@ class StreamRequests:
         system, component = self.target
         rate = self.settings.telemetry_rate_hz
         if self.fixed_wing:
-            rate = min(rate, _PLANE_MAX_RATE_HZ)
+            rate = plane_rate_hz(rate)
         attitude_hz = min(rate, _ATTITUDE_RATE_HZ)
         heartbeat = self.heartbeat
         ardupilot = (
@@ -81,6 +97,7 @@ class StreamRequests:
             self._send_interval(name, hz)
         self._streams_requested_s = now
         self._counts_at_request = dict(self.received)
+        self._counts_settled = None
         self.requested_rate_hz = self.global_rate_hz = rate
         self._global_paced_s = now
         self.events.emit(
@@ -125,14 +142,14 @@ class StreamRequests:
 
     def _check_rates(self, now: float) -> None:
         start = self._streams_requested_s
-        if start is None or now - start < _RATE_CHECK_AFTER_S:
+        if start is None:
+            return
+        if self._counts_settled is None and now - start >= _RATE_SETTLE_S:
+            self._counts_settled = (now, dict(self.received))
+        if now - start < _RATE_CHECK_AFTER_S:
             return
         self._streams_requested_s = None
-        elapsed = now - start
-        rate = max(
-            (self.received.get(n, 0) - self._counts_at_request.get(n, 0)) / elapsed
-            for n in POSITIONS
-        )
+        rate = self._position_rate_hz(self._counts_at_request, now - start)
         if rate < 0.5 * self.requested_rate_hz:
             self.events.emit(
                 EventKind.RATE_LOW,
@@ -143,7 +160,12 @@ class StreamRequests:
             if self._rate_checks == 0 and self.connected:
                 self.request_streams(now, groups=True)
             self._rate_checks += 1
-        elif rate < _LOOP_SHARE_MIN * self.loop_rate_hz:
+            return
+        if self._counts_settled is None:
+            return
+        since, counts = self._counts_settled
+        rate = self._position_rate_hz(counts, now - since)
+        if rate < _LOOP_SHARE_MIN * self.loop_rate_hz:
             self.events.emit(
                 EventKind.WARNING,
                 now,
@@ -155,6 +177,11 @@ class StreamRequests:
                 rate_hz=rate,
                 loop_rate_hz=self.loop_rate_hz,
             )
+
+    def _position_rate_hz(self, counts: dict[str, int], elapsed_s: float) -> float:
+        """Positions a second since ``counts`` were taken, ``elapsed_s`` ago (the faster
+        of the two streams)."""
+        return max((self.received.get(n, 0) - counts.get(n, 0)) / elapsed_s for n in POSITIONS)
 
     @property
     def loop_rate_hz(self) -> float:

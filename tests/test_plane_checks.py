@@ -159,3 +159,25 @@ def test_a_plane_is_guided_at_an_even_stream_one_tick_a_sample(tmp_path: Path) -
     times = np.array([t for t, _ in ticks])
     assert np.diff(times).min() > 0.9 * 0.04
     assert len(ticks) <= 25.0 * (times[-1] - times[0]) + 1.5
+
+
+def test_a_scenario_too_slow_for_the_planes_stream_rate_is_refused_named(
+    tmp_path: Path,
+) -> None:
+    """A scenario the 50 Hz loop can fly (a step of a period turns less than a revolution
+    at half its speed) but the 25 Hz a plane is asked at cannot: refused as the vehicle is
+    found, before GUIDED is asked for, naming the speed and the rate; nothing is sent."""
+    data = yaml.safe_load((CONFIG / "paper_scenario1.yaml").read_text())
+    least_25 = 2.0 * data["vehicle"]["accel_max_m_s2"] / 25.0 / (2.0 * math.pi)
+    data["vehicle"]["speed_m_s"] = 0.6 * least_25  # 1.2 times the 50 Hz loop's least
+    config = tmp_path / "slow.yaml"
+    config.write_text(yaml.safe_dump(data))
+    flight = fly_service(config, tmp_path, profile="plane", start_mode="LOITER",
+                         max_time_s=4.0, lockstep=True, loop_rate_hz=50.0,
+                         telemetry_rate_hz=50.0)  # fmt: skip
+    (refused,) = [e for e in flight.events.of_kind(EventKind.ABORTED)
+                  if e.data.get("cause") == "loop_rate"]  # fmt: skip
+    assert refused.data["loop_rate_hz"] == 25.0
+    assert "vehicle.speed_m_s" in refused.message and "at a 25 Hz loop" in refused.message
+    asked = [e for e in flight.events.of_kind(EventKind.MODE) if "requested" in e.data]
+    assert not asked and flight.outcome.setpoints_sent == 0

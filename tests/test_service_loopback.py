@@ -506,7 +506,7 @@ def test_signing_mismatch_is_refused_and_a_match_flies(tmp_path: Path) -> None:
     )
     match_dir = tmp_path / "match"
     match_dir.mkdir()
-    matched = fly(mismatch, match_dir, signing_key_hex=KEY_A)
+    matched = fly(mismatch, match_dir, signing_key_hex=KEY_A, lockstep=True)
     assert matched.outcome.intercepted
 
 

@@ -96,13 +96,13 @@ class GuidanceLoop:
                     start.east_m, start.course_rad, 0.0, 0.0, start.speed_m_s, 0.0, 0.0, 1.0,
                     0.0, 0.0, math.inf)  # fmt: skip
 
-    def use_loop_rate(self, loop_rate_hz: float) -> None:
+    def use_loop_rate(self, loop_rate_hz: float, fix: str = "raise the rate") -> None:
         """Tick at ``loop_rate_hz``: the law's step is its period. Only before guidance
         starts (the step is one and the same throughout: docs/guidance.md, assumption 3).
         A tick on time must be a step the law can take at the least speed it is fed
         (slower, a step turns more than a revolution: ``single.least_speed_m_s``): a
-        scenario too slow for the rate is refused with a ``ConfigError``, not at a tick,
-        and the rate is left as it was."""
+        scenario too slow for the rate is refused with a ``ConfigError`` that ends with
+        ``fix``, not at a tick, and the rate is left as it was."""
         period = 1.0 / loop_rate_hz
         least = least_speed_m_s(self.scenario.guidance.accel_max_m_s2, period)
         speed = self.scenario.start.speed_m_s
@@ -112,7 +112,7 @@ class GuidanceLoop:
                 "vehicle.speed_m_s", speed,
                 f"must be >= {shown} m/s at a {loop_rate_hz:g} Hz "
                 f"loop (the law is fed half of it at the least, and a step of one period "
-                f"must not turn more than a revolution at accel_max_m_s2): raise the rate",
+                f"must not turn more than a revolution at accel_max_m_s2): {fix}",
             )  # fmt: skip
         self.period_s = period
 

@@ -659,11 +659,11 @@ class CompanionService:
         if rate >= configured:
             return True
         try:
-            self.loop.use_loop_rate(rate)
+            self.loop.use_loop_rate(rate, fix="guidance ticks no faster than positions are "
+                                    "asked for (telemetry_rate_hz; 25 Hz at most on a plane)")
         except ConfigError as exc:
-            self.events.emit(EventKind.ABORTED, now, f"{exc}; guidance ticks no faster than "
-                             f"positions are asked for, {rate:g} Hz on this vehicle: not "
-                             "guided", cause="loop_rate", loop_rate_hz=rate)  # fmt: skip
+            self.events.emit(EventKind.ABORTED, now, f"{exc}: not guided", cause="loop_rate",
+                             loop_rate_hz=rate)  # fmt: skip
             self.engagement.done = True
             self.phase = Phase.DONE
             return False

@@ -161,8 +161,8 @@ class StreamRequests:
                 self.request_streams(now, groups=True)
             self._rate_checks += 1
             return
-        if self._counts_settled is None:
-            return
+        if self._counts_settled is None or now - self._counts_settled[0] < _RATE_SETTLE_S:
+            return  # (the service was held up: too short a count to say)
         since, counts = self._counts_settled
         rate = self._position_rate_hz(counts, now - since)
         if rate < _LOOP_SHARE_MIN * self.loop_rate_hz:

@@ -331,6 +331,12 @@ class StubConfig:
         return gain if guided_p is None else math.radians(guided_p / 100.0)
 
     @property
+    def roll_rate_max_rad_s(self) -> float:
+        """The most the vehicle's roll turns a second: the profile's in the measured model
+        (a plane's, as ArduPlane SITL rolled), 0 (at once) in the ideal one."""
+        return self.spec.roll_rate_max_rad_s if self.measured else 0.0
+
+    @property
     def roll_limit_rad(self) -> float:
         """ArduPlane's roll limit, which clips its heading loop's roll: ``roll_limit_deg``,
         else the profile's (the firmware's default, 45 degrees)."""

@@ -77,6 +77,9 @@ class ProfileSpec:
     # stub's own course loop (course_gain_1_s)
     heading_roll_gain: float | None = None
     roll_limit_rad: float = math.radians(45.0)
+    # the most the roll turns a second (measured model; 0: at once): ArduPlane 4.5.1 SITL's
+    # ATTITUDE rolled at 1.29 rad/s at most in a 67 s engagement with reversals (p99 0.86)
+    roll_rate_max_rad_s: float = 0.0
     vz_hold_drift_m_s: float  # climb while told vz = 0 without a height (up)
     failsafe_descent_m_s: float  # descent after the offboard-loss failsafe (no RC)
     acks_twice: bool  # every COMMAND_ACK is sent twice (PX4 v1.16)
@@ -143,6 +146,7 @@ _PLANE = ProfileSpec(
     speed_ratio=23.4 / 22.0, heading_accel_ratio=0.73, vz_hold_drift_m_s=0.0,
     failsafe_descent_m_s=0.0, acks_twice=False, firmware=(4, 7, 0, 0),
     heading_roll_gain=math.radians(50.0),  # GUIDED_P 5000 cd/rad: 50 degrees per radian
+    roll_rate_max_rad_s=1.3,  # 74 deg/s: ArduPlane 4.5.1 SITL's most (docs/sitl_stub.md)
 )
 
 _PX4 = ProfileSpec(

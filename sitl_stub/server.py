@@ -77,6 +77,7 @@ class SitlStub:
             speed_lag_s=config.model_value("velocity_lag_s") if config.measured else 0.0,
             follows_setpoint_speed=config.measured, shaping=config.velocity_shaping(),
             vector_lag_s=config.vector_lag_s(),
+            roll_rate_max_rad_s=config.roll_rate_max_rad_s,
         )
         grounded = not s.start_armed and config.spec.can_hover
         start = config.placed_start

@@ -257,9 +257,9 @@ def test_each_setpoint_profile_flies_the_stub(
 ) -> None:
     # The copter holds in LOITER and the companion asks for GUIDED; PX4 holds in AUTO.LOITER
     # and refuses OFFBOARD until setpoints stream, so the companion streams first. The plane
-    # flies the scenario at a plane's scale (at the paper's 1 m/s the loopback plane's roll,
-    # set at once, turned its yaw rate by up to 18 rad/s^2 at 25 Hz, beyond the estimate
-    # gate's 10: refused, named; 9.2 at 20 Hz, asked 16.7 Hz now, a plane's even rate)
+    # flies the scenario at a plane's scale (1 m/s is no plane's: there the loopback plane's
+    # roll, before it turned at ArduPlane's rate, had turned its yaw rate beyond the gate's
+    # 10 rad/s^2 at the 16.7 Hz a plane is asked at for 20)
     config = CONFIG / ("paper_scenario1_plane22.yaml" if profile == "plane" else
                        "paper_scenario1.yaml")  # fmt: skip
     flight = fly(config, tmp_path, profile=profile, start_mode=start_mode, lockstep=True,

@@ -332,7 +332,7 @@ class StubConfig:
 
     @property
     def roll_rate_max_rad_s(self) -> float:
-        """The most the vehicle's roll turns a second: the profile's in the measured model
+        """The most the vehicle's bank turns a second: the profile's in the measured model
         (a plane's, as ArduPlane SITL rolled), 0 (at once) in the ideal one."""
         return self.spec.roll_rate_max_rad_s if self.measured else 0.0
 

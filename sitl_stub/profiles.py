@@ -77,7 +77,7 @@ class ProfileSpec:
     # stub's own course loop (course_gain_1_s)
     heading_roll_gain: float | None = None
     roll_limit_rad: float = math.radians(45.0)
-    # the most the roll turns a second (measured model; 0: at once): ArduPlane 4.5.1 SITL's
+    # the most the bank turns a second (measured model; 0: at once): ArduPlane 4.5.1 SITL's
     # ATTITUDE rolled at 1.29 rad/s at most in a 67 s engagement with reversals (p99 0.86)
     roll_rate_max_rad_s: float = 0.0
     vz_hold_drift_m_s: float  # climb while told vz = 0 without a height (up)

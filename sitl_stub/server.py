@@ -78,6 +78,7 @@ class SitlStub:
             follows_setpoint_speed=config.measured, shaping=config.velocity_shaping(),
             vector_lag_s=config.vector_lag_s(),
             roll_rate_max_rad_s=config.roll_rate_max_rad_s,
+            bank_accel_ratio=config.model_value("heading_accel_ratio"),
         )
         grounded = not s.start_armed and config.spec.can_hover
         start = config.placed_start

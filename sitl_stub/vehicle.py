@@ -13,9 +13,10 @@ State (local NED of the scenario, SI):
 - ``height_m``, ``climb_m_s``: height above the scenario's origin (up) and its rate; a
   :class:`Vertical` command holds a height or flies a climb rate; never below 0 once above.
 - ``accel_lat_m_s2``: the lateral acceleration actually flown, positive turning right; it
-  follows the desired one with a first-order lag of ``response_time_s`` (0 = at once), its
-  roll, atan(a / g), turning at most ``roll_rate_max_rad_s`` a second (a plane; 0 = at
-  once), and is bounded by ``accel_max_m_s2`` and by ``speed * yaw_rate_max``.
+  follows the desired one with a first-order lag of ``response_time_s`` (0 = at once), the
+  bank it is flown at, atan(a / (``bank_accel_ratio`` g)), turning at most
+  ``roll_rate_max_rad_s`` a second (a plane; 0 = at once), and is bounded by
+  ``accel_max_m_s2`` and by ``speed * yaw_rate_max``.
 - ``shaped``: with :class:`VelocityShaping` (ArduCopter), the autopilot's own shaped
   velocity reference and its acceleration while it follows a velocity setpoint or brakes;
   None otherwise.
@@ -172,8 +173,10 @@ class VehicleParams:
     shaping: VelocityShaping | None = None  # velocity setpoints shaped as ArduCopter does
     # > 0: velocity setpoints flown by a velocity loop, the vector lagging by this (PX4)
     vector_lag_s: float = 0.0
-    # > 0: the roll of a coordinated turn, atan(a / g), turns at most this fast (a plane)
+    # > 0: the bank of the turn, atan(a / (bank_accel_ratio g)), turns at most this fast (a
+    # plane, which turns at bank_accel_ratio g tan(bank): ArduPlane's 0.73)
     roll_rate_max_rad_s: float = 0.0
+    bank_accel_ratio: float = 1.0
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -424,11 +427,11 @@ def step(
     bound = _accel_bound(params, speed_mean)
     accel_next = max(-bound, min(bound, accel_next))
     rolling = params.roll_rate_max_rad_s > 0.0
-    if rolling:  # the roll of the turn, atan(a / g), turns at most this fast
-        roll = math.atan(state.accel_lat_m_s2 / GRAVITY_M_S2)
+    if rolling:  # the bank of the turn turns at most this fast
+        g = params.bank_accel_ratio * GRAVITY_M_S2  # a = g tan(bank)
+        bank = math.atan(state.accel_lat_m_s2 / g)
         turn = params.roll_rate_max_rad_s * dt_s
-        wanted_roll = math.atan(accel_next / GRAVITY_M_S2)
-        accel_next = GRAVITY_M_S2 * math.tan(min(max(wanted_roll, roll - turn), roll + turn))
+        accel_next = g * math.tan(min(max(math.atan(accel_next / g), bank - turn), bank + turn))
     accel_now = max(-bound, min(bound, state.accel_lat_m_s2
                                 if params.response_time_s > 0.0 or rolling else accel_next))
     slope = (accel_next - accel_now) / dt_s

@@ -9,7 +9,9 @@ from __future__ import annotations
 import math
 import time
 from pathlib import Path
+from typing import Any
 
+import pytest
 import yaml
 from test_service_loopback import fly
 from test_service_units import CONFIG, ORIGIN, known_origin, local
@@ -170,3 +172,78 @@ def test_positions_slower_than_the_loop_are_said_with_the_loop_rate_that_ticks_o
     assert said.data["loop_rate_hz"] == 50.0 and 27.0 <= said.data["rate_hz"] <= 31.0
     assert f"companion.loop_rate_hz to {math.floor(said.data['rate_hz'])} or less" in (
         said.message)
+
+
+def loop_rate_warnings(counts_at_s: dict[float, int]) -> list[Any]:
+    """The loop-rate warnings of a session asked for 25 Hz on a 25 Hz loop whose
+    LOCAL_POSITION_NED count reads ``counts_at_s[t]`` at each periodic call at ``t`` (s
+    after the request)."""
+    scenario = load_scenario(CONFIG)
+    log = EventLog()
+    with open_link("udpin:127.0.0.1:0", system_id=1, component_id=1) as vehicle:
+        host, port = vehicle.local_address or ("", 0)
+        settings = companion_settings(scenario, connect=f"udpout:{host}:{port}",
+                                      telemetry_rate_hz=25.0, loop_rate_hz=25.0)  # fmt: skip
+        with open_link(settings.connect, system_id=245, component_id=191) as link:
+            session = VehicleSession(scenario, settings, log, link, link.send)
+            session.target = (1, 1)
+            session.heartbeat = mavlink.MAVLink_heartbeat_message(
+                mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 4, 4, 3)
+            session.request_streams(0.0)
+            for now, count in sorted(counts_at_s.items()):
+                session.received["LOCAL_POSITION_NED"] = count
+                session.periodic(now, waiting=False)
+    return [e for e in log.of_kind(EventKind.WARNING) if "loop_rate_hz" in e.data]
+
+
+def test_the_loop_rate_check_counts_from_half_a_second_after_asking() -> None:
+    """A vehicle takes its old interval's time to change rate: 2 positions in the first
+    half second, then 25 Hz, read 20 Hz from the request (below 0.9 of the loop's 25)
+    and 25.3 Hz from half a second on: no warning. A stream at 20 Hz throughout is named.
+    A service held up past 2 s before its first check says nothing rather than divide a
+    count by no time."""
+    assert loop_rate_warnings({0.1: 0, 0.5: 2, 1.0: 14, 1.5: 27, 2.0: 40}) == []
+    (said,) = loop_rate_warnings({0.1: 2, 0.5: 10, 1.0: 20, 1.5: 30, 2.0: 40})
+    assert said.data["rate_hz"] == 20.0 and "loop_rate_hz to 20 or less" in said.message
+    assert loop_rate_warnings({2.2: 55}) == []
+
+
+def test_local_positions_count_as_fresh_only_once_the_snapshot_reads_them() -> None:
+    """After a lost link the tracks wait ``_CONFIRM_S`` to be confirmed, and the snapshot
+    reads no position from an unconfirmed one. ``local_fresh`` (which decides whether a
+    global position ticks, and at what rate it is asked) said True from the first new
+    local sample; it now agrees with the snapshot at every sample."""
+    t = known_origin(stale_after_s=0.25)
+    fly_both(t, 50)
+    t.forget_motion()
+    agreed = []
+    for k in range(50, 80):
+        boot = 1000 + DT_MS * k
+        now = boot / 1000.0
+        t.update(local(boot, 0.02 * k, 0.0), now)
+        t.update(global_at(boot, 0.02 * k, 0.0), now)
+        state = t.snapshot(0.25, now)
+        agreed.append(t.local_fresh(now) == (state is not None
+                                             and state.position_source == "local"))
+    assert all(agreed)
+    assert t.local_fresh((1000 + DT_MS * 79) / 1000.0)  # confirmed by the end
+
+
+def test_the_loop_rate_follows_the_positions_asked_for_within_the_loops_range() -> None:
+    """The loop ticks no faster than positions are asked for, a plane's evenly on its 50
+    Hz main loop, and no slower than a loop may be configured to tick (1 Hz)."""
+    scenario = load_scenario(CONFIG)
+    cases = [({"telemetry_rate_hz": 50.0}, False, 50.0), ({"telemetry_rate_hz": 20.0}, False, 20.0),
+             ({"telemetry_rate_hz": 50.0}, True, 25.0), ({"telemetry_rate_hz": 20.0}, True, 50 / 3),
+             ({"telemetry_rate_hz": 0.5, "stale_after_s": 4.0}, False, 1.0),
+             ({"telemetry_rate_hz": 50.0, "loop_rate_hz": 10.0}, True, 10.0)]  # fmt: skip
+    with open_link("udpin:127.0.0.1:0", system_id=1, component_id=1) as vehicle:
+        host, port = vehicle.local_address or ("", 0)
+        for overrides, plane, expected in cases:
+            settings = companion_settings(scenario, connect=f"udpout:{host}:{port}",
+                                          **overrides)  # type: ignore[arg-type]
+            with open_link(settings.connect, system_id=245, component_id=191) as link:
+                session = VehicleSession(scenario, settings, EventLog(), link, link.send)
+                session.target, session.fixed_wing = (1, 1), plane
+                session.request_streams(0.0)
+                assert session.loop_rate_hz == pytest.approx(expected), (overrides, plane)

@@ -59,6 +59,7 @@ from ezcompanion.wire import (
 
 __all__ = [
     "GATE_ACCEL_MAX_M_S2",
+    "LOOP_RATE_MIN_HZ",
     "SIGNING_ENV",
     "CompanionSettings",
     "OnExit",
@@ -73,6 +74,7 @@ _ON_EXIT = "hold, loiter, rtl, none or default"
 # the estimate gate's widest settings (see CompanionSettings.__post_init__)
 _GATE_POSITION_MAX_M = 25.0
 GATE_ACCEL_MAX_M_S2 = 50.0
+LOOP_RATE_MIN_HZ = 1.0  # the slowest loop: a tick a second
 
 #: Environment variables a signing key may come from (hex key, passphrase).
 SIGNING_ENV = ("EZCOMPANION_SIGNING_KEY", "EZCOMPANION_SIGNING_PASSPHRASE")
@@ -165,8 +167,9 @@ class CompanionSettings:
                            ("gate_accel_m_s2", GATE_ACCEL_MAX_M_S2)):  # fmt: skip
             if getattr(self, name) > most:
                 raise ConfigError(name, getattr(self, name), f"must be at most {most:g}")
-        if not 1.0 <= self.loop_rate_hz <= 1000.0:
-            raise ConfigError("loop_rate_hz", self.loop_rate_hz, "must be within [1, 1000]")
+        if not LOOP_RATE_MIN_HZ <= self.loop_rate_hz <= 1000.0:
+            raise ConfigError("loop_rate_hz", self.loop_rate_hz,
+                              f"must be within [{LOOP_RATE_MIN_HZ:g}, 1000]")
         if self.stale_after_s < 2.0 / self.telemetry_rate_hz:
             raise ConfigError(
                 "stale_after_s", self.stale_after_s, "must allow at least two telemetry periods"

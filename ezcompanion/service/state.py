@@ -449,9 +449,11 @@ class TelemetryState:
         return kind
 
     def local_fresh(self, now_s: float) -> bool:
-        """A local position arrived (and moved) within ``stale_after_s``."""
+        """A confirmed local position arrived (and moved) within ``stale_after_s``: the one
+        ``snapshot`` reads (a track still to be confirmed, after a lost link, is not)."""
         track = self._tracks.get("local")
-        return track is not None and now_s - track.moved.arrived_s <= self.stale_after_s
+        return (track is not None and track.unconfirmed_since_s is None
+                and now_s - track.moved.arrived_s <= self.stale_after_s)  # fmt: skip
 
     def take_refusal(self) -> tuple[Hold, str] | None:
         """The trust refusal of the last :meth:`update` (cause, why), once."""

@@ -19,7 +19,7 @@ from collections.abc import Callable
 
 from ezcompanion.records import EventKind
 from ezcompanion.service.events import EventLog
-from ezcompanion.service.settings import CompanionSettings
+from ezcompanion.service.settings import LOOP_RATE_MIN_HZ, CompanionSettings
 from ezcompanion.service.state import CROSS_CHECK_PERIOD_S, TelemetryState
 from ezcompanion.wire import Link, Message, mavlink
 
@@ -29,8 +29,8 @@ _RATE_CHECK_AFTER_S = 2.0
 # positions slower than this share of the loop's rate come later than its deadline (1.1
 # periods after the last tick): said, with the loop rate that would tick once a sample
 _LOOP_SHARE_MIN = 0.9
-# ... measured from this long after asking (the vehicle's old interval runs out first: on
-# ArduPlane SITL the 2 s from the request counted 45 positions of a 25 Hz stream)
+# ... counted from this long after asking (the vehicle's old interval runs out first: on
+# ArduPlane SITL, counted from the request, a 25 Hz stream read 22.5 Hz, a false warning)
 _RATE_SETTLE_S = 0.5
 # ArduPlane sends its streams once a main loop (50 Hz, SCHED_LOOP_RATE), 40 Hz at most: asked
 # 40 Hz, 4.5.1 SITL sent them 20, 20, 20 and 40 ms apart (a helper's three runs), and a 40 Hz
@@ -173,7 +173,7 @@ class StreamRequests:
                 "guidance loop: a sample more than 1.1 periods after the last tick ticks "
                 "twice (a deadline tick on the last position, then its own), each a step of a "
                 "period, and the law's time runs ahead of the clock; set "
-                f"companion.loop_rate_hz to {math.floor(rate):g} or less",
+                f"companion.loop_rate_hz to {max(math.floor(rate), 1):g} or less",
                 rate_hz=rate,
                 loop_rate_hz=self.loop_rate_hz,
             )
@@ -186,5 +186,6 @@ class StreamRequests:
     @property
     def loop_rate_hz(self) -> float:
         """The rate guidance ticks at: the configured loop's, no faster than positions are
-        asked for (``CompanionService._tick_at_stream_rate``)."""
-        return min(self.settings.loop_rate_hz, self.requested_rate_hz)
+        asked for (``CompanionService._tick_at_stream_rate``), and no slower than a loop may
+        be configured to tick (positions asked below 1 Hz: a tick a second)."""
+        return max(LOOP_RATE_MIN_HZ, min(self.settings.loop_rate_hz, self.requested_rate_hz))

@@ -22,13 +22,14 @@ from hypothesis import strategies as st
 
 from ezcompanion.config import load_scenario
 from ezcompanion.errors import ConfigError
+from ezcompanion.guidance.single import law_step_s
 from ezcompanion.service.clock import LockstepClock
 from ezcompanion.service.demo import free_udp_port, run_loopback
 from ezcompanion.service.events import EventKind, EventLog
 from ezcompanion.service.lockstep import Lockstep, check_loopback_url
 from ezcompanion.service.runner import CompanionService
 from ezcompanion.service.settings import companion_settings
-from ezcompanion.service.ticks import TickSchedule
+from ezcompanion.service.ticks import DEADLINE_PERIODS, TickSchedule
 from ezcompanion.wire import mavlink
 from sitl_stub import SitlStub
 
@@ -50,8 +51,9 @@ def test_a_sample_ticks_once_and_a_late_deadline_does_not_tick_it_again() -> Non
     assert not schedule.sample(0.040)  # GLOBAL_POSITION_INT of the same instant
     assert not schedule.is_due(0.0433)  # the old grid's late deadline: no second tick
     assert not schedule.is_due(0.0600)  # a period: a sample on time may still come
-    assert schedule.is_due(0.0620)  # a period and a tenth without a sample: a deadline
-    schedule.ticked(0.0620)
+    assert not schedule.is_due(0.0669)  # ArduCopter's samples came up to 1.24 periods late
+    assert schedule.is_due(0.0670)  # 1.35 periods without a sample: a deadline
+    schedule.ticked(0.0670)
     assert not schedule.is_due(0.0839)
     assert schedule.sample(0.080) and schedule.is_due(0.0840)
     schedule.ticked(0.0840)
@@ -85,18 +87,19 @@ def test_guidance_starts_with_one_tick_on_the_newest_sample_not_two() -> None:
 
 
 def test_a_sample_just_after_a_deadline_ticks_at_once() -> None:
-    """The deadline ticked without it (the sample came 2.5 ms late, 0.4 ms after the
+    """The deadline ticked without it (the sample came 7.5 ms late, 0.4 ms after the
     deadline): the sample is not held half a period behind a tick that did not use it."""
     schedule = TickSchedule(0.02)
     assert schedule.sample(0.0) and schedule.is_due(0.0)
     schedule.ticked(0.0)
     assert schedule.sample(0.020) and schedule.is_due(0.0201)  # on time (0.1 ms in)
     schedule.ticked(0.0201)
-    assert schedule.is_due(0.0421)  # the next sample is late: a deadline
-    schedule.ticked(0.0421)
-    assert schedule.sample(0.040) and schedule.is_due(0.0425)  # 0.4 ms after it: at once
-    schedule.ticked(0.0425)
-    assert not schedule.is_due(0.0640) and schedule.is_due(0.0645)
+    assert not schedule.is_due(0.0468)  # ArduCopter's samples came up to 4.7 ms late
+    assert schedule.is_due(0.0471)  # the next sample is later still: a deadline
+    schedule.ticked(0.0471)
+    assert schedule.sample(0.040) and schedule.is_due(0.0475)  # 0.4 ms after it: at once
+    schedule.ticked(0.0475)
+    assert not schedule.is_due(0.0744) and schedule.is_due(0.0745)
 
 
 @settings(max_examples=200, deadline=None)
@@ -133,7 +136,7 @@ def test_sample_ticks_are_half_a_period_apart_and_each_tick_has_a_sample_or_a_de
             assert t1 - last_sample_tick >= 0.5 * period - 1e-6
             last_sample_tick = t1
         else:
-            assert t1 - t0 >= 1.1 * period - 1e-6  # no sample: only at a deadline
+            assert t1 - t0 >= DEADLINE_PERIODS * period - 1e-6  # no sample: only at a deadline
 
 
 # --- the companion's clock and guard ----------------------------------------------------------
@@ -279,3 +282,42 @@ def test_a_lockstep_companion_refuses_a_non_loopback_address() -> None:
     settings_ = companion_settings(scenario, connect="udpin:0.0.0.0:14550")
     with pytest.raises(ConfigError, match="--lockstep"):
         CompanionService(scenario, settings_, lockstep=True)
+
+
+# LOCAL_POSITION_NED of ArduCopter 4.5.1 SITL at 50 Hz (2026-12-06): stamped exactly 20 ms
+# apart, each arriving this many ms later than the earliest of them (arrival less stamp),
+# 40 in a row: gaps of 17.3 to 25.7 ms between arrivals
+ARDUCOPTER_DELAYS_MS = [0.8, 4.9, 2.5, 1.7, 4.8, 2.6, 0.1, 5.8, 3.4, 0.9, 4.9, 2.5, 1.0, 4.3,
+                        2.5, 0.7, 4.0, 3.0, 0.8, 4.1, 2.3, 0.7, 4.1, 2.4, 0.0, 3.5, 0.8, 3.8,
+                        1.6, 5.0, 4.0, 2.4, 5.5, 4.1, 1.5, 5.1, 3.4, 0.7, 4.2, 2.6]  # fmt: skip
+
+
+def ticks_of_a_stream(delays_ms: list[float], period: float) -> list[tuple[float, bool]]:
+    """(clock time, on a new sample) of each tick of a schedule fed samples stamped a
+    ``period`` apart that arrive ``delays_ms`` late, the clock read every 0.1 ms from the
+    first arrival (guidance starts on a sample)."""
+    schedule = TickSchedule(period)
+    arrivals = [(k * period + d / 1000.0, k * period) for k, d in enumerate(delays_ms)]
+    ticks, due = [], 0
+    for step in range(round(arrivals[0][0] / 1e-4), round((arrivals[-1][0] + period) / 1e-4)):
+        now = step * 1e-4
+        while due < len(arrivals) and arrivals[due][0] <= now + 1e-9:
+            schedule.sample(arrivals[due][1])
+            due += 1
+        pending = schedule.sample_pending
+        if schedule.is_due(now):
+            schedule.ticked(now)
+            ticks.append((now, pending))
+    return ticks
+
+
+def test_arducopters_jittered_stream_ticks_once_a_sample_each_a_step_of_a_period() -> None:
+    """With the deadline at 1.1 periods, 14 of these 40 samples came after it: a deadline
+    tick on the old position, then the sample's own a few ms later, each told a period
+    (on SITL 1.37 to 1.43 setpoints a sample). At 1.35 periods each sample ticks once,
+    and every tick but the first is a step of a period (``single.law_step_s``)."""
+    period = 0.02
+    ticks = ticks_of_a_stream(ARDUCOPTER_DELAYS_MS, period)
+    assert len(ticks) == len(ARDUCOPTER_DELAYS_MS) and all(sampled for _, sampled in ticks)
+    steps = [law_step_s(period, t1 - t0) for (t0, _), (t1, _) in itertools.pairwise(ticks)]
+    assert steps == [period] * (len(ticks) - 1)

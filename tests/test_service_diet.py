@@ -159,7 +159,7 @@ def test_positions_slower_than_the_loop_are_said_with_the_loop_rate_that_ticks_o
 ) -> None:
     """The loopback copter streams at 30 Hz at most (the companion's 50 Hz request DENIED,
     its stream groups clamped to 30 Hz on the retry after ``rate_low``), on a 50 Hz loop:
-    each sample comes after the loop's deadline, 1.1 periods on, so it ticks twice. The
+    each tick is a step of 20 ms every 33 ms, and a late one ticks twice. The
     companion says so once, naming the loop rate that ticks once a sample."""
     data = yaml.safe_load(CONFIG.read_text())
     data.setdefault("sitl_stub", {})["max_stream_rate_hz"] = 30.0

@@ -140,7 +140,7 @@ def law_step_s(period_s: float, elapsed_s: float) -> float:
     step to the next only at the same step (docs/guidance.md, assumption 3):
 
     - within [2/3, 3/2] of a period, a period (a stream at the loop's rate, jittered, and a
-      deadline tick, 1.1 periods after the last);
+      deadline tick, 1.35 periods after the last);
     - within [1/2, 2/3) of one, half a period (a faster stream, ticked every half period);
     - sooner, a period (a late sample just after a deadline tick: its command is held half
       a period or more);

@@ -21,13 +21,14 @@ from ezcompanion.records import EventKind
 from ezcompanion.service.events import EventLog
 from ezcompanion.service.settings import LOOP_RATE_MIN_HZ, CompanionSettings
 from ezcompanion.service.state import CROSS_CHECK_PERIOD_S, TelemetryState
+from ezcompanion.service.ticks import DEADLINE_PERIODS
 from ezcompanion.wire import Link, Message, mavlink
 
 __all__ = ["POSITIONS", "StreamRequests", "plane_rate_hz"]
 
 _RATE_CHECK_AFTER_S = 2.0
-# positions slower than this share of the loop's rate come later than its deadline (1.1
-# periods after the last tick): said, with the loop rate that would tick once a sample
+# positions slower than this share of the loop's rate run the law's time ahead of the clock
+# (and late ones tick twice): said, with the loop rate that would tick once a sample
 _LOOP_SHARE_MIN = 0.9
 # ... counted from this long after asking (the vehicle's old interval runs out first: on
 # ArduPlane SITL, counted from the request, a 25 Hz stream read 22.5 Hz, a false warning)
@@ -170,10 +171,10 @@ class StreamRequests:
                 EventKind.WARNING,
                 now,
                 f"positions arrive at {rate:.1f} Hz, slower than the {self.loop_rate_hz:g} Hz "
-                "guidance loop: a sample more than 1.1 periods after the last tick ticks "
-                "twice (a deadline tick on the last position, then its own), each a step of a "
-                "period, and the law's time runs ahead of the clock; set "
-                f"companion.loop_rate_hz to {max(math.floor(rate), 1):g} or less",
+                "guidance loop: each tick is a step of a period, so the law's time runs ahead "
+                f"of the clock, and a sample more than {DEADLINE_PERIODS:g} periods after the "
+                "last tick ticks twice (a deadline tick on the last position, then its own); "
+                f"set companion.loop_rate_hz to {max(math.floor(rate), 1):g} or less",
                 rate_hz=rate,
                 loop_rate_hz=self.loop_rate_hz,
             )

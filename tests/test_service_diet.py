@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -88,24 +90,33 @@ def test_the_cross_check_still_refuses_a_global_position_that_disagrees() -> Non
     assert refusals[0][0] <= 55  # within one cross-check period (0.1 s = 5 samples)
 
 
-def requests(settings_overrides: dict[str, object], groups: bool) -> list[Message]:
-    """What ``request_streams`` sends, as the vehicle (a listening link) receives it."""
+@contextmanager
+def asking_session(settings_overrides: dict[str, object], log: EventLog | None = None, *,
+                   fixed_wing: bool = False) -> Iterator[tuple[VehicleSession, Any]]:
+    """A session locked on an ArduPilot quadrotor (or a plane) that is a listening link on
+    loopback, before it has asked for anything: (the session, the vehicle's link)."""
     scenario = load_scenario(CONFIG)
     with open_link("udpin:127.0.0.1:0", system_id=1, component_id=1) as vehicle:
         host, port = vehicle.local_address or ("", 0)
         settings = companion_settings(scenario, connect=f"udpout:{host}:{port}",
                                       **settings_overrides)  # type: ignore[arg-type]
         with open_link(settings.connect, system_id=245, component_id=191) as link:
-            session = VehicleSession(scenario, settings, EventLog(), link, link.send)
-            session.target = (1, 1)
+            session = VehicleSession(scenario, settings, log or EventLog(), link, link.send)
+            session.target, session.fixed_wing = (1, 1), fixed_wing
             session.heartbeat = mavlink.MAVLink_heartbeat_message(
                 mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 4, 4, 3)
-            session.request_streams(0.0, groups=groups)
-            got: list[Message] = []
-            end = time.monotonic() + 5.0
-            while time.monotonic() < end and len(got) < (5 if groups else 3):
-                vehicle.wait_readable(0.1)
-                got.extend(vehicle.recv_messages())
+            yield session, vehicle
+
+
+def requests(settings_overrides: dict[str, object], groups: bool) -> list[Message]:
+    """What ``request_streams`` sends, as the vehicle (a listening link) receives it."""
+    with asking_session(settings_overrides) as (session, vehicle):
+        session.request_streams(0.0, groups=groups)
+        got: list[Message] = []
+        end = time.monotonic() + 5.0
+        while time.monotonic() < end and len(got) < (5 if groups else 3):
+            vehicle.wait_readable(0.1)
+            got.extend(vehicle.recv_messages())
     return got
 
 
@@ -178,21 +189,12 @@ def loop_rate_warnings(counts_at_s: dict[float, int]) -> list[Any]:
     """The loop-rate warnings of a session asked for 25 Hz on a 25 Hz loop whose
     LOCAL_POSITION_NED count reads ``counts_at_s[t]`` at each periodic call at ``t`` (s
     after the request)."""
-    scenario = load_scenario(CONFIG)
     log = EventLog()
-    with open_link("udpin:127.0.0.1:0", system_id=1, component_id=1) as vehicle:
-        host, port = vehicle.local_address or ("", 0)
-        settings = companion_settings(scenario, connect=f"udpout:{host}:{port}",
-                                      telemetry_rate_hz=25.0, loop_rate_hz=25.0)  # fmt: skip
-        with open_link(settings.connect, system_id=245, component_id=191) as link:
-            session = VehicleSession(scenario, settings, log, link, link.send)
-            session.target = (1, 1)
-            session.heartbeat = mavlink.MAVLink_heartbeat_message(
-                mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 4, 4, 3)
-            session.request_streams(0.0)
-            for now, count in sorted(counts_at_s.items()):
-                session.received["LOCAL_POSITION_NED"] = count
-                session.periodic(now, waiting=False)
+    with asking_session({"telemetry_rate_hz": 25.0, "loop_rate_hz": 25.0}, log) as (session, _):
+        session.request_streams(0.0)
+        for now, count in sorted(counts_at_s.items()):
+            session.received["LOCAL_POSITION_NED"] = count
+            session.periodic(now, waiting=False)
     return [e for e in log.of_kind(EventKind.WARNING) if "loop_rate_hz" in e.data]
 
 
@@ -232,18 +234,11 @@ def test_local_positions_count_as_fresh_only_once_the_snapshot_reads_them() -> N
 def test_the_loop_rate_follows_the_positions_asked_for_within_the_loops_range() -> None:
     """The loop ticks no faster than positions are asked for, a plane's evenly on its 50
     Hz main loop, and no slower than a loop may be configured to tick (1 Hz)."""
-    scenario = load_scenario(CONFIG)
     cases = [({"telemetry_rate_hz": 50.0}, False, 50.0), ({"telemetry_rate_hz": 20.0}, False, 20.0),
              ({"telemetry_rate_hz": 50.0}, True, 25.0), ({"telemetry_rate_hz": 20.0}, True, 50 / 3),
              ({"telemetry_rate_hz": 0.5, "stale_after_s": 4.0}, False, 1.0),
              ({"telemetry_rate_hz": 50.0, "loop_rate_hz": 10.0}, True, 10.0)]  # fmt: skip
-    with open_link("udpin:127.0.0.1:0", system_id=1, component_id=1) as vehicle:
-        host, port = vehicle.local_address or ("", 0)
-        for overrides, plane, expected in cases:
-            settings = companion_settings(scenario, connect=f"udpout:{host}:{port}",
-                                          **overrides)  # type: ignore[arg-type]
-            with open_link(settings.connect, system_id=245, component_id=191) as link:
-                session = VehicleSession(scenario, settings, EventLog(), link, link.send)
-                session.target, session.fixed_wing = (1, 1), plane
-                session.request_streams(0.0)
-                assert session.loop_rate_hz == pytest.approx(expected), (overrides, plane)
+    for overrides, plane, expected in cases:
+        with asking_session(overrides, fixed_wing=plane) as (session, _):
+            session.request_streams(0.0)
+            assert session.loop_rate_hz == pytest.approx(expected), (overrides, plane)

@@ -15,11 +15,12 @@ apart on one position, when a late deadline fell right after a sample's tick). R
   0.35 is the grace of a sample on time. A deadline at exactly one period ticked on the
   old position between the frames of one instant, every period in lockstep (ATTITUDE
   before LOCAL_POSITION_NED); one at 1.1 periods, on real ArduCopter 4.5.1 SITL, ticked
-  before 37% of its samples, which arrive 17.3 to 25.7 ms apart at 50 Hz (their stamps
-  exactly 20 ms apart): a deadline tick on the old position, then the sample's own 0.5 to
-  2 ms later, each told a period (``single.law_step_s``), 1.37 to 1.43 setpoints a sample
-  and the law's time some 1.4 times the clock's. At 1.35 the deadline lies beyond that
-  jitter and short of the band's top, 3/2, where the law is told a period, by 3 ms at
+  before 37% of its samples, which arrive 17 to 25 ms apart at 50 Hz (p1 to p99 of six
+  engagements; their stamps exactly 20 ms apart): a deadline tick on the old position,
+  then the sample's own 0.5 to 2 ms later, each told a period (``single.law_step_s``),
+  1.37 to 1.43 setpoints a sample and the law's time some 1.4 times the clock's. At 1.35
+  the deadline lies beyond nearly all of that jitter (0 to 2 gaps a run beyond 27 ms, at
+  most 33 ms) and short of the band's top, 3/2, where the law is told a period, by 3 ms at
   50 Hz for the deadline tick's own lateness;
 - ticks on samples are therefore at least half a period apart, a deadline tick at least a
   period after the tick before it, and each tick is driven by one new sample or one

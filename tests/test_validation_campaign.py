@@ -11,12 +11,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ezcompanion.errors import ConfigError
 from ezcompanion.guidance import GuidanceParams, KinematicState, LawName
 from ezcompanion.validation.batch import BatchSettings, StepResult, law_policy, simulate_batch
-from ezcompanion.validation.campaign import CampaignSpec, run_campaign
+from ezcompanion.validation.campaign import (
+    CampaignSpec,
+    _attested,
+    _gather_attested,
+    run_campaign,
+)
 from ezcompanion.validation.chatter import chattering
 from ezcompanion.validation.output import write_outputs
 from ezcompanion.validation.policies import POLICIES
+from ezcompanion.validation.provenance import mismatches, numerics
 from ezcompanion.validation.response import ResponseClass
 from ezcompanion.validation.scenarios import ScenarioBatch, ScenarioDistribution, draw_scenarios
 from ezcompanion.validation.stats import Rate, upper_bound_95
@@ -64,9 +71,57 @@ def test_a_local_dask_cluster_gives_the_in_process_report(tmp_path: Path) -> Non
         write_outputs(result, tmp_path / folder, figures=False)
         reports.append(json.loads((tmp_path / folder / "report.json").read_text()))
     assert _strip(reports[0]) == _strip(reports[1]) == _strip(reports[2])
+    assert reports[0]["numerics"] == numerics()  # what the runs were computed with
+    summary = (tmp_path / "here" / "summary.txt").read_text()
+    assert f"numba {numerics()['numba']}, llvmlite " in summary.splitlines()[0]
     assert (tmp_path / "here" / "tables.md").read_text() == (
         tmp_path / "dask" / "tables.md"
     ).read_text()
+
+
+def test_a_cluster_whose_workers_compute_otherwise_is_refused_before_any_run() -> None:
+    """A worker that would compute the runs otherwise (here, its kernels uncompiled) is
+    refused by name before any task goes out: the merged report would be neither its
+    numbers nor this process's. A task's result from such a worker (one that joined after
+    the check) is refused as it is gathered."""
+    from distributed import Client, LocalCluster
+
+    spec = CampaignSpec(runs=4, seed=9, policies=("robust",), map_runs=0, chunk_runs=2,
+                        settings=BatchSettings(duration_s=2.0), chatter_runs=0)  # fmt: skip
+    with LocalCluster(
+        n_workers=1, threads_per_worker=1, host="127.0.0.1", dashboard_address=None,
+        scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
+        env={"EZCOMPANION_JIT": "0"},
+    ) as uncompiled:  # fmt: skip
+        address = uncompiled.scheduler_address
+        with pytest.raises(ConfigError) as refused:
+            run_campaign(dataclasses.replace(spec, scheduler=address))
+        assert not uncompiled.scheduler.tasks  # nothing was submitted
+        with Client(uncompiled) as client:
+            task = client.submit(_attested, math.hypot, 3.0, 4.0, pure=False)
+            assert client.gather(task)[2] == 5.0
+            with pytest.raises(ConfigError, match="kernels uncompiled"):
+                _gather_attested(client, [task], "that cluster")
+    message = str(refused.value)
+    assert message.startswith("scheduler: worker tcp://127.0.0.1:")
+    assert "kernels uncompiled (EZCOMPANION_JIT=0), where this process has compiled" in message
+    assert f"(got 'Dask cluster at {address}')" in message
+
+
+def test_a_mismatch_names_the_worker_the_field_and_both_values() -> None:
+    here = numerics()
+    assert set(here) == {"ezcompanion sources", "numpy", "numba", "llvmlite", "kernels", "python",
+                         "libc"}
+    older = dict(here, numba="0.67.0")
+    assert mismatches(here, {"tcp://127.0.0.1:1": here, "tcp://127.0.0.1:2": older}) == [
+        f"worker tcp://127.0.0.1:2: numba 0.67.0, where this process has {here['numba']}"]
+    missing = {k: v for k, v in here.items() if k != "ezcompanion sources"}
+    assert mismatches(here, {"w": missing}) == [
+        f"worker w: ezcompanion sources unknown, where this process has "
+        f"{here['ezcompanion sources']}"]
+    assert mismatches(here, {"v": ModuleNotFoundError("No module named 'ezcompanion'")}) == [
+        "worker v: cannot say what it computes with (ModuleNotFoundError: No module named "
+        "'ezcompanion')"]
 
 
 def test_every_law_is_a_policy() -> None:

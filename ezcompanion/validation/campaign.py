@@ -10,7 +10,9 @@ all of numba's threads; otherwise on Dask (``distributed``): an existing cluster
 ``scheduler`` (``tcp://host:8786``), or a ``LocalCluster`` on loopback with ``workers``
 single-threaded worker processes (default one per core), numba held to one thread each
 so that they do not oversubscribe the cores. The cluster's workers must have this package
-installed; the results come back in submission order whatever order they finish in.
+installed, and the same (``provenance``: a worker that would compute otherwise, other
+sources or another numba, is refused before any task); the results come back in submission
+order whatever order they finish in.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from ezcompanion.validation.escape import escape_margin_m
 from ezcompanion.validation.fixed import ring_scenarios
 from ezcompanion.validation.oracle import OracleResult, OracleSettings, run_oracle
 from ezcompanion.validation.policies import POLICIES, make_policy
+from ezcompanion.validation.provenance import mismatches, numerics
 from ezcompanion.validation.scenarios import (
     _KIND_RING,
     ScenarioBatch,
@@ -180,6 +183,29 @@ def _in_worker() -> None:
     numba.set_num_threads(1)
 
 
+def _refuse(found: list[str], where: str) -> None:
+    if found:
+        more = f" (and {len(found) - 1} more)" if len(found) > 1 else ""
+        raise ConfigError("scheduler", where, f"{found[0]}{more}: every worker must compute as "
+                          "this process does, or the merged report is not this machine's")
+
+
+def _attested(function: Callable[..., Any], *args: Any) -> tuple[str, dict[str, str], Any]:
+    """``function(*args)`` run on a Dask worker, with the worker's address and what it
+    computed with."""
+    from distributed import get_worker
+
+    return get_worker().address, numerics(), function(*args)
+
+
+def _gather_attested(client: Any, futures: list[Any], where: str) -> list[Any]:
+    """The tasks' results, each checked to come from a worker that computes as this
+    process does (a worker may join the cluster after the check before the first task)."""
+    attested = client.gather(futures)
+    _refuse(mismatches(numerics(), {worker: seen for worker, seen, _ in attested}), where)
+    return [result for _, _, result in attested]
+
+
 def _tasks(spec: CampaignSpec) -> list[tuple[str, Callable[..., Any], tuple[Any, ...]]]:
     tasks: list[tuple[str, Callable[..., Any], tuple[Any, ...]]] = [
         ("chunk", _run_chunk, (spec, a, b)) for a, b in spec.chunks()
@@ -223,14 +249,16 @@ def _run_dask(spec: CampaignSpec, report: Callable[[int, int], None]) -> tuple[l
     try:
         address = cluster if cluster is not None else spec.scheduler
         with Client(address) as client:  # type: ignore[no-untyped-call]
+            # every worker computes as this process does, or nothing is sent (provenance)
+            _refuse(mismatches(numerics(), client.run(numerics, on_error="return")), where)
             client.run(_in_worker)
             futures = [
-                client.submit(function, *args, pure=False, key=f"{kind}-{i}-{spec.seed}")
+                client.submit(_attested, function, *args, pure=False, key=f"{kind}-{i}-{spec.seed}")
                 for i, (kind, function, args) in enumerate(tasks)
             ]
             for done, _ in enumerate(as_completed(futures)):  # type: ignore[no-untyped-call]
                 report(done + 1, len(tasks))
-            results = client.gather(futures)
+            results = _gather_attested(client, futures, where)
     finally:
         if cluster is not None:
             cluster.close()

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from ezcompanion.validation.campaign import CampaignResult
+from ezcompanion.validation.provenance import numerics
 from ezcompanion.validation.report import (
     GROUPS,
     format_markdown,
@@ -50,6 +51,12 @@ def _map_rows(result: CampaignResult) -> list[Any]:
     return summarise(result.map.metrics, labels, result.map.oracle, ("all",))
 
 
+def _libraries() -> str:
+    """The arithmetic's libraries, as the summary's first line names them."""
+    have = numerics()
+    return ", ".join(f"{name} {have[name]}" for name in ("numba", "llvmlite", "numpy"))
+
+
 def summary_text(result: CampaignResult) -> str:
     """The readable summary: the spec in one paragraph, then the tables."""
     spec = result.spec
@@ -62,13 +69,13 @@ def summary_text(result: CampaignResult) -> str:
         + (f"holds jittered by +-{spec.settings.hold_jitter:g} of dt (the law told the "
            "service's step), " if spec.settings.hold_jitter > 0.0 else "")
         + f"policies {', '.join(spec.policies)}; "
-        f"{result.wall_s:.1f} s wall ({result.cluster}).\nRates: % of runs [95% Wilson "
-        "interval], a zero count as 0/N (< its one-sided 95% upper bound); 'entered|safe "
-        "existed': entries among runs where the oracle found a safe manoeuvre; 'S+I/oracle': "
-        "safe intercepts over the oracle's feasible ones; 'no S+I|icpt existed': runs not "
-        "safely intercepted among those where the oracle found a safe intercept. Other "
-        "columns: medians (depth, time inside over runs that entered; miss over runs not "
-        "intercepted; t/t_line over runs intercepted).\n"
+        f"{result.wall_s:.1f} s wall ({result.cluster}; {_libraries()}).\nRates: % of runs "
+        "[95% Wilson interval], a zero count as 0/N (< its one-sided 95% upper bound); "
+        "'entered|safe existed': entries among runs where the oracle found a safe manoeuvre; "
+        "'S+I/oracle': safe intercepts over the oracle's feasible ones; 'no S+I|icpt "
+        "existed': runs not safely intercepted among those where the oracle found a safe "
+        "intercept. Other columns: medians (depth, time inside over runs that entered; miss "
+        "over runs not intercepted; t/t_line over runs intercepted).\n"
     )
     text = head + _oracle_line(result) + "\n" + format_tables(
         summarise(result.metrics, labels, result.oracle)
@@ -120,6 +127,7 @@ def write_outputs(result: CampaignResult, out_dir: Path, *, figures: bool = True
         "wall_s": result.wall_s,
         "cluster": result.cluster,
         "machine": {"python": platform.python_version(), "processor": platform.machine()},
+        "numerics": numerics(),
         "strata": to_json_dict(summarise(result.metrics, labels, result.oracle)),
         "chattering": [
             {"policy": c.policy, "coarse_m_s2": c.coarse_m_s2.tolist(),

@@ -1,0 +1,82 @@
+"""What a campaign's numbers depend on besides its seed: this package's sources and the
+libraries that do its arithmetic.
+
+A run's outcome is decided in floating point, so what does the arithmetic can flip it:
+seed 2031's 10,000 runs, flown on a fresh machine on the very sources of the published
+tables, came out different in one stratum's counts (docs/validation.md, "The same numbers
+need the same arithmetic"). The merged report is the same whatever the cluster only if
+every worker computes as the process that merges: the same sources, numba, llvmlite,
+numpy and C library, the kernels compiled or not. ``numerics`` says what a process has;
+``mismatches`` names what a worker has that differs; the campaign refuses a cluster with
+any (``campaign._run_dask``) and writes its own into ``report.json``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import platform
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+
+__all__ = ["mismatches", "numerics"]
+
+_PACKAGE = Path(__file__).resolve().parent.parent  # the ezcompanion package
+_LIBRARIES = ("numpy", "numba", "llvmlite")
+
+
+def _sources_digest() -> str:
+    """A digest of every Python source of the package (relative paths and contents, in
+    path order)."""
+    digest = hashlib.blake2b(digest_size=8)
+    for path in sorted(_PACKAGE.rglob("*.py"), key=lambda p: p.relative_to(_PACKAGE).as_posix()):
+        digest.update(path.relative_to(_PACKAGE).as_posix().encode())
+        digest.update(b"\0")
+        digest.update(path.read_bytes())
+        digest.update(b"\0")
+    return digest.hexdigest()
+
+
+# read once, as this package is imported: the sources of the code this process runs, not
+# of files edited since
+_SOURCES = _sources_digest()
+
+
+def _installed(name: str) -> str:
+    try:
+        return version(name)
+    except PackageNotFoundError:
+        return "not installed"
+
+
+def numerics() -> dict[str, str]:
+    """What this process computes a campaign with: the package's sources (a digest), the
+    libraries' versions, whether the kernels are compiled, Python's and the C library's
+    versions."""
+    from ezcompanion.guidance._jit import JIT_ENABLED
+
+    return {
+        "ezcompanion sources": _SOURCES,
+        **{name: _installed(name) for name in _LIBRARIES},
+        "kernels": "compiled" if JIT_ENABLED else "uncompiled (EZCOMPANION_JIT=0)",
+        "python": platform.python_version(),
+        "libc": " ".join(platform.libc_ver()) or "unknown",  # libm's sin, exp, atan2
+    }
+
+
+def mismatches(here: dict[str, str],
+               workers: dict[str, dict[str, str] | BaseException]) -> list[str]:  # fmt: skip
+    """One line per worker and field whose value differs from ``here``'s (this process),
+    naming both values, or per worker that could not say (the exception it raised: this
+    package not installed there, say); empty when every worker computes as this process
+    does."""
+    lines = []
+    for worker, theirs in sorted(workers.items()):
+        if isinstance(theirs, BaseException):
+            lines.append(f"worker {worker}: cannot say what it computes with "
+                         f"({type(theirs).__name__}: {theirs})")  # fmt: skip
+            continue
+        for field, value in here.items():
+            other = theirs.get(field, "unknown")
+            if other != value:
+                lines.append(f"worker {worker}: {field} {other}, where this process has {value}")
+    return lines

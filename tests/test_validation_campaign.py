@@ -72,6 +72,7 @@ def test_a_local_dask_cluster_gives_the_in_process_report(tmp_path: Path) -> Non
         reports.append(json.loads((tmp_path / folder / "report.json").read_text()))
     assert _strip(reports[0]) == _strip(reports[1]) == _strip(reports[2])
     assert reports[0]["numerics"] == numerics()  # what the runs were computed with
+    assert reports[0]["machine"]["cpu"] and reports[0]["machine"]["cpu"] != "unknown"
     summary = (tmp_path / "here" / "summary.txt").read_text()
     assert f"numba {numerics()['numba']}, llvmlite " in summary.splitlines()[0]
     assert (tmp_path / "here" / "tables.md").read_text() == (

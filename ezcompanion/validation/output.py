@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from ezcompanion.validation.campaign import CampaignResult
-from ezcompanion.validation.provenance import numerics
+from ezcompanion.validation.provenance import cpu_model, numerics
 from ezcompanion.validation.report import (
     GROUPS,
     format_markdown,
@@ -126,7 +126,8 @@ def write_outputs(result: CampaignResult, out_dir: Path, *, figures: bool = True
         "spec": _spec_dict(result),
         "wall_s": result.wall_s,
         "cluster": result.cluster,
-        "machine": {"python": platform.python_version(), "processor": platform.machine()},
+        "machine": {"python": platform.python_version(), "processor": platform.machine(),
+                    "cpu": cpu_model()},
         "numerics": numerics(),
         "strata": to_json_dict(summarise(result.metrics, labels, result.oracle)),
         "chattering": [

@@ -6,6 +6,8 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
+import time
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +25,7 @@ from ezcompanion.validation.campaign import (
 from ezcompanion.validation.chatter import chattering
 from ezcompanion.validation.output import write_outputs
 from ezcompanion.validation.policies import POLICIES
-from ezcompanion.validation.provenance import mismatches, numerics
+from ezcompanion.validation.provenance import _sources_digest, mismatches, numerics
 from ezcompanion.validation.response import ResponseClass
 from ezcompanion.validation.scenarios import ScenarioBatch, ScenarioDistribution, draw_scenarios
 from ezcompanion.validation.stats import Rate, upper_bound_95
@@ -99,10 +101,12 @@ def test_a_cluster_whose_workers_compute_otherwise_is_refused_before_any_run() -
             run_campaign(dataclasses.replace(spec, scheduler=address))
         assert not uncompiled.scheduler.tasks  # nothing was submitted
         with Client(uncompiled) as client:
-            task = client.submit(_attested, math.hypot, 3.0, 4.0, pure=False)
-            assert client.gather(task)[2] == 5.0
-            with pytest.raises(ConfigError, match="kernels uncompiled"):
-                _gather_attested(client, [task], "that cluster")
+            tasks = [client.submit(_attested, math.hypot, 3.0, 4.0, pure=False),
+                     client.submit(_attested, time.sleep, 60.0, pure=False)]  # fmt: skip
+            assert client.gather(tasks[0])[2] == 5.0
+            with pytest.raises(ConfigError, match=r"\(task 0\): kernels uncompiled"):
+                _gather_attested(tasks, "that cluster", lambda done, total: None)
+            assert tasks[1].status == "cancelled"  # what was still to run is not waited for
     message = str(refused.value)
     assert message.startswith("scheduler: worker tcp://127.0.0.1:")
     assert "kernels uncompiled (EZCOMPANION_JIT=0), where this process has compiled" in message
@@ -123,6 +127,36 @@ def test_a_mismatch_names_the_worker_the_field_and_both_values() -> None:
     assert mismatches(here, {"v": ModuleNotFoundError("No module named 'ezcompanion'")}) == [
         "worker v: cannot say what it computes with (ModuleNotFoundError: No module named "
         "'ezcompanion')"]
+
+
+def test_kernels_run_uncompiled_either_way_are_named(tmp_path: Path) -> None:
+    """``NUMBA_DISABLE_JIT=1`` runs the kernels uncompiled as ``EZCOMPANION_JIT=0`` does:
+    each is named as such, not as compiled."""
+    import subprocess
+    import sys
+
+    script = "from ezcompanion.validation.provenance import numerics; print(numerics()['kernels'])"
+    for variable, expected in (("NUMBA_DISABLE_JIT", "uncompiled (NUMBA_DISABLE_JIT=1)"),
+                               ("EZCOMPANION_JIT", "uncompiled (EZCOMPANION_JIT=0)")):  # fmt: skip
+        value = "1" if variable == "NUMBA_DISABLE_JIT" else "0"
+        env = {**os.environ, variable: value, "NUMBA_CACHE_DIR": str(tmp_path)}
+        said = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
+                              text=True, timeout=120, check=True)  # fmt: skip
+        assert said.stdout.strip() == expected
+
+
+def test_the_sources_digest_reads_the_sources_only(tmp_path: Path) -> None:
+    """An editor's lock file (a dangling link named ``.#x.py``) and macOS's ``._x.py`` are
+    not sources: they neither break the digest nor change it; an edit of a source does."""
+    package = tmp_path / "package"
+    (package / "sub").mkdir(parents=True)
+    (package / "sub" / "law.py").write_text("x = 1\n")
+    before = _sources_digest(package)
+    (package / "sub" / ".#law.py").symlink_to("user@host.1:1")
+    (package / "._law.py").write_bytes(b"\0\5")
+    assert _sources_digest(package) == before
+    (package / "sub" / "law.py").write_text("x = 2\n")
+    assert _sources_digest(package) != before
 
 
 def test_every_law_is_a_policy() -> None:

@@ -11,8 +11,8 @@ all of numba's threads; otherwise on Dask (``distributed``): an existing cluster
 single-threaded worker processes (default one per core), numba held to one thread each
 so that they do not oversubscribe the cores. The cluster's workers must have this package
 installed, and the same (``provenance``: a worker that would compute otherwise, other
-sources or another numba, is refused before any task); the results come back in submission
-order whatever order they finish in.
+sources or another numba, is refused before any task, and any result from one as it comes
+back); the results come back in submission order whatever order they finish in.
 """
 
 from __future__ import annotations
@@ -198,12 +198,28 @@ def _attested(function: Callable[..., Any], *args: Any) -> tuple[str, dict[str, 
     return get_worker().address, numerics(), function(*args)
 
 
-def _gather_attested(client: Any, futures: list[Any], where: str) -> list[Any]:
-    """The tasks' results, each checked to come from a worker that computes as this
-    process does (a worker may join the cluster after the check before the first task)."""
-    attested = client.gather(futures)
-    _refuse(mismatches(numerics(), {worker: seen for worker, seen, _ in attested}), where)
-    return [result for _, _, result in attested]
+def _gather_attested(futures: list[Any], where: str,
+                     report: Callable[[int, int], None]) -> list[Any]:  # fmt: skip
+    """The tasks' results in submission order, each checked as it comes back to come from
+    a worker that computes as this process does (a worker may join the cluster after the
+    first check): on the first that does not, the tasks still to run are cancelled and the
+    campaign refused."""
+    from distributed import as_completed
+
+    here = numerics()
+    index = {future.key: i for i, future in enumerate(futures)}
+    results: list[Any] = [None] * len(futures)
+    arriving = as_completed(futures, with_results=True)  # type: ignore[no-untyped-call]
+    for done, (future, (worker, seen, result)) in enumerate(arriving, start=1):
+        i = index[future.key]
+        found = mismatches(here, {f"{worker} (task {i})": seen})
+        if found:
+            for other in futures:
+                other.cancel()
+            _refuse(found, where)
+        results[i] = result
+        report(done, len(futures))
+    return results
 
 
 def _tasks(spec: CampaignSpec) -> list[tuple[str, Callable[..., Any], tuple[Any, ...]]]:
@@ -227,7 +243,7 @@ def _run_here(spec: CampaignSpec, report: Callable[[int, int], None]) -> list[An
 
 
 def _run_dask(spec: CampaignSpec, report: Callable[[int, int], None]) -> tuple[list[Any], str]:
-    from distributed import Client, LocalCluster, as_completed
+    from distributed import Client, LocalCluster
 
     tasks = _tasks(spec)
     cluster: LocalCluster | None = None
@@ -256,9 +272,7 @@ def _run_dask(spec: CampaignSpec, report: Callable[[int, int], None]) -> tuple[l
                 client.submit(_attested, function, *args, pure=False, key=f"{kind}-{i}-{spec.seed}")
                 for i, (kind, function, args) in enumerate(tasks)
             ]
-            for done, _ in enumerate(as_completed(futures)):  # type: ignore[no-untyped-call]
-                report(done + 1, len(tasks))
-            results = _gather_attested(client, futures, where)
+            results = _gather_attested(futures, where, report)
     finally:
         if cluster is not None:
             cluster.close()

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import platform
+import sys
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
@@ -24,49 +25,82 @@ _PACKAGE = Path(__file__).resolve().parent.parent  # the ezcompanion package
 _LIBRARIES = ("numpy", "numba", "llvmlite")
 
 
-def _sources_digest() -> str:
-    """A digest of every Python source of the package (relative paths and contents, in
-    path order)."""
+def _sources(package: Path) -> list[Path]:
+    """The package's Python sources: regular ``.py`` files, none under a hidden name (an
+    editor's lock file, ``.#campaign.py``, is a dangling link; macOS leaves ``._x.py``)."""
+    found = []
+    for path in package.rglob("*.py"):
+        relative = path.relative_to(package)
+        if not any(part.startswith(".") for part in relative.parts) and path.is_file():
+            found.append(path)
+    return sorted(found, key=lambda p: p.relative_to(package).as_posix())
+
+
+def _sources_digest(package: Path = _PACKAGE) -> str:
+    """A digest of every Python source of ``package`` (relative paths and contents, in
+    path order); a file that cannot be read counts by its name and the error."""
     digest = hashlib.blake2b(digest_size=8)
-    for path in sorted(_PACKAGE.rglob("*.py"), key=lambda p: p.relative_to(_PACKAGE).as_posix()):
-        digest.update(path.relative_to(_PACKAGE).as_posix().encode())
+    for path in _sources(package):
+        digest.update(path.relative_to(package).as_posix().encode())
         digest.update(b"\0")
-        digest.update(path.read_bytes())
+        try:
+            digest.update(path.read_bytes())
+        except OSError as exc:
+            digest.update(f"unreadable: {type(exc).__name__}".encode())
         digest.update(b"\0")
     return digest.hexdigest()
 
 
 # read once, as this package is imported: the sources of the code this process runs, not
-# of files edited since
+# of files edited since. Strict by design: any edit of any source (a docstring too) makes
+# another digest, so a worker refused for it may well compute the same numbers
 _SOURCES = _sources_digest()
 
 
-def _installed(name: str) -> str:
+def _version(name: str) -> str:
+    """The version of library ``name`` this process runs: the loaded module's own, or the
+    installed one's where it is not loaded (a venv upgraded under a running worker reports
+    what it computes with, not what is on disk)."""
+    module = sys.modules.get(name)
+    loaded = getattr(module, "__version__", None)
+    if isinstance(loaded, str):
+        return loaded
     try:
         return version(name)
     except PackageNotFoundError:
         return "not installed"
 
 
+def _kernels() -> str:
+    from ezcompanion.guidance._jit import JIT_ENABLED
+
+    if not JIT_ENABLED:
+        return "uncompiled (EZCOMPANION_JIT=0)"
+    from numba import config
+
+    disabled = config.DISABLE_JIT  # type: ignore[attr-defined]
+    return "uncompiled (NUMBA_DISABLE_JIT=1)" if disabled else "compiled"
+
+
 def numerics() -> dict[str, str]:
     """What this process computes a campaign with: the package's sources (a digest), the
     libraries' versions, whether the kernels are compiled, Python's and the C library's
     versions."""
-    from ezcompanion.guidance._jit import JIT_ENABLED
-
     return {
         "ezcompanion sources": _SOURCES,
-        **{name: _installed(name) for name in _LIBRARIES},
-        "kernels": "compiled" if JIT_ENABLED else "uncompiled (EZCOMPANION_JIT=0)",
+        **{name: _version(name) for name in _LIBRARIES},
+        "kernels": _kernels(),
         "python": platform.python_version(),
-        "libc": " ".join(platform.libc_ver()) or "unknown",  # libm's sin, exp, atan2
+        # libm's sin, exp, atan2
+        "libc": " ".join(part for part in platform.libc_ver() if part) or "unknown",
     }
 
 
 def cpu_model() -> str:
     """The processor's model name (Linux's /proc/cpuinfo), else the architecture: recorded
-    with a campaign, not compared (numba's code for a generic x86-64 and numpy's loops
-    without AVX2 flew 2,000 runs bit for bit as this machine's own did)."""
+    with a campaign, not compared (on an AMD EPYC without AVX-512, numba's code for a
+    generic x86-64 and numpy's loops without AVX2 flew 2,000 runs bit for bit as the
+    machine's own did; a CPU with AVX-512 was not tried)."""
     try:
         with open("/proc/cpuinfo", encoding="utf-8") as info:
             for line in info:

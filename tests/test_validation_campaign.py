@@ -136,9 +136,8 @@ def test_kernels_run_uncompiled_either_way_are_named(tmp_path: Path) -> None:
     import sys
 
     script = "from ezcompanion.validation.provenance import numerics; print(numerics()['kernels'])"
-    for variable, expected in (("NUMBA_DISABLE_JIT", "uncompiled (NUMBA_DISABLE_JIT=1)"),
-                               ("EZCOMPANION_JIT", "uncompiled (EZCOMPANION_JIT=0)")):  # fmt: skip
-        value = "1" if variable == "NUMBA_DISABLE_JIT" else "0"
+    for variable, value in (("NUMBA_DISABLE_JIT", "1"), ("EZCOMPANION_JIT", "0")):
+        expected = f"uncompiled ({variable}={value})"
         env = {**os.environ, variable: value, "NUMBA_CACHE_DIR": str(tmp_path)}
         said = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
                               text=True, timeout=120, check=True)  # fmt: skip

@@ -22,7 +22,7 @@ demo: $(STAMP)
 test: $(STAMP) lint typecheck pytest
 
 lint: $(STAMP)
-	$(BIN)/ruff check $(PACKAGES) tests bench
+	$(BIN)/ruff check $(PACKAGES) tests bench setup.py
 
 typecheck: $(STAMP)
 	$(BIN)/mypy $(PACKAGES)

@@ -83,22 +83,3 @@ def test_live_track_files_match_simulate_and_read_back(tmp_path: Path) -> None:
     back = read_track_csv(tmp_path / "live.csv", scenario, LawName.ROBUST)
     assert back.north_m.tolist() == pytest.approx([8.0, 7.9, 7.8])
     assert back.clearance_m.shape == (3, 3) and not back.captured
-
-
-def test_compile_fills_a_cold_cache_so_the_service_starts_warm(tmp_path: Path) -> None:
-    """``ezcompanion compile`` in a fresh cache directory compiles the service's kernel; a
-    second run, and the service's own start (``kernels_cached``), find it there."""
-    import os
-    import subprocess
-    import sys
-
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
-    script = "from ezcompanion.cli import main; raise SystemExit(main(['compile']))"
-    runs = [subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
-                           text=True, timeout=600, check=True) for _ in range(2)]  # fmt: skip
-    assert "compiled into numba's cache" in runs[0].stdout, runs[0].stdout
-    assert "already in numba's cache" in runs[1].stdout, runs[1].stdout
-    check = "from ezcompanion.guidance import kernels_cached; print(kernels_cached())"
-    seen = subprocess.run([sys.executable, "-c", check], env=env, capture_output=True,
-                          text=True, timeout=120, check=True)  # fmt: skip
-    assert seen.stdout.strip() == "True"

@@ -112,6 +112,7 @@ CHECKS: dict[str, Check] = {
     "python bench/bench_law.py --service": Check.PARSE,
     "python bench/bench_service.py --seconds 20 --follow": Check.PARSE,
     "python bench/bench_service.py --startup 5": Check.PARSE,
+    "python bench/bench_service.py --startup 3 --python VENV/bin/python": Check.PARSE,
     "python bench/bench_service.py --seconds 6": Check.PARSE,
     "python bench/bench_telemetry.py --seconds 6": Check.PARSE,
     "python bench/bench_telemetry.py --seconds 5": Check.PARSE,

@@ -225,16 +225,36 @@ def test_a_cold_kernel_cache_is_seen_and_said_before_the_link_opens(
     """A first run after an install or an edit compiles the one-vehicle step (11 s idle,
     over a minute on a busy machine) before the link opens: the companion says so first,
     rather than sitting silent. The cache is seen cold exactly where numba has not indexed
-    the kernel; once this process has run the step it is warm."""
+    the kernel in a form numba would load; once this process has run the step it is warm."""
     assert kernels_cached(directory=str(tmp_path)) is not JIT_ENABLED  # uncompiled: "warm"
-    (tmp_path / "guidance_0").mkdir()
-    (tmp_path / "guidance_0" / "single.step_one-110.py311.nbi").write_bytes(b"")
-    assert kernels_cached(directory=str(tmp_path))
-    assert kernels_cached("backup.shield_one", directory=str(tmp_path)) is not JIT_ENABLED
     controller = GuidanceController(zones=SCENARIO.zones(), target=SCENARIO.target)
     controller.reset()
     controller.step_one(north_m=8.0, east_m=-4.0, course_rad=2.5, speed_m_s=1.0, dt_s=0.02)
     assert kernels_cached()  # compiled (or loaded) here, so indexed
+    if JIT_ENABLED:
+        import pickle
+
+        from numba.core import config
+
+        (index,) = Path(config.CACHE_DIR).glob("guidance/single.step_one-*.nbi")
+        copy = tmp_path / "guidance" / index.name
+        copy.parent.mkdir()
+        copy.write_bytes(index.read_bytes())  # the same index elsewhere: it loads
+        assert kernels_cached(directory=str(tmp_path))
+        assert not kernels_cached("guidance/backup.shield_one", directory=str(tmp_path))
+        with index.open("rb") as stream:
+            version = pickle.load(stream)
+            stamp, overloads = pickle.loads(stream.read())
+
+        def index_of(version: str, stamp: str, overloads: dict[object, str]) -> bytes:
+            return pickle.dumps(version) + pickle.dumps((stamp, overloads))
+
+        for stale in (b"", index_of("0.1", stamp, overloads),  # truncated; another numba
+                      index_of(version, "an edited source", overloads),
+                      index_of(version, stamp, {(k[0], ("another CPU",), k[2]): v
+                                                for k, v in overloads.items()})):  # fmt: skip
+            copy.write_bytes(stale)
+            assert not kernels_cached(directory=str(tmp_path))
 
     settings_ = companion_settings(SCENARIO, connect="udpin:127.0.0.1:14550")
     said = []

@@ -12,7 +12,10 @@ An edit to ``backup.py`` alone would leave it running the old shield. So the cac
 a directory named by a digest of every source file of this package
 (``__pycache__/numba-<digest>`` here, or under ``NUMBA_CACHE_DIR`` when that is set): any
 edit here compiles afresh. (Set in numba's config for this process only, not in the
-environment, so child processes find the same directory.)
+environment, so child processes find the same directory.) Inside it each subpackage's
+kernels have a directory of their own (``guidance/``, ``validation/``), named relative to
+the package rather than by absolute path, so that a cache is found wherever the package is
+installed: the wheel ships one (setup.py).
 
 The kernels are plain Python with ``math``, so they also run uncompiled, unchanged. That is
 what ``EZCOMPANION_JIT=0`` in the environment (read once, at import) selects: numba is then
@@ -68,22 +71,111 @@ def cache_dir(base: str) -> str:
     return os.path.join(base, name) if base else str(_HERE / "__pycache__" / name)
 
 
-def kernels_cached(kernel: str = "single.step_one", directory: str | None = None) -> bool:
+def kernels_cached(kernel: str = "guidance/single.step_one", directory: str | None = None) -> bool:
     """Whether numba's cache (``directory``, by default this process's) holds ``kernel``
-    (module.function, by default the service's one-vehicle step) compiled from these
-    sources: False on the first run after an install or an edit, which compiles it (about
-    25 s on an idle 2-core machine, longer on a busy one). True when nothing is compiled."""
+    (subpackage/module.function, by default the service's one-vehicle step) in a form this
+    process will load: an index written by this numba, for the kernel's source as it is,
+    with an entry for this CPU (the checks numba makes before it loads). False on the first
+    run after an install that did not compile, or an edit, which compiles it (25 to 45 s on
+    a 2-core machine). True when nothing is compiled."""
     if not JIT_ENABLED:
         return True
     where = Path(directory if directory is not None else _numba_config.CACHE_DIR)  # type: ignore[attr-defined]
-    return any(where.glob(f"*/{kernel}-*.nbi"))
+    subpackage, name = kernel.split("/")
+    source = _PACKAGE / subpackage / f"{name.split('.')[0]}.py"
+    return any(_index_loads(index, source) for index in where.glob(f"{kernel}-*.nbi"))
+
+
+def _index_loads(index: Path, source: Path) -> bool:
+    """Whether numba would load an overload from the cache ``index`` of a kernel in
+    ``source`` (see numba.core.caching.IndexDataCacheFile._load_index)."""
+    import pickle
+
+    import numba
+    from numba.core.registry import cpu_target
+
+    try:
+        with index.open("rb") as stream:
+            version = pickle.load(stream)
+            if version != numba.__version__:
+                return False
+            stamp, overloads = pickle.loads(stream.read())
+    except (OSError, EOFError, ValueError, TypeError, pickle.UnpicklingError):
+        return False  # unreadable, or written by another numba
+    if stamp != _source_stamp(source):
+        return False
+    here = cpu_target.target_context.codegen().magic_tuple()
+    return any(key[1] == here for key in overloads)
+
+
+def _source_stamp(source: Path) -> str:
+    """The stamp of a kernel's source in its cache index: a digest of its contents."""
+    try:
+        return hashlib.sha256(source.read_bytes()).hexdigest()
+    except OSError:
+        return ""
+
+
+_PACKAGE = _HERE.parent  # ezcompanion/
+
+
+def _package_subdirectory(source: str) -> str | None:
+    """The directory of ``source`` relative to this package (``guidance``,
+    ``validation``...), or None for a file outside it."""
+    try:
+        return str(Path(source).resolve().parent.relative_to(_PACKAGE))
+    except ValueError:
+        return None
 
 
 if JIT_ENABLED:
     from numba import config as _numba_config
     from numba import get_num_threads, njit, prange
+    from numba.core import caching as _caching
 
     _numba_config.CACHE_DIR = cache_dir(os.environ.get("NUMBA_CACHE_DIR", ""))  # type: ignore[attr-defined]
+
+    class _PackageCacheLocator(_caching._CacheLocator):
+        """Where numba caches this package's kernels: ``CACHE_DIR/<subpackage>``, stamped
+        with a digest of the source file's contents.
+
+        numba's own locator for a ``CACHE_DIR`` names the subdirectory after the source's
+        absolute path (and numba before 0.68 stamps it with the file's modification time),
+        so a cache made in one place is never found in another. This one is found wherever
+        the package is: a wheel built with its cache (``setup.py``) runs warm on its first
+        run after ``pip install``, and a checkout whose files were touched but not changed
+        does not compile again. The directory is already named after every source's
+        digest (``cache_dir``); the stamp covers the kernel's own file, as numba's does."""
+
+        def __init__(self, py_func: Any, py_file: str, subdirectory: str) -> None:
+            self._py_file = py_file
+            self._lineno = py_func.__code__.co_firstlineno
+            self._cache_path = os.path.join(_numba_config.CACHE_DIR, subdirectory)  # type: ignore[attr-defined]
+
+        def get_cache_path(self) -> str:
+            return self._cache_path
+
+        def get_source_stamp(self) -> str:
+            return _source_stamp(Path(self._py_file))
+
+        def get_disambiguator(self) -> str:
+            return str(self._lineno)
+
+        @classmethod
+        def from_function(cls, py_func: Any, py_file: str) -> _PackageCacheLocator | None:
+            subdirectory = _package_subdirectory(py_file)
+            if subdirectory is None or not os.path.isfile(py_file):
+                return None
+            locator = cls(py_func, py_file, subdirectory)
+            try:
+                locator.ensure_cache_path()  # type: ignore[no-untyped-call]
+            except OSError:  # not writable (a system-wide install): numba's next locator
+                return None
+            return locator
+
+    # numba >= 0.62 names the class CacheImpl, earlier ones _CacheImpl
+    _impl = getattr(_caching, "CacheImpl", None) or _caching._CacheImpl  # type: ignore[attr-defined]
+    _impl._locator_classes.insert(0, _PackageCacheLocator)
 else:
     prange = range  # type: ignore[misc]  # a plain loop when nothing is compiled
 

@@ -1,0 +1,86 @@
+"""An install starts warm: the wheel carries numba's cache of the service's kernels, and a
+copy of the package unpacked elsewhere loads them rather than compiling (issue 13, start-up
+on the first run)."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+from ezcompanion.guidance._jit import kernel_fingerprint
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# what the first run after an install does: `ezcompanion compile` builds the service's loop
+# (the one-vehicle step, loaded or compiled) and says which; then what numba did
+_FIRST_RUN = """
+import json, sys
+import ezcompanion
+from ezcompanion.commands import run_compile
+run_compile()
+from ezcompanion.guidance.single import step_one
+stats = step_one.stats
+print(json.dumps({"package": ezcompanion.__file__, "hits": len(stats.cache_hits),
+                  "misses": len(stats.cache_misses)}))
+"""
+
+
+def _compiled_environment() -> dict[str, str]:
+    """This environment, compiled (whatever this process runs) and with numba's cache where
+    the package puts it."""
+    dropped = ("NUMBA_CACHE_DIR", "PYTHONPATH", "EZCOMPANION_JIT", "NUMBA_DISABLE_JIT")
+    return {key: value for key, value in os.environ.items() if key not in dropped}
+
+
+def _index_files(site: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(site)): p.read_bytes() for p in site.rglob("*.nbi")}
+
+
+def test_the_wheel_carries_the_kernels_and_its_first_run_loads_them(tmp_path: Path) -> None:
+    """``pip wheel`` (setup.py's build step) compiles the service's kernels into the wheel,
+    under the digest of the sources it ships. Unpacked at another path, as pip installs it,
+    the first run finds every kernel it needs in that cache: numba loads the one-vehicle
+    step, misses nothing, and writes no index. Also the cold and warm halves of
+    ``ezcompanion compile``."""
+    source = tmp_path / "source"
+    source.mkdir()
+    ignore = shutil.ignore_patterns("__pycache__", "*.egg-info")
+    for name in ("pyproject.toml", "setup.py", "README.md"):
+        shutil.copy(ROOT / name, source / name)
+    for package in ("ezcompanion", "sitl_stub"):
+        shutil.copytree(ROOT / package, source / package, ignore=ignore)
+    built = subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "-v", "--no-build-isolation", "--no-deps",
+         "--no-cache-dir", "--wheel-dir", str(tmp_path / "dist"), str(source)],
+        env=_compiled_environment(), cwd=tmp_path, capture_output=True, text=True,
+        timeout=900,
+    )  # fmt: skip
+    said = built.stdout + built.stderr  # pip -v passes the build's output on stderr
+    assert built.returncode == 0, said[-5000:]
+    assert "compiled into numba's cache" in said, said[-5000:]
+    (wheel,) = (tmp_path / "dist").glob("ezcompanion-*.whl")
+
+    digest = kernel_fingerprint((source / "ezcompanion" / "guidance").glob("*.py"))
+    cache = f"ezcompanion/guidance/__pycache__/numba-{digest}/"
+    names = zipfile.ZipFile(wheel).namelist()
+    shipped = [n for n in names if n.startswith(cache) and n.endswith(".nbi")]
+    assert any("/single.step_one-" in n for n in shipped), names
+    assert not [n for n in names if n.endswith(".pyc")]
+
+    site = tmp_path / "site"  # another path than the one it was compiled at
+    zipfile.ZipFile(wheel).extractall(site)
+    indexed = _index_files(site)
+    env = {**_compiled_environment(), "PYTHONPATH": str(site)}
+    first = subprocess.run([sys.executable, "-c", _FIRST_RUN], env=env, cwd=tmp_path,
+                           capture_output=True, text=True, timeout=600, check=True)  # fmt: skip
+    lines = first.stdout.strip().splitlines()
+    seen = json.loads(lines[-1])
+    assert Path(seen["package"]).is_relative_to(site)
+    assert "already in numba's cache, loaded" in first.stdout, first.stdout
+    assert seen["hits"] >= 1 and seen["misses"] == 0, seen
+    assert _index_files(site) == indexed  # nothing compiled, nothing re-indexed

@@ -19,7 +19,9 @@ itself) and when ``EZCOMPANION_BUILD_COMPILE=0``.
 
 from __future__ import annotations
 
+import glob
 import os
+import shutil
 import subprocess
 import sys
 
@@ -44,10 +46,31 @@ class BuildWithKernels(build_py):
         path = [os.path.abspath(self.build_lib), env.get("PYTHONPATH", "")]
         env["PYTHONPATH"] = os.pathsep.join(entry for entry in path if entry)
         env["PYTHONDONTWRITEBYTECODE"] = "1"  # the kernels' cache only, no .pyc files
-        script = "from ezcompanion.commands import run_compile; raise SystemExit(run_compile())"
         # run in the build directory: `python -c` puts its working directory first on the
         # path, and the source tree's own package must not be the one compiled
-        subprocess.run([sys.executable, "-c", script], env=env, cwd=self.build_lib, check=True)
+        subprocess.run([sys.executable, "-c", _COMPILE], env=env, cwd=self.build_lib, check=True)
+        # a build directory used before (pip builds in the source tree's build/) may hold
+        # the caches of earlier sources: only this one ships
+        with open(os.path.join(self.build_lib, _CACHE_NAMED)) as named:
+            kept = named.read().strip()
+        os.remove(os.path.join(self.build_lib, _CACHE_NAMED))
+        build_lib, kept = os.path.realpath(self.build_lib), os.path.realpath(kept)
+        if os.path.commonpath([build_lib, kept]) != build_lib:
+            raise RuntimeError(f"the kernels were compiled into {kept}, not into the build")
+        for cache in glob.glob(os.path.join(os.path.dirname(kept), "numba-*")):
+            if os.path.realpath(cache) != kept:
+                shutil.rmtree(cache)
+
+
+_CACHE_NAMED = "ezcompanion-kernel-cache.txt"  # where the compile says its cache is
+_COMPILE = f"""
+from ezcompanion.commands import run_compile
+from numba.core import config
+code = run_compile()
+with open({_CACHE_NAMED!r}, "w") as named:
+    named.write(config.CACHE_DIR)
+raise SystemExit(code)
+"""
 
 
 setup(cmdclass={"build_py": BuildWithKernels})

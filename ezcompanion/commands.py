@@ -77,7 +77,7 @@ def run_compile() -> int:
     """Compile the service's kernels (the one-vehicle step, with the law, the shield and the
     abandon check; the response fits' scan) into numba's cache, or say they are there
     already; 0 either way. Run once after an install or an update, so that the first
-    ``ezcompanion run`` starts at once instead of compiling for about 25 s before its link
+    ``ezcompanion run`` starts at once instead of compiling for 25 to 45 s before its link
     opens."""
     import time
 
@@ -90,6 +90,8 @@ def run_compile() -> int:
     if not JIT_ENABLED:
         print("nothing to compile: EZCOMPANION_JIT=0 runs the kernels uncompiled")
         return ExitCode.OK
+    import numba
+
     cached = kernels_cached()
     started = time.perf_counter()
     # any scenario: the kernel's types, not its values, decide what is compiled
@@ -97,7 +99,7 @@ def run_compile() -> int:
     warm_up()  # the response fits' scan
     took = time.perf_counter() - started
     where = "already in numba's cache, loaded" if cached else "compiled into numba's cache"
-    print(f"the service's guidance kernel: {where} in {took:.1f} s")
+    print(f"the service's guidance kernel: {where} in {took:.1f} s (numba {numba.__version__})")
     return ExitCode.OK
 
 

@@ -46,7 +46,8 @@ def test_the_wheel_carries_the_kernels_and_its_first_run_loads_them(tmp_path: Pa
     under the digest of the sources it ships. Unpacked at another path, as pip installs it,
     the first run finds every kernel it needs in that cache: numba loads the one-vehicle
     step, misses nothing, and writes no index. Also the cold and warm halves of
-    ``ezcompanion compile``."""
+    ``ezcompanion compile``. A cache of other sources left in the build directory does not
+    ship."""
     source = tmp_path / "source"
     source.mkdir()
     ignore = shutil.ignore_patterns("__pycache__", "*.egg-info")
@@ -54,6 +55,10 @@ def test_the_wheel_carries_the_kernels_and_its_first_run_loads_them(tmp_path: Pa
         shutil.copy(ROOT / name, source / name)
     for package in ("ezcompanion", "sitl_stub"):
         shutil.copytree(ROOT / package, source / package, ignore=ignore)
+    # a build directory used before, for other sources (pip builds in the tree's build/)
+    stale = source / "build/lib/ezcompanion/guidance/__pycache__/numba-0123456789abcdef"
+    (stale / "guidance").mkdir(parents=True)
+    (stale / "guidance" / "single.step_one-1.py311.nbi").write_bytes(b"")
     built = subprocess.run(
         [sys.executable, "-m", "pip", "wheel", "-v", "--no-build-isolation", "--no-deps",
          "--no-cache-dir", "--wheel-dir", str(tmp_path / "dist"), str(source)],
@@ -70,7 +75,7 @@ def test_the_wheel_carries_the_kernels_and_its_first_run_loads_them(tmp_path: Pa
     names = zipfile.ZipFile(wheel).namelist()
     shipped = [n for n in names if n.startswith(cache) and n.endswith(".nbi")]
     assert any("/single.step_one-" in n for n in shipped), names
-    assert not [n for n in names if n.endswith(".pyc")]
+    assert not [n for n in names if n.endswith(".pyc") or "numba-0123" in n or "kernel-cache" in n]
 
     site = tmp_path / "site"  # another path than the one it was compiled at
     zipfile.ZipFile(wheel).extractall(site)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -255,6 +256,18 @@ def test_a_cold_kernel_cache_is_seen_and_said_before_the_link_opens(
                                                 for k, v in overloads.items()})):  # fmt: skip
             copy.write_bytes(stale)
             assert not kernels_cached(directory=str(tmp_path))
+        copy.unlink()  # another Python's index of the kernel (a shared NUMBA_CACHE_DIR)
+        other = copy.with_name(copy.name.replace(f".py{sys.version_info[0]}", ".py2"))
+        other.write_bytes(index.read_bytes())
+        assert other != copy and not kernels_cached(directory=str(tmp_path))
+        other.rename(copy)
+        assert kernels_cached(directory=str(tmp_path))
+        # where numba cannot write its cache it keeps one elsewhere, and compiles there
+        (tmp_path / "a-file").write_text("")
+        assert not _jit._writable(tmp_path / "a-file" / "guidance")
+        monkeypatch.setattr(_jit, "_writable", lambda directory: False)
+        assert not kernels_cached(directory=str(tmp_path))
+        monkeypatch.undo()
 
     settings_ = companion_settings(SCENARIO, connect="udpin:127.0.0.1:14550")
     said = []

@@ -29,6 +29,8 @@ from __future__ import annotations
 
 import hashlib
 import os
+import sys
+import tempfile
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, TypeVar, cast
@@ -53,6 +55,16 @@ JIT_ENABLED = os.environ.get("EZCOMPANION_JIT", "1") != "0"
 _HERE = Path(__file__).resolve().parent
 
 
+def python_sources(directory: Path, pattern: str = "*.py") -> list[Path]:
+    """The Python sources under ``directory`` matching ``pattern``: regular files, none
+    under a hidden name (an editor's lock file, ``.#law.py``, is a dangling link; macOS
+    leaves ``._law.py``), in the order of their paths relative to ``directory``."""
+    relative = {path: path.relative_to(directory) for path in directory.glob(pattern)}
+    hidden = {path for path, name in relative.items() if any(p.startswith(".") for p in name.parts)}
+    found = [path for path in relative if path.is_file() and path not in hidden]
+    return sorted(found, key=lambda path: relative[path].as_posix())
+
+
 def kernel_fingerprint(paths: Iterable[Path]) -> str:
     """A digest of the files ``paths`` (their names and contents, in name order)."""
     digest = hashlib.blake2b(digest_size=8)
@@ -67,7 +79,7 @@ def kernel_fingerprint(paths: Iterable[Path]) -> str:
 def cache_dir(base: str) -> str:
     """numba's cache directory for this package's sources as they are now, under ``base``
     (the user's ``NUMBA_CACHE_DIR``) or, if empty, in this package's ``__pycache__``."""
-    name = f"numba-{kernel_fingerprint(_HERE.glob('*.py'))}"
+    name = f"numba-{kernel_fingerprint(python_sources(_HERE))}"
     return os.path.join(base, name) if base else str(_HERE / "__pycache__" / name)
 
 
@@ -81,9 +93,27 @@ def kernels_cached(kernel: str = "guidance/single.step_one", directory: str | No
     if not JIT_ENABLED:
         return True
     where = Path(directory if directory is not None else _numba_config.CACHE_DIR)  # type: ignore[attr-defined]
+    if not _writable(where / kernel.split("/")[0]):
+        return False  # numba caches elsewhere then (_PackageCacheLocator.from_function)
     subpackage, name = kernel.split("/")
     source = _PACKAGE / subpackage / f"{name.split('.')[0]}.py"
-    return any(_index_loads(index, source) for index in where.glob(f"{kernel}-*.nbi"))
+    python = f"py{sys.version_info[0]}{sys.version_info[1]}{getattr(sys, 'abiflags', '')}"
+    indexes = where.glob(f"{kernel}-*.{python}.nbi")  # (numba's name for this Python's)
+    return any(_index_loads(index, source) for index in indexes)
+
+
+def _writable(directory: Path) -> bool:
+    """Whether numba could keep its cache in ``directory`` (its own test is to make it and
+    write a file there; here the file is written in its nearest existing ancestor, so that
+    asking makes nothing); if not, numba keeps it elsewhere and compiles there."""
+    existing = directory
+    while not existing.exists() and existing.parent != existing:
+        existing = existing.parent
+    try:
+        tempfile.TemporaryFile(dir=existing).close()
+    except OSError:
+        return False
+    return True
 
 
 def _index_loads(index: Path, source: Path) -> bool:

@@ -19,28 +19,19 @@ import sys
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
+from ezcompanion.guidance._jit import python_sources
+
 __all__ = ["cpu_model", "mismatches", "numerics"]
 
 _PACKAGE = Path(__file__).resolve().parent.parent  # the ezcompanion package
 _LIBRARIES = ("numpy", "numba", "llvmlite")
 
 
-def _sources(package: Path) -> list[Path]:
-    """The package's Python sources: regular ``.py`` files, none under a hidden name (an
-    editor's lock file, ``.#campaign.py``, is a dangling link; macOS leaves ``._x.py``)."""
-    found = []
-    for path in package.rglob("*.py"):
-        relative = path.relative_to(package)
-        if not any(part.startswith(".") for part in relative.parts) and path.is_file():
-            found.append(path)
-    return sorted(found, key=lambda p: p.relative_to(package).as_posix())
-
-
 def _sources_digest(package: Path = _PACKAGE) -> str:
     """A digest of every Python source of ``package`` (relative paths and contents, in
     path order); a file that cannot be read counts by its name and the error."""
     digest = hashlib.blake2b(digest_size=8)
-    for path in _sources(package):
+    for path in python_sources(package, "**/*.py"):
         digest.update(path.relative_to(package).as_posix().encode())
         digest.update(b"\0")
         try:

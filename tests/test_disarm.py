@@ -195,3 +195,27 @@ def test_no_end_mode_is_asked_of_a_vehicle_heard_disarmed() -> None:
                                now=lambda: next(clock), pump=lambda _timeout_s: None)  # fmt: skip
         assert report.mode is None and "disarmed" in report.detail
         assert sent_to(vehicle) == []
+
+
+def _periodic_until(session: VehicleSession, start_s: float, end_s: float) -> None:
+    """The loop's periodic work every 20 ms over [start_s, end_s]."""
+    for k in range(round((end_s - start_s) / 0.02) + 1):
+        session.periodic(start_s + 0.02 * k, waiting=False)
+
+
+@pytest.mark.parametrize("stalled_s", [0.0, 8.0])
+def test_the_companions_own_stall_is_not_the_vehicles_silence(stalled_s: float) -> None:
+    """Heartbeats to 2 s, then none. Without a stall of the companion's own the link is
+    lost 3 s (``link_lost_after_s``) after the last; after one (nothing run for 8 s, the
+    heartbeats meanwhile unread in the socket), 3 s after the companion resumed, not at
+    once. Before, the first periodic work after the stall lost the link, and the vehicle's
+    queued heartbeats, read after it, were judged a burst (tests/test_stamp_age.py)."""
+    with session_and_vehicle() as (session, _):
+        last_s = engaged(session)
+        _periodic_until(session, last_s, last_s + 0.5)
+        resumed_s = last_s + 0.5 + stalled_s if stalled_s else last_s
+        limit_s = session.settings.link_lost_after_s
+        _periodic_until(session, resumed_s, resumed_s + limit_s - 0.02)
+        assert session.connected
+        _periodic_until(session, resumed_s + limit_s, resumed_s + limit_s + 0.04)
+        assert not session.connected

@@ -26,8 +26,9 @@ is the engagement's (:mod:`ezcompanion.service.engagement`).
    GLOBAL_POSITION_INT is asked at ``CROSS_CHECK_PERIOD_S`` only (the cross-check's rate),
    and at the full rate again as soon as the local position goes stale.
 3. With ``engage``, ask for GUIDED (OFFBOARD on PX4) every second while not in it. Never arm.
-4. No heartbeat from the vehicle for ``link_lost_after_s`` is a lost link: the address lock
-   is released and discovery runs again, for the same system and component only.
+4. No heartbeat from the vehicle for ``link_lost_after_s`` is a lost link (counted from the
+   companion's own last stall at the latest: ``_check_link``): the address lock is
+   released and discovery runs again, for the same system and component only.
 5. A vehicle that reports itself disarmed (HEARTBEAT base_mode without
    MAV_MODE_FLAG_SAFETY_ARMED) after it was armed since guidance first started cannot fly
    the engagement. One such heartbeat makes it :attr:`VehicleSession.disarm_pending` (the
@@ -97,6 +98,9 @@ _ORIGIN_TRIES = 6  # then the scenario's origin is assumed (with a warning)
 # reboot; ArduCopter 4.5.1 SITL after a forced reboot was unheard for 2.03-2.05 s (its
 # heartbeats 2.2-2.4 s apart, docs/field.md), which 2.5 s of heartbeats alone named a disarm
 _REBOOT_SILENCE_S = 1.5
+# the loop does its periodic work at least once a second (its own heartbeat): a longer gap
+# is the companion stalled (stopped, swapped out, starved), not the vehicle silent
+_OWN_STALL_S = 1.0
 _REBOOT_SILENCE_PERIODS = 3.0
 
 
@@ -154,6 +158,8 @@ class VehicleSession(StreamRequests):
         self.guided_mode: tuple[str, float, float, float] | None = None
         self.last_heartbeat_s = -math.inf
         self.last_heard_s = -math.inf  # the last frame of any kind from the vehicle
+        self._periodic_s = -math.inf  # our clock at the last periodic work
+        self._resumed_s = -math.inf  # ... after the companion's own last stall
         self._streams_requested_s: float | None = None
         self._rate_checks = 0
         self._counts_at_request: dict[str, int] = {}
@@ -496,6 +502,9 @@ class VehicleSession(StreamRequests):
     def periodic(self, now: float, *, waiting: bool) -> None:
         """Discovery, link health, the stream-rate check, the origin request and
         (``waiting`` for GUIDED) mode requests."""
+        if now - self._periodic_s > _OWN_STALL_S and self._periodic_s > -math.inf:
+            self._resumed_s = now
+        self._periodic_s = now
         self._check_link(now)
         if self.heard_disarmed:
             return  # nothing is asked of a vehicle that disarmed
@@ -561,7 +570,15 @@ class VehicleSession(StreamRequests):
         self._request_message(mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN)
 
     def _check_link(self, now: float) -> None:
-        if self.connected and now - self.last_heartbeat_s > self.settings.link_lost_after_s:
+        """No heartbeat for ``link_lost_after_s``: the link is lost. The silence counts from
+        the companion's own last stall at the latest: the heartbeats sent meanwhile wait
+        unread in its socket (a companion stopped for 8 s had declared the link lost before
+        reading them; the samples read after its relock were all "ahead" of the clock
+        taken afresh from the first, so the heartbeats, counted on our clock, were a burst:
+        a spoof failsafe, guidance ended). A vehicle silent in fact is found so
+        ``link_lost_after_s`` after the companion resumed, its samples stale long before."""
+        silent_since = max(self.last_heartbeat_s, self._resumed_s)
+        if self.connected and now - silent_since > self.settings.link_lost_after_s:
             self.connected = False
             # The runner stops guidance and emits link_lost (it knows what was sent). A
             # signed vehicle is known by its key: it is discovered again, the same id only,

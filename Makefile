@@ -12,7 +12,7 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
-	@echo "compiling the guidance kernels into numba's cache (once, 10 to 30 s)"
+	@echo "compiling the guidance kernels into numba's cache (once, 25 to 45 s on a 2-core machine)"
 	$(BIN)/ezcompanion compile
 	touch $(STAMP)
 

@@ -14,7 +14,7 @@ features, Python, and the same sources. A wheel built on one machine and install
 another CPU compiles on its first run, as any install did before.
 
 Skipped for an editable install (``pip install -e``: ``make`` runs ``ezcompanion compile``
-itself) and when ``EZCOMPANION_BUILD_COMPILE=0``.
+itself) and when ``EZCOMPANION_BUILD_COMPILE=0`` (the wheel then carries no cache).
 """
 
 from __future__ import annotations
@@ -37,6 +37,9 @@ class BuildWithKernels(build_py):
         if getattr(self, "editable_mode", False):
             return
         if os.environ.get("EZCOMPANION_BUILD_COMPILE", "1") == "0":
+            # nor any cache an earlier build left in the build directory
+            for cache in glob.glob(os.path.join(self.build_lib, _CACHES, "numba-*")):
+                shutil.rmtree(cache)
             return
         # compiled, into the package's own cache directory, whatever this shell says
         dropped = ("NUMBA_CACHE_DIR", "EZCOMPANION_JIT", "NUMBA_DISABLE_JIT")
@@ -62,6 +65,7 @@ class BuildWithKernels(build_py):
                 shutil.rmtree(cache)
 
 
+_CACHES = os.path.join("ezcompanion", "guidance", "__pycache__")  # numba-<digest>/ in it
 _CACHE_NAMED = "ezcompanion-kernel-cache.txt"  # where the compile says its cache is
 _COMPILE = f"""
 from ezcompanion.commands import run_compile

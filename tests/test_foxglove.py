@@ -34,6 +34,7 @@ from websockets.sync.client import ClientConnection, connect
 from ezcompanion.cli import main
 from ezcompanion.config import GeoOrigin, load_scenario, scenario_to_dict
 from ezcompanion.guidance import evaluate_law
+from ezcompanion.service.demo import free_port
 from ezcompanion.telemetry import telemetry_settings
 from ezcompanion.telemetry.cli import monitor_config, router_config, run_router
 from ezcompanion.telemetry.foxglove_bridge import run_bridge
@@ -51,9 +52,7 @@ PROTOCOL = "foxglove.sdk.v1"  # the foxglove-sdk server's WebSocket subprotocol
 
 
 def free_tcp_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
+    return free_port(socket.SOCK_STREAM)
 
 
 def protobuf_decoder(schema_name: str, descriptor_set: bytes) -> Callable[[bytes], Any]:

@@ -41,6 +41,31 @@ def _index_files(site: Path) -> dict[str, bytes]:
     return {str(p.relative_to(site)): p.read_bytes() for p in site.rglob("*.nbi")}
 
 
+def _build_wheel(source: Path, env: dict[str, str]) -> tuple[Path, str]:
+    """The wheel ``pip wheel`` builds (offline) from a copy of the sources at ``source``,
+    whose build directory holds a cache of other sources (pip builds in the tree's
+    build/), and what the build said."""
+    source.mkdir()
+    ignore = shutil.ignore_patterns("__pycache__", "*.egg-info")
+    for name in ("pyproject.toml", "setup.py", "README.md"):
+        shutil.copy(ROOT / name, source / name)
+    for package in ("ezcompanion", "sitl_stub"):
+        shutil.copytree(ROOT / package, source / package, ignore=ignore)
+    stale = source / "build/lib/ezcompanion/guidance/__pycache__/numba-0123456789abcdef"
+    (stale / "guidance").mkdir(parents=True)
+    (stale / "guidance" / "single.step_one-1.py311.nbi").write_bytes(b"")
+    dist = source.parent / f"{source.name}-dist"
+    built = subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "-v", "--no-build-isolation", "--no-deps",
+         "--no-cache-dir", "--wheel-dir", str(dist), str(source)],
+        env=env, cwd=source.parent, capture_output=True, text=True, timeout=900,
+    )  # fmt: skip
+    said = built.stdout + built.stderr  # pip -v passes the build's output on stderr
+    assert built.returncode == 0, said[-5000:]
+    (wheel,) = dist.glob("ezcompanion-*.whl")
+    return wheel, said
+
+
 def test_the_wheel_carries_the_kernels_and_its_first_run_loads_them(tmp_path: Path) -> None:
     """``pip wheel`` (setup.py's build step) compiles the service's kernels into the wheel,
     under the digest of the sources it ships. Unpacked at another path, as pip installs it,
@@ -49,26 +74,8 @@ def test_the_wheel_carries_the_kernels_and_its_first_run_loads_them(tmp_path: Pa
     ``ezcompanion compile``. A cache of other sources left in the build directory does not
     ship."""
     source = tmp_path / "source"
-    source.mkdir()
-    ignore = shutil.ignore_patterns("__pycache__", "*.egg-info")
-    for name in ("pyproject.toml", "setup.py", "README.md"):
-        shutil.copy(ROOT / name, source / name)
-    for package in ("ezcompanion", "sitl_stub"):
-        shutil.copytree(ROOT / package, source / package, ignore=ignore)
-    # a build directory used before, for other sources (pip builds in the tree's build/)
-    stale = source / "build/lib/ezcompanion/guidance/__pycache__/numba-0123456789abcdef"
-    (stale / "guidance").mkdir(parents=True)
-    (stale / "guidance" / "single.step_one-1.py311.nbi").write_bytes(b"")
-    built = subprocess.run(
-        [sys.executable, "-m", "pip", "wheel", "-v", "--no-build-isolation", "--no-deps",
-         "--no-cache-dir", "--wheel-dir", str(tmp_path / "dist"), str(source)],
-        env=_compiled_environment(), cwd=tmp_path, capture_output=True, text=True,
-        timeout=900,
-    )  # fmt: skip
-    said = built.stdout + built.stderr  # pip -v passes the build's output on stderr
-    assert built.returncode == 0, said[-5000:]
+    wheel, said = _build_wheel(source, _compiled_environment())
     assert "compiled into numba's cache" in said, said[-5000:]
-    (wheel,) = (tmp_path / "dist").glob("ezcompanion-*.whl")
 
     digest = kernel_fingerprint((source / "ezcompanion" / "guidance").glob("*.py"))
     cache = f"ezcompanion/guidance/__pycache__/numba-{digest}/"
@@ -89,3 +96,14 @@ def test_the_wheel_carries_the_kernels_and_its_first_run_loads_them(tmp_path: Pa
     assert "already in numba's cache, loaded" in first.stdout, first.stdout
     assert seen["hits"] >= 1 and seen["misses"] == 0, seen
     assert _index_files(site) == indexed  # nothing compiled, nothing re-indexed
+
+
+def test_a_wheel_built_without_the_compile_carries_no_cache(tmp_path: Path) -> None:
+    """``EZCOMPANION_BUILD_COMPILE=0``: nothing compiled, and no cache an earlier build left
+    in the build directory ships either."""
+    env = {**_compiled_environment(), "EZCOMPANION_BUILD_COMPILE": "0"}
+    wheel, said = _build_wheel(tmp_path / "source", env)
+    assert "numba's cache" not in said
+    names = zipfile.ZipFile(wheel).namelist()
+    assert "ezcompanion/guidance/_jit.py" in names
+    assert not [n for n in names if "numba-" in n], names

@@ -26,6 +26,7 @@ import zenoh
 
 from ezcompanion.config import Scenario, load_scenario, scenario_from_dict, scenario_update
 from ezcompanion.errors import ConfigError
+from ezcompanion.service.demo import free_port
 from ezcompanion.service.events import Event, EventKind
 from ezcompanion.service.inbox import ScenarioInbox
 from ezcompanion.service.loop import GuidanceLoop, TickCommand
@@ -50,9 +51,7 @@ NAMES = ("D1", "D2", "D3")
 
 
 def free_endpoint() -> str:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{sock.getsockname()[1]}"
+    return f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
 
 
 def peer(connect: str) -> zenoh.Config:

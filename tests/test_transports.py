@@ -41,7 +41,7 @@ import yaml
 from test_service_loopback import STUCK, stop_or_dump
 
 from ezcompanion.config import load_scenario
-from ezcompanion.service.demo import free_udp_port, judge_truth
+from ezcompanion.service.demo import free_port, free_udp_port, judge_truth
 from ezcompanion.service.events import EventKind, EventLog
 from ezcompanion.service.runner import CompanionService, EngagementOutcome
 from ezcompanion.service.settings import companion_settings
@@ -77,9 +77,7 @@ _WALL_BUDGET_S = 90.0  # a stuck run fails here instead of hanging the suite
 
 
 def _free_tcp_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return int(probe.getsockname()[1])
+    return free_port(socket.SOCK_STREAM)
 
 
 @dataclass(frozen=True)
@@ -369,3 +367,17 @@ def test_a_bad_stub_endpoint_is_one_line_naming_the_flag(
     assert stub_main(["--config", str(SCENARIO), "--connect", url]) == 2
     (line,) = capsys.readouterr().err.splitlines()
     assert "argument --connect" in line and reason in line and repr(url) in line, line
+
+
+def test_a_free_port_is_drawn_outside_the_kernels_ephemeral_range() -> None:
+    """A port chosen for a peer that binds it later is not one the kernel hands to unbound
+    sockets meanwhile (a loopback stub once found its UDP port so taken)."""
+    from ezcompanion.service import demo
+
+    low, high = demo._ephemeral_ports()
+    assert low <= high
+    for kind in (socket.SOCK_STREAM, socket.SOCK_DGRAM):
+        ports = [free_port(kind) for _ in range(20)]
+        assert not [port for port in ports if low <= port <= high], (low, high, ports)
+        with socket.socket(socket.AF_INET, kind) as sock:
+            sock.bind(("127.0.0.1", ports[-1]))  # free when given

@@ -16,6 +16,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from ezcompanion.cli import main
 from ezcompanion.exit_codes import ExitCode
+from ezcompanion.service.demo import free_port
 from ezcompanion.wire import Link
 
 SCENARIO = Path(__file__).resolve().parents[1] / "config" / "paper_scenario1.yaml"
@@ -98,9 +99,7 @@ def test_a_tcp_client_survives_an_idle_socket_and_reconnects() -> None:
 
 
 def _free_tcp_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return int(probe.getsockname()[1])
+    return free_port(socket.SOCK_STREAM)
 
 
 def test_a_tcp_client_started_before_its_server_connects_once_the_server_listens(

@@ -10,6 +10,7 @@ columns of ``ezcompanion simulate``), ``companion.tlog`` and ``engagement.png``.
 
 from __future__ import annotations
 
+import random
 import socket
 import subprocess
 import sys
@@ -29,6 +30,7 @@ from ezcompanion.wire import Projection
 __all__ = [
     "DemoResult",
     "as_flown",
+    "free_port",
     "free_udp_port",
     "judge_run",
     "judge_truth",
@@ -138,10 +140,41 @@ def telemetry_endpoint() -> str:
 
 
 def free_udp_port() -> int:
-    """A UDP port on 127.0.0.1 that nothing holds right now."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+    """A UDP port on 127.0.0.1 that nothing holds right now (see :func:`free_port`)."""
+    return free_port(socket.SOCK_DGRAM)
+
+
+def free_port(kind: int = socket.SOCK_STREAM) -> int:
+    """A port on 127.0.0.1 that nothing holds right now (TCP, or UDP with
+    ``socket.SOCK_DGRAM``), drawn at random outside the kernel's range of ephemeral ports.
+    A port the kernel hands out for a bind to port 0 is one of those, and once let go it
+    may be handed again to any socket that sends or connects unbound (another process's)
+    before the one it was meant for binds it: a loopback vehicle started a second after
+    its port was chosen once found it taken ("Address already in use"). Outside that range
+    only another explicit choice can take it; inside it when there is no room outside."""
+    low, high = _ephemeral_ports()
+    spans = [(lo, hi) for lo, hi in ((10_000, low - 1), (high + 1, 65_535)) if hi - lo >= 1_000]
+    draw = random.SystemRandom()
+    for _ in range(64 if spans else 0):
+        port = draw.randint(*draw.choice(spans))
+        with socket.socket(socket.AF_INET, kind) as sock:
+            try:
+                sock.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
+    with socket.socket(socket.AF_INET, kind) as sock:
         sock.bind(("127.0.0.1", 0))
         return int(sock.getsockname()[1])
+
+
+def _ephemeral_ports() -> tuple[int, int]:
+    """The kernel's range of ephemeral ports (Linux's; its default elsewhere)."""
+    try:
+        low, high = Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()
+        return int(low), int(high)
+    except (OSError, ValueError):
+        return 32_768, 60_999
 
 
 def as_flown(scenario: Scenario, profile: str = "copter") -> Scenario:

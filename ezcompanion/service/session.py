@@ -98,10 +98,10 @@ _ORIGIN_TRIES = 6  # then the scenario's origin is assumed (with a warning)
 # reboot; ArduCopter 4.5.1 SITL after a forced reboot was unheard for 2.03-2.05 s (its
 # heartbeats 2.2-2.4 s apart, docs/field.md), which 2.5 s of heartbeats alone named a disarm
 _REBOOT_SILENCE_S = 1.5
+_REBOOT_SILENCE_PERIODS = 3.0
 # the loop does its periodic work at least once a second (its own heartbeat): a longer gap
 # is the companion stalled (stopped, swapped out, starved), not the vehicle silent
 _OWN_STALL_S = 1.0
-_REBOOT_SILENCE_PERIODS = 3.0
 
 
 def gate_bound_m_s2(given_m_s2: float, accel_max_m_s2: float,

@@ -36,10 +36,12 @@ class BuildWithKernels(build_py):
         super().run()
         if getattr(self, "editable_mode", False):
             return
+        # a build directory used before (pip builds in the source tree's build/) may hold
+        # the caches of earlier builds: only the one compiled now ships
+        caches = os.path.join(self.build_lib, _CACHES, "numba-*")
+        for cache in glob.glob(caches):
+            shutil.rmtree(cache)
         if os.environ.get("EZCOMPANION_BUILD_COMPILE", "1") == "0":
-            # nor any cache an earlier build left in the build directory
-            for cache in glob.glob(os.path.join(self.build_lib, _CACHES, "numba-*")):
-                shutil.rmtree(cache)
             return
         # compiled, into the package's own cache directory, whatever this shell says
         dropped = ("NUMBA_CACHE_DIR", "EZCOMPANION_JIT", "NUMBA_DISABLE_JIT")
@@ -52,29 +54,12 @@ class BuildWithKernels(build_py):
         # run in the build directory: `python -c` puts its working directory first on the
         # path, and the source tree's own package must not be the one compiled
         subprocess.run([sys.executable, "-c", _COMPILE], env=env, cwd=self.build_lib, check=True)
-        # a build directory used before (pip builds in the source tree's build/) may hold
-        # the caches of earlier sources: only this one ships
-        with open(os.path.join(self.build_lib, _CACHE_NAMED)) as named:
-            kept = named.read().strip()
-        os.remove(os.path.join(self.build_lib, _CACHE_NAMED))
-        build_lib, kept = os.path.realpath(self.build_lib), os.path.realpath(kept)
-        if os.path.commonpath([build_lib, kept]) != build_lib:
-            raise RuntimeError(f"the kernels were compiled into {kept}, not into the build")
-        for cache in glob.glob(os.path.join(os.path.dirname(kept), "numba-*")):
-            if os.path.realpath(cache) != kept:
-                shutil.rmtree(cache)
+        if not glob.glob(caches):
+            raise RuntimeError(f"the kernels were compiled, but not into {caches}")
 
 
 _CACHES = os.path.join("ezcompanion", "guidance", "__pycache__")  # numba-<digest>/ in it
-_CACHE_NAMED = "ezcompanion-kernel-cache.txt"  # where the compile says its cache is
-_COMPILE = f"""
-from ezcompanion.commands import run_compile
-from numba.core import config
-code = run_compile()
-with open({_CACHE_NAMED!r}, "w") as named:
-    named.write(config.CACHE_DIR)
-raise SystemExit(code)
-"""
+_COMPILE = "from ezcompanion.commands import run_compile; raise SystemExit(run_compile())"
 
 
 setup(cmdclass={"build_py": BuildWithKernels})

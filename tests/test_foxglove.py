@@ -51,10 +51,6 @@ SCENARIO = CONFIG / "paper_scenario1.yaml"
 PROTOCOL = "foxglove.sdk.v1"  # the foxglove-sdk server's WebSocket subprotocol
 
 
-def free_tcp_port() -> int:
-    return free_port(socket.SOCK_STREAM)
-
-
 def protobuf_decoder(schema_name: str, descriptor_set: bytes) -> Callable[[bytes], Any]:
     """A parser of ``schema_name`` messages from the FileDescriptorSet Foxglove gives."""
     files = descriptor_pb2.FileDescriptorSet.FromString(descriptor_set)
@@ -198,7 +194,7 @@ def bridge(endpoint: str, port: int, **options: Any) -> Iterator[list[FoxgloveTe
 def test_a_foxglove_client_decodes_map_scene_and_plots_of_a_loopback_engagement(
     tmp_path: Path,
 ) -> None:
-    endpoint, port = free_endpoint(), free_tcp_port()
+    endpoint, port = free_endpoint(), free_port()
     scenario = load_scenario(SCENARIO)
     with router(endpoint), bridge(endpoint, port) as translated:
         client = FoxgloveClient(port)
@@ -297,7 +293,7 @@ def test_a_foxglove_client_decodes_map_scene_and_plots_of_a_loopback_engagement(
 
 
 def test_the_cli_serves_foxglove_and_refuses_bad_flags(capsys: pytest.CaptureFixture[str]) -> None:
-    endpoint, port = free_endpoint(), free_tcp_port()
+    endpoint, port = free_endpoint(), free_port()
     done: list[int] = []
     args = ["foxglove", "--connect", endpoint, "--port", str(port), "--duration", "2"]
     thread = threading.Thread(target=lambda: done.append(main(args)))

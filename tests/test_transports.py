@@ -76,10 +76,6 @@ CASES = {
 _WALL_BUDGET_S = 90.0  # a stuck run fails here instead of hanging the suite
 
 
-def _free_tcp_port() -> int:
-    return free_port(socket.SOCK_STREAM)
-
-
 @dataclass(frozen=True)
 class Transport:
     """One way to connect: each side's endpoint, and who must start first."""
@@ -93,7 +89,7 @@ def _transport(name: str, tmp_path: Path) -> Transport:
     if name == "serial":
         tty = tmp_path / "ttyFC"
         return Transport(f"{tty},115200", f"pty:{tty}", stub_first=True)
-    port = _free_tcp_port() if name.startswith("tcp") else free_udp_port()
+    port = free_port() if name.startswith("tcp") else free_udp_port()
     pairs: dict[str, tuple[str, str]] = {
         "tcp": ("tcp", "tcpin"),
         "tcpin": ("tcpin", "tcp"),
@@ -292,7 +288,7 @@ def test_a_tcp_vehicle_that_restarts_is_reached_again_and_guided_again(
     caplog.set_level(logging.WARNING, logger="ezcompanion.wire")
     speedup = 5.0
     scenario = load_scenario(SCENARIO)
-    port = _free_tcp_port()
+    port = free_port()
     settings = companion_settings(scenario, connect=f"tcp:127.0.0.1:{port}", engage=True,
                                   speedup=speedup, loop_rate_hz=20.0,
                                   telemetry_rate_hz=20.0)  # fmt: skip

@@ -98,14 +98,10 @@ def test_a_tcp_client_survives_an_idle_socket_and_reconnects() -> None:
         server.close()
 
 
-def _free_tcp_port() -> int:
-    return free_port(socket.SOCK_STREAM)
-
-
 def test_a_tcp_client_started_before_its_server_connects_once_the_server_listens(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
-    port = _free_tcp_port()
+    port = free_port()
     caplog.set_level(logging.WARNING, logger="ezcompanion.wire")
     # nothing listens: the link opens anyway (pymavlink's mavtcp raises here) and waits
     link = Link(f"tcp:127.0.0.1:{port}", system_id=245, component_id=191)
@@ -146,7 +142,7 @@ def test_a_tcp_client_started_before_its_server_connects_once_the_server_listens
 def test_a_tcp_client_with_no_server_ends_in_one_line_when_its_budget_runs_out(
     capsys: pytest.CaptureFixture[str], caplog: pytest.LogCaptureFixture
 ) -> None:
-    port = _free_tcp_port()
+    port = free_port()
     url = f"tcp:127.0.0.1:{port}"
     argv = ["run", "--config", str(SCENARIO), "--connect", f"tcp://127.0.0.1:{port}",
             "--max-time", "1.5", "--no-telemetry"]  # fmt: skip
@@ -186,7 +182,7 @@ def test_a_tcpin_link_serves_the_next_client_when_one_goes_away() -> None:
 def test_the_stubs_tcp_client_waits_for_a_companion_that_listens_late() -> None:
     from sitl_stub.mav import StubLink
 
-    port = _free_tcp_port()
+    port = free_port()
     stub = StubLink(f"tcp:127.0.0.1:{port}", system_id=1, component_id=1)  # nothing listens
     companion = None
     try:

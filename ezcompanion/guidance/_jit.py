@@ -93,9 +93,9 @@ def kernels_cached(kernel: str = "guidance/single.step_one", directory: str | No
     if not JIT_ENABLED:
         return True
     where = Path(directory if directory is not None else _numba_config.CACHE_DIR)  # type: ignore[attr-defined]
-    if not _writable(where / kernel.split("/")[0]):
-        return False  # numba caches elsewhere then (_PackageCacheLocator.from_function)
     subpackage, name = kernel.split("/")
+    if not _writable(where / subpackage):
+        return False  # numba caches elsewhere then (_PackageCacheLocator.from_function)
     source = _PACKAGE / subpackage / f"{name.split('.')[0]}.py"
     python = f"py{sys.version_info[0]}{sys.version_info[1]}{getattr(sys, 'abiflags', '')}"
     indexes = where.glob(f"{kernel}-*.{python}.nbi")  # (numba's name for this Python's)

@@ -198,6 +198,11 @@ _SCREEN_SLACK = 1e-6
 # costliest 300 of 120,000 campaign steps, 95% did by the 4th sample; a long flight paid
 # for one at every sample (bench/bench_shield.py, docs/service.md, "Cost").
 _SCREEN_EVERY = 4
+# A flight's heading moves by at most a_max dt / v in a control step (0.02 rad at the
+# paper's scale and 50 Hz, 0.008 for the plane at 25 Hz); up to this much, the cosine and
+# sine of the next heading are the last ones rotated by it (``_fly``), not computed afresh
+# (sincos had been a quarter of the shield's time on a lagging track: docs/service.md).
+_ROTATE_RAD = 0.1
 # turn_certificate's bool argument every_step, read from here so that it is a bool at run
 # time: numba compiles a kernel once more for each literal value of a bool or int
 # argument, and a cold compile of turn_certificate took 6.7 s (twice, with True and False,
@@ -304,17 +309,39 @@ def _fly(n: float, e: float, h: float, cos_h: float, sin_h: float, a0: float, a1
          ) -> tuple[float, float, float, float, float, float]:
     """The vehicle over dt while the actuator moves linearly from a0 to a1: position by
     Simpson's rule on the exact heading, heading and a_v exact. ``cos_h``, ``sin_h``: of
-    ``h``, and returned for the heading after (a flight of many steps computes each
-    once); ``decays``: ``_decays(tau, dt)``, computed once a flight."""  # fmt: skip
+    ``h``, and returned for the heading after; ``decays``: ``_decays(tau, dt)``, computed
+    once a flight. The cosine and sine after are those before rotated by the step's turn
+    (``_small_cos_sin``), each within a few units in the last place of the rotation: a
+    flight of N steps carries them within some N 1e-16 of cos h and sin h (1.0e-12 after
+    20,000 steps of hard turns; tests/test_backup.py), far below what Simpson's rule leaves.
+    A turn beyond ``_ROTATE_RAD`` a step computes them afresh."""  # fmt: skip
     _, half = _lag_response(a0, a1, av0, tau, 0.5 * dt, dt, decays[0])
     av1, full = _lag_response(a0, a1, av0, tau, dt, dt, decays[1])
-    hm = h + half / speed
-    h1 = h + full / speed
-    cos_h1, sin_h1 = math.cos(h1), math.sin(h1)
+    turn_mid = half / speed
+    turn = full / speed
+    h1 = h + turn
+    if abs(turn) <= _ROTATE_RAD and abs(turn_mid) <= _ROTATE_RAD:
+        cm, sm = _small_cos_sin(turn_mid)
+        c1, s1 = _small_cos_sin(turn)
+        cos_hm, sin_hm = cos_h * cm - sin_h * sm, sin_h * cm + cos_h * sm
+        cos_h1, sin_h1 = cos_h * c1 - sin_h * s1, sin_h * c1 + cos_h * s1
+    else:
+        cos_hm, sin_hm = math.cos(h + turn_mid), math.sin(h + turn_mid)
+        cos_h1, sin_h1 = math.cos(h1), math.sin(h1)
     step = speed * dt / 6.0
-    n1 = n + step * (cos_h + 4.0 * math.cos(hm) + cos_h1)
-    e1 = e + step * (sin_h + 4.0 * math.sin(hm) + sin_h1)
+    n1 = n + step * (cos_h + 4.0 * cos_hm + cos_h1)
+    e1 = e + step * (sin_h + 4.0 * sin_hm + sin_h1)
     return n1, e1, h1, av1, cos_h1, sin_h1
+
+
+@jit_inline
+def _small_cos_sin(x: float) -> tuple[float, float]:
+    """cos x and sin x for |x| <= ``_ROTATE_RAD`` by their Taylor series to x^8 and x^9
+    (the first term left out is below 3e-17 there: exact to round-off)."""
+    x2 = x * x
+    cos_x = 1.0 - x2 * (1 / 2 - x2 * (1 / 24 - x2 * (1 / 720 - x2 * (1 / 40320))))
+    sin_x = x * (1.0 - x2 * (1 / 6 - x2 * (1 / 120 - x2 * (1 / 5040 - x2 * (1 / 362880)))))
+    return cos_x, sin_x
 
 
 # ---------------------------------------------------------------------------------------
@@ -505,17 +532,22 @@ def _tube_gap(
 def _si_cin(x: float) -> tuple[float, float]:
     """Si(x) = int_0^x sin(u) / u du and Cin(x) = int_0^x (1 - cos u) / u du, by their power
     series (alternating, stopped once a term is below 1e-17: at most 15 terms for |x| <= 4,
-    3 for |x| <= 0.01)."""
+    3 for |x| <= 0.01). Each division is a product with ``_INVERSES`` (the lag's screen,
+    which sums these once a zone, took a fifth of the shield's time on a lagging track: perf
+    on bench_law.py --service's states, its kernels not inlined)."""
     si = cin = 0.0
     term = x  # +- x^(2j-1) / (2j-1)!
     for j in range(1, 16):
-        si += term / (2 * j - 1)
-        term *= x / (2 * j)  # +- x^(2j) / (2j)!
-        cin += term / (2 * j)
-        term *= -x / (2 * j + 1)
+        si += term * _INVERSES[2 * j - 1]
+        term *= x * _INVERSES[2 * j]  # +- x^(2j) / (2j)!
+        cin += term * _INVERSES[2 * j]
+        term *= -x * _INVERSES[2 * j + 1]
         if abs(term) < 1e-17:
             break
     return si, cin
+
+
+_INVERSES = np.concatenate(([math.inf], 1.0 / np.arange(1.0, 32.0)))  # 1 / k at index k
 
 
 # The lag's closed-form screen is used where the heading still to come from a_v alone,

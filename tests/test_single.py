@@ -3,6 +3,7 @@ path: the same law, actuator, shield and modes, to round-off, for every law."""
 
 from __future__ import annotations
 
+import ast
 import dataclasses
 import math
 import sys
@@ -218,6 +219,65 @@ def test_the_kernel_cache_is_named_by_every_kernel_source(tmp_path: Path) -> Non
     assert cache_dir("/elsewhere") == f"/elsewhere/numba-{here}"
     cache_path = step_one._cache._impl.locator.get_cache_path()  # type: ignore[attr-defined]
     assert cache_path.startswith(config.CACHE_DIR)
+
+
+_KERNEL_DECORATORS = {"jit", "jit_borrow", "jit_inline", "jit_parallel"}
+# where a kernel may take what it compiles in: its own module (numba's stamp of its file),
+# the guidance package (the cache directory's digest), and these
+_KERNEL_LIBRARIES = ("math", "numpy", "ezcompanion.guidance", "__future__", "typing",
+                     "collections.abc", "numpy.typing")  # fmt: skip
+
+
+def _kernels_foreign_names(source: str) -> list[str]:
+    """The names the kernels of a module (its functions decorated with ``_jit``'s
+    decorators) take from another module outside ``_KERNEL_LIBRARIES``."""
+    tree = ast.parse(source)
+    imported: dict[str, str] = {}
+    for node in tree.body:
+        if isinstance(node, ast.ImportFrom) and node.module is not None:
+            for alias in node.names:
+                imported[alias.asname or alias.name] = node.module
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                imported[alias.asname or alias.name.split(".")[0]] = alias.name
+    foreign = []
+    for node in tree.body:
+        if not isinstance(node, ast.FunctionDef) or not any(
+            isinstance(d, ast.Name) and d.id in _KERNEL_DECORATORS for d in node.decorator_list
+        ):
+            continue
+        for used in ast.walk(node):
+            if isinstance(used, ast.Name) and used.id in imported:
+                origin = imported[used.id]
+                if not any(origin == lib or origin.startswith(lib + ".")
+                           for lib in _KERNEL_LIBRARIES):  # fmt: skip
+                    foreign.append(f"{node.name}: {used.id} from {origin}")
+    return foreign
+
+
+def test_kernels_outside_guidance_take_nothing_the_cache_would_not_see_change() -> None:
+    """numba reloads a cached kernel while its own file is unchanged, and the cache
+    directory is named by a digest of guidance/'s sources only. So a kernel elsewhere
+    (validation/, service/) may compile in code and constants from its own module and from
+    guidance/ only: a constant taken from a third file would stay frozen in the cache
+    through an edit of that file. Every module that holds one is checked, and the check
+    itself against a module that breaks the rule."""
+    package = Path(_jit.__file__).parents[1]
+    holders = [path for path in sorted(package.rglob("*.py"))
+               if "guidance" not in path.relative_to(package).parts
+               and "guidance._jit import" in path.read_text()]  # fmt: skip
+    assert {p.name for p in holders} >= {"_oracle_search.py", "escape.py", "identify.py"}
+    for path in holders:
+        assert _kernels_foreign_names(path.read_text()) == [], path
+    breaks = (
+        "import math\n"
+        "from ezcompanion.guidance._jit import jit\n"
+        "from ezcompanion.validation.scenarios import PAD_M\n"
+        "@jit\n"
+        "def kernel(x):\n"
+        "    return math.hypot(x, PAD_M)\n"
+    )
+    assert _kernels_foreign_names(breaks) == ["kernel: PAD_M from ezcompanion.validation.scenarios"]
 
 
 def test_a_cold_kernel_cache_is_seen_and_said_before_the_link_opens(

@@ -11,10 +11,11 @@ carries the code of every kernel it calls, from other files: the service's one-v
 An edit to ``backup.py`` alone would leave it running the old shield. So the cache lives in
 a directory named by a digest of every source file of this package
 (``__pycache__/numba-<digest>`` here, or under ``NUMBA_CACHE_DIR`` when that is set): any
-edit here compiles afresh. The kernels elsewhere (``validation/``, ``service/``) compile in
-code and constants from their own module and this package only, which that digest and
-numba's own stamp cover (``tests/test_single.py`` holds every one of them to it). (Set in numba's config for this process only, not in the
-environment, so child processes find the same directory.) Inside it each subpackage's
+edit here compiles afresh. (Set in numba's config for this process only, not in the
+environment, so child processes find the same directory.) The kernels elsewhere
+(``validation/``, ``service/``) compile in code and constants from their own module and
+this package only, which that digest and numba's own stamp cover (``tests/test_single.py``
+holds every one of them to it). Inside the directory each subpackage's
 kernels have a directory of their own (``guidance/``, ``validation/``), named relative to
 the package rather than by absolute path, so that a cache is found wherever the package is
 installed: the wheel ships one (setup.py).

@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+import pytest
 from conftest_sitl import Relay
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -27,9 +28,10 @@ from test_service_units import known_origin, local
 from test_trust_link import LIGHT, SCENARIO, Clock, assert_honest, wait_for
 
 from ezcompanion.config import load_scenario
-from ezcompanion.records import Hold
+from ezcompanion.records import Hold, VehicleState
 from ezcompanion.service.demo import free_udp_port, wait_for_line
-from ezcompanion.service.events import EventKind
+from ezcompanion.service.engagement import Engagement
+from ezcompanion.service.events import EventKind, EventLog
 from ezcompanion.service.loop import GuidanceLoop
 from ezcompanion.service.trust import HeartbeatJudge
 from ezcompanion.wire import Frame, mode_name
@@ -273,6 +275,31 @@ def test_heartbeats_that_waited_through_a_stall_are_not_a_burst(tmp_path: Path) 
     # "intercepted"; the abandon check, off by default, is what keeps that setpoint safe)
     assert "(the companion stalled): guidance starts afresh" in out, out
     assert "ended: intercepted" in out or "reached the target, but entered the zone" in out, out
+
+
+@pytest.mark.parametrize("stalled_s", [0.0, 8.0])
+def test_a_stall_in_a_failsafe_is_said_too(stalled_s: float) -> None:
+    # in `make test` under load, the stall of the test above came while the engagement was
+    # in a failsafe (a stale position), and went unsaid: ticks go on at each deadline there,
+    # so a gap between them is the companion's own too
+    scenario = load_scenario(SCENARIO)
+    loop = GuidanceLoop(scenario, loop_rate_hz=50.0, stale_after_s=BUDGET_S)
+    events = EventLog()
+    engagement = Engagement(loop, events, lambda _m: True,
+                            intercept_radius_m=scenario.guidance.intercept_radius_m)  # fmt: skip
+    engagement.start(0.0, "GUIDED")
+    old = VehicleState(north_m=8.0, east_m=-4.0, down_m=-20.0, velocity_north_m_s=-0.8,
+                       velocity_east_m_s=0.6, yaw_rad=2.5, position_time_s=1.0,
+                       attitude_time_s=1.0, position_source="local")  # stale from 1.25 s
+    now = 2.0
+    for _ in range(10):
+        engagement.tick(now, old)
+        now += 0.027  # a deadline tick: 1.35 periods
+    assert engagement.failsafe_active
+    engagement.tick(now + stalled_s, old)
+    said = [e for e in events.of_kind(EventKind.WARNING) if "companion stalled" in e.message]
+    assert len(said) == (1 if stalled_s else 0), said
+    assert engagement.failsafe_active  # the position is as stale as before: still held
 
 
 def _heartbeat(seq: int = 0, status: int = mavutil.mavlink.MAV_STATE_ACTIVE) -> Frame:

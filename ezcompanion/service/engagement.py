@@ -124,11 +124,13 @@ class Engagement:
         state says."""
         self.ticks += 1
         last, self._last_tick_s = self._last_tick_s, now
-        if last is not None and now - last > STALL_S and not self.failsafe_active:
+        if last is not None and now - last > STALL_S:
             # the companion itself stopped (a stall): the vehicle flew its last setpoint on
             # and may have stopped at its own timeout; the law's actuator state and the
             # setpoints' reference no longer say what it does: start afresh, as after a
-            # lost link (from the measured turn or, at rest, along a clear line)
+            # lost link (from the measured turn or, at rest, along a clear line). In a
+            # failsafe too (ticks go on in one, at each deadline): it is said, and
+            # guidance resumes afresh (a stall under load had gone unsaid there)
             self.loop.reset()
             if self.setpoints is not None:
                 self.setpoints.reset()

@@ -24,8 +24,15 @@ _START_S = 1.7e9  # a log's wall clock
 
 def _log(path: Path, *, jump_at: int | None = None, autopilot: bool = True,
          step_back_at: int | None = None, reboot_at: int | None = None,
-         attitude_ahead_ms: int | None = None) -> Path:
+         attitude_ahead_ms: int | None = None, own: bool = False,
+         stall_at: int | None = None) -> Path:
+    """``own``: the logger's own heartbeat too, once a second whatever the vehicle does
+    (a companion's tlog); ``stall_at``: the logger stopped for 8 s there (nothing logged,
+    the vehicle flying on)."""
     vehicle, station = forger(1, 1), forger(255, 190)
+    companion = forger(1, 191)
+    own_beat = M.MAVLink_heartbeat_message(M.MAV_TYPE_ONBOARD_CONTROLLER,
+                                           M.MAV_AUTOPILOT_INVALID, 0, 0, 4, 3)  # fmt: skip
     with TlogWriter(path) as log:
         log.write(frame(station, M.MAVLink_heartbeat_message(
             M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3)), _START_S)  # fmt: skip
@@ -41,7 +48,13 @@ def _log(path: Path, *, jump_at: int | None = None, autopilot: bool = True,
             if k == step_back_at:
                 clock_s -= 1.0  # the logger's wall clock set back (NTP)
             if k == reboot_at:  # 5 s unheard, and back from a reboot, its clock afresh
+                for second in range(1, 5) if own else ():
+                    log.write(frame(companion, own_beat), clock_s + second)
                 clock_s, boot_ms = clock_s + 5.0, 500 - 20 * k
+            if k == stall_at:  # the logger stopped: 8 s of nothing, the vehicle on its way
+                clock_s, boot_ms = clock_s + 8.0, boot_ms + 8000
+            if own and k % 50 == 0:
+                log.write(frame(companion, own_beat), clock_s)
             if autopilot and k % 50 == 49:
                 log.write(frame(vehicle, beat), clock_s)
             east = 3.0 if jump_at is not None and k >= jump_at else 0.0
@@ -112,3 +125,14 @@ def test_attitudes_stamped_ahead_are_named_as_the_service_names_them(tmp_path: P
     report = check_tlog(_log(tmp_path / "ahead.tlog", attitude_ahead_ms=300))
     assert not report.clean
     assert any(reason.startswith("attitude sample stamped") for reason in report.reasons)
+
+
+def test_a_stall_of_the_logger_is_not_a_lost_link(tmp_path: Path) -> None:
+    """As the service counts a vehicle's silence from its own last stall: a companion's
+    tlog has a gap where the companion was stopped (nothing logged, its own heartbeat
+    included), which is not the vehicle's silence; a vehicle silent while the companion's
+    own heartbeats went on being logged is."""
+    report = check_tlog(_log(tmp_path / "stall.tlog", own=True, stall_at=120))
+    assert report.clean and report.lost == 0 and report.used["LOCAL_POSITION_NED"] == 250
+    report = check_tlog(_log(tmp_path / "silent.tlog", own=True, reboot_at=120))
+    assert report.clean and report.lost == 1

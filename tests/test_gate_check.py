@@ -25,10 +25,11 @@ _START_S = 1.7e9  # a log's wall clock
 def _log(path: Path, *, jump_at: int | None = None, autopilot: bool = True,
          step_back_at: int | None = None, reboot_at: int | None = None,
          attitude_ahead_ms: int | None = None, own: bool = False,
-         stall_at: int | None = None) -> Path:
+         stall_at: int | None = None, other: bool = False) -> Path:
     """``own``: the logger's own heartbeat too, once a second whatever the vehicle does
     (a companion's tlog); ``stall_at``: the logger stopped for 8 s there (nothing logged,
-    the vehicle flying on)."""
+    the vehicle flying on); ``other``: a second autopilot's heartbeat beside each of the
+    vehicle's frames (on the same link: silent with it)."""
     vehicle, station = forger(1, 1), forger(255, 190)
     companion = forger(1, 191)
     own_beat = M.MAVLink_heartbeat_message(M.MAV_TYPE_ONBOARD_CONTROLLER,
@@ -57,6 +58,8 @@ def _log(path: Path, *, jump_at: int | None = None, autopilot: bool = True,
                 log.write(frame(companion, own_beat), clock_s)
             if autopilot and k % 50 == 49:
                 log.write(frame(vehicle, beat), clock_s)
+            if other:
+                log.write(frame(forger(2, 1), beat), clock_s)
             east = 3.0 if jump_at is not None and k >= jump_at else 0.0
             msg = M.MAVLink_local_position_ned_message(boot_ms + 20 * k, 0.1 * k, east, -20.0,
                                                        5.0, 0.0, 0.0)  # fmt: skip
@@ -135,4 +138,7 @@ def test_a_stall_of_the_logger_is_not_a_lost_link(tmp_path: Path) -> None:
     report = check_tlog(_log(tmp_path / "stall.tlog", own=True, stall_at=120))
     assert report.clean and report.lost == 0 and report.used["LOCAL_POSITION_NED"] == 250
     report = check_tlog(_log(tmp_path / "silent.tlog", own=True, reboot_at=120))
+    assert report.clean and report.lost == 1
+    # another vehicle's frames are not the logger's: silent with the link, they are no stall
+    report = check_tlog(_log(tmp_path / "two.tlog", other=True, reboot_at=120))
     assert report.clean and report.lost == 1

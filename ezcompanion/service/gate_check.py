@@ -39,7 +39,7 @@ _EXAMPLES = 3
 # which its positions are judged afresh (TelemetryState.forget_motion)
 _LINK_LOST_S = CompanionSettings.link_lost_after_s
 # nothing logged for longer than this, while the logger's own frames (a companion's or a
-# ground station's, a heartbeat a second at least) were being logged up to it, is the
+# ground station's, a heartbeat a second at least) were logged up to it, is the
 # logger stalled, not the vehicle silent: the silence counts from its end, as the service
 # counts it from its own last stall (session._OWN_STALL_S; here beyond the 1 s heartbeat)
 _LOGGER_STALL_S = 1.5
@@ -103,7 +103,10 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
     shift_s = 0.0  # what the logger's clock stepped back by, in all
     last_s = -math.inf
     heartbeat_s = -math.inf
-    own_s = -math.inf  # the logger's own last frame (any source but the vehicle)
+    # the logger's own last frame: of a source whose heartbeat is not an autopilot's (a
+    # companion's, a ground station's; another vehicle's falls silent with the link)
+    own: set[tuple[int, int]] = set()
+    own_s = -math.inf
     resumed_s = -math.inf  # the end of the logger's last stall
     lost = False
     for logged_s, msg in read_tlog(path):
@@ -114,7 +117,9 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
             resumed_s = last_s
         kind = msg.get_type()
         source = (msg.get_srcSystem(), msg.get_srcComponent())
-        if report.vehicle is not None and source != report.vehicle:
+        if kind == "HEARTBEAT" and not is_autopilot_heartbeat(msg):
+            own.add(source)
+        if source in own:
             own_s = last_s
         if report.vehicle is None:
             if kind != "HEARTBEAT" or not is_autopilot_heartbeat(msg) or (

@@ -38,11 +38,6 @@ _EXAMPLES = 3
 # the service's default: no heartbeat of the vehicle's for this long is a lost link, after
 # which its positions are judged afresh (TelemetryState.forget_motion)
 _LINK_LOST_S = CompanionSettings.link_lost_after_s
-# nothing logged for longer than this, while the logger's own frames (a companion's or a
-# ground station's, a heartbeat a second at least) were logged up to it, is the
-# logger stalled, not the vehicle silent: the silence counts from its end, as the service
-# counts it from its own last stall (session._OWN_STALL_S; here beyond the 1 s heartbeat)
-_LOGGER_STALL_S = 1.5
 
 
 @dataclass
@@ -94,33 +89,26 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
     would take for that autopilot (its tilt limit's, and at least twice ``accel_max_m_s2``
     where given). As the service: ``_LINK_LOST_S`` without an autopilot heartbeat is a
     lost link, nothing is taken until the next, and the positions are judged afresh after
-    it, the silence counted from the logger's own last stall (``_LOGGER_STALL_S``); and the
-    log's times (the logger's wall clock) are taken as never going back (the service's
-    clock is monotonic)."""
+    it; and the log's times (the logger's wall clock) are taken as never going back (the
+    service's clock is monotonic). Not as the service: a gap in the log where the logger
+    itself stopped (a companion's tlog across its stall) reads as the vehicle's silence.
+    The service tells the two apart by its own clock; a log cannot (a link that drops
+    leaves the same gap where the logger logs only what it sent, as the companion does
+    over a tcp: link that is down), so such a stall counts a lost link here and the
+    positions after it are judged afresh."""
     report = GateReport()
     state: TelemetryState | None = None
     first_s: float | None = None
     shift_s = 0.0  # what the logger's clock stepped back by, in all
     last_s = -math.inf
     heartbeat_s = -math.inf
-    # the logger's own last frame: of a source whose heartbeat is not an autopilot's (a
-    # companion's, a ground station's; another vehicle's falls silent with the link)
-    own: set[tuple[int, int]] = set()
-    own_s = -math.inf
-    resumed_s = -math.inf  # the end of the logger's last stall
     lost = False
     for logged_s, msg in read_tlog(path):
         if logged_s + shift_s < last_s:
             shift_s = last_s - logged_s
-        before_s, last_s = last_s, logged_s + shift_s
-        if last_s - before_s > _LOGGER_STALL_S and before_s - own_s <= _LOGGER_STALL_S:
-            resumed_s = last_s
+        last_s = logged_s + shift_s
         kind = msg.get_type()
         source = (msg.get_srcSystem(), msg.get_srcComponent())
-        if kind == "HEARTBEAT" and not is_autopilot_heartbeat(msg):
-            own.add(source)
-        if source in own:
-            own_s = last_s
         if report.vehicle is None:
             if kind != "HEARTBEAT" or not is_autopilot_heartbeat(msg) or (
                 system_id is not None and source[0] != system_id
@@ -135,7 +123,7 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
             continue
         if source != report.vehicle:
             continue
-        if last_s - max(heartbeat_s, resumed_s) > _LINK_LOST_S and not lost:
+        if last_s - heartbeat_s > _LINK_LOST_S and not lost:
             lost = True  # as the service: the link lost, what the vehicle did meanwhile
             report.lost += 1  # unknown; nothing taken until it is found again
             if state is not None:

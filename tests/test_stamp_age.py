@@ -277,11 +277,12 @@ def test_heartbeats_that_waited_through_a_stall_are_not_a_burst(tmp_path: Path) 
     assert "ended: intercepted" in out or "reached the target, but entered the zone" in out, out
 
 
+@pytest.mark.parametrize("ticks_before", [1, 10])
 @pytest.mark.parametrize("stalled_s", [0.0, 8.0])
-def test_a_stall_in_a_failsafe_is_said_too(stalled_s: float) -> None:
+def test_a_stall_in_a_failsafe_is_said_too(stalled_s: float, ticks_before: int) -> None:
     # in `make test` under load, the stall of the test above came while the engagement was
     # in a failsafe (a stale position), and went unsaid: ticks go on at each deadline there,
-    # so a gap between them is the companion's own too
+    # so a gap between them is the companion's own too, from the failsafe's first tick on
     scenario = load_scenario(SCENARIO)
     loop = GuidanceLoop(scenario, loop_rate_hz=50.0, stale_after_s=BUDGET_S)
     events = EventLog()
@@ -292,7 +293,7 @@ def test_a_stall_in_a_failsafe_is_said_too(stalled_s: float) -> None:
                        velocity_east_m_s=0.6, yaw_rad=2.5, position_time_s=1.0,
                        attitude_time_s=1.0, position_source="local")  # stale from 1.25 s
     now = 2.0
-    for _ in range(10):
+    for _ in range(ticks_before):
         engagement.tick(now, old)
         now += 0.027  # a deadline tick: 1.35 periods
     assert engagement.failsafe_active

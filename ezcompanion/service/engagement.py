@@ -152,7 +152,8 @@ class Engagement:
             return
         self.failsafe_active = True
         self.failsafes += 1
-        self._last_tick_s = None
+        # (the last tick's time is kept: ticks go on in a failsafe, so a stall right after
+        # its first tick is one too; where they stop, pause() forgets it)
         self.loop.reset()
         stop = None
         if self.setpoints is not None:

@@ -140,5 +140,5 @@ def test_a_gap_in_the_log_is_a_lost_link_whatever_went_quiet(tmp_path: Path) -> 
     for name, flight in (("silent", {"own": True, "reboot_at": 120}),
                          ("two", {"other": True, "reboot_at": 120}),
                          ("stall", {"own": True, "stall_at": 120})):  # fmt: skip
-        report = check_tlog(_log(tmp_path / f"{name}.tlog", **flight))  # type: ignore[arg-type]
+        report = check_tlog(_log(tmp_path / f"{name}.tlog", **flight))
         assert report.clean and report.lost == 1, name

@@ -12,7 +12,7 @@ import sys
 import zipfile
 from pathlib import Path
 
-from ezcompanion.guidance._jit import kernel_fingerprint
+from ezcompanion.guidance._jit import kernel_fingerprint, python_sources
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -77,7 +77,7 @@ def test_the_wheel_carries_the_kernels_and_its_first_run_loads_them(tmp_path: Pa
     wheel, said = _build_wheel(source, _compiled_environment())
     assert "compiled into numba's cache" in said, said[-5000:]
 
-    digest = kernel_fingerprint((source / "ezcompanion" / "guidance").glob("*.py"))
+    digest = kernel_fingerprint(python_sources(source / "ezcompanion" / "guidance"))
     cache = f"ezcompanion/guidance/__pycache__/numba-{digest}/"
     names = zipfile.ZipFile(wheel).namelist()
     shipped = [n for n in names if n.startswith(cache) and n.endswith(".nbi")]

@@ -24,7 +24,13 @@ from ezcompanion.guidance import (
     Target,
     _jit,
 )
-from ezcompanion.guidance._jit import JIT_ENABLED, cache_dir, kernel_fingerprint, kernels_cached
+from ezcompanion.guidance._jit import (
+    JIT_ENABLED,
+    cache_dir,
+    kernel_fingerprint,
+    kernels_cached,
+    python_sources,
+)
 from ezcompanion.guidance.backup import BACKUP_NONE
 from ezcompanion.guidance.single import step_one
 from ezcompanion.service import runner
@@ -214,7 +220,7 @@ def test_the_kernel_cache_is_named_by_every_kernel_source(tmp_path: Path) -> Non
     from numba.core import config
 
     package = Path(_jit.__file__).parent
-    here = kernel_fingerprint(package.glob("*.py"))
+    here = kernel_fingerprint(python_sources(package))
     assert config.CACHE_DIR.endswith(f"numba-{here}")
     assert cache_dir("/elsewhere") == f"/elsewhere/numba-{here}"
     cache_path = step_one._cache._impl.locator.get_cache_path()  # type: ignore[attr-defined]
@@ -285,13 +291,13 @@ def test_kernels_outside_guidance_take_nothing_the_cache_would_not_see_change() 
     (``_kernels_foreign_names`` says what it reads), and the check itself against a module
     that breaks the rule in each way it reads."""
     package = Path(_jit.__file__).parents[1]
-    holders = [path for path in sorted(package.rglob("*.py"))
-               if "guidance" not in path.relative_to(package).parts
-               and ("guidance._jit import" in path.read_text()
-                    or "guidance import _jit" in path.read_text())]  # fmt: skip
+    sources = {path: path.read_text() for path in python_sources(package, "**/*.py")
+               if "guidance" not in path.relative_to(package).parts}  # fmt: skip
+    holders = {path: text for path, text in sources.items()
+               if "guidance._jit import" in text or "guidance import _jit" in text}  # fmt: skip
     assert {p.name for p in holders} >= {"_oracle_search.py", "escape.py", "identify.py"}
-    for path in holders:
-        assert _kernels_foreign_names(path.read_text()) == [], path
+    for path, text in holders.items():
+        assert _kernels_foreign_names(text) == [], path
     breaks = (
         "import math\n"
         "from ezcompanion.guidance import _jit\n"

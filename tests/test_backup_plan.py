@@ -50,7 +50,7 @@ def next_accel(params: GuidanceParams, policy: int, a: float, dt: float) -> floa
     amax, p1, n, cmd = (params.accel_max_m_s2, params.actuator_p1_1_s, params.actuator_n,
                         params.command_limit_m_s3)  # fmt: skip
     if policy == bk.BACKUP_STRAIGHT:
-        return float(bk._advance_straighten(a, dt, amax, p1, n, cmd))
+        return float(bk._advance_straighten(a, n, bk._straightening(settings_for(params), dt)))
     return float(advance_one(a, -cmd if policy == bk.BACKUP_LEFT else cmd, dt, amax, p1, n, cmd))
 
 

@@ -12,7 +12,8 @@ assumptions named; tests/test_backup.py checks each step):
    follows the actuator state a with a first-order lag tau (``response_lag_s``; tau = 0:
    a_v = a), and a follows the saturation model with a bounded command.
 3. **Three backup policies**, feedbacks on the actuator alone (no clock): STRAIGHT commands
-   a_c = -(C / a_max) a, integrated continuously (the turn dies out, then a straight line);
+   a_c = -(C / a_max) a, continuously (its flow in closed form: the turn dies out, then a
+   straight line);
    LEFT and RIGHT hold a_c = -C or +C (a hard turn) until the first control step at which
    STRAIGHT is certified, then STRAIGHT; a turn with no such step before it has turned half
    a revolution after converging circles for ever (its certificate says so; flown, it may
@@ -84,7 +85,7 @@ import numpy.typing as npt
 
 from ezcompanion.guidance._jit import jit, jit_borrow, jit_inline
 from ezcompanion.guidance.abandon import abandon_gap
-from ezcompanion.guidance.actuator import actuator_rate, advance_one
+from ezcompanion.guidance.actuator import advance_one
 from ezcompanion.guidance.lookahead import (
     annulus_gap,
     dip,
@@ -264,20 +265,31 @@ def _abandon(
 # 2. the model: actuator, lag, kinematics over one step with the actuator path given
 
 
-@jit_inline  # inlined: its constants (gain, substeps) are then computed once per flight
-def _advance_straighten(a: float, dt_s: float, accel_max: float, p1: float, n: int,
-                        limit: float) -> float:
-    """The actuator over ``dt_s`` under the feedback a_c = -(limit / a_max) a, integrated
-    continuously (SSPRK3, substeps within the bound that keeps |a| < a_max)."""  # fmt: skip
-    gain = limit / accel_max
-    max_step = 1.0 / (n * limit / accel_max + p1)
-    steps = max(1, math.ceil(dt_s / max_step - 1e-9))
-    h = dt_s / steps
-    for _ in range(steps):
-        a1 = a + h * actuator_rate(a, -gain * a, accel_max, p1, n)
-        a2 = 0.75 * a + 0.25 * (a1 + h * actuator_rate(a1, -gain * a1, accel_max, p1, n))
-        a = a / 3.0 + (2.0 / 3.0) * (a2 + h * actuator_rate(a2, -gain * a2, accel_max, p1, n))
-    return a
+@jit_inline
+def _straightening(s: FloatArray, dt: float) -> tuple[float, float]:
+    """STRAIGHT's actuator step in closed form, its constants (g, q): the same for every
+    step of a flight, so computed once a flight. Under the feedback a_c = -(C / a_max) a
+    the saturation model is a' = -r a + b a^(n+1) (r = k + p1, k = C / a_max,
+    b = k / a_max^n), a Bernoulli equation: u = a^-n follows u' = n r u - n b, so over dt
+    u grows to b / r + (u - b / r) e^(n r dt), and with g = e^(n r dt) - 1,
+    a after = a / (1 + g - q |a|^n)^(1/n), q = g b / r (``_advance_straighten``)."""
+    amax, p1, nn = s[S_AMAX], s[S_P1], int(s[S_N])
+    k = s[S_CMD] / amax
+    g = math.expm1(nn * (k + p1) * dt)
+    return g, g * k / (k + p1) / amax**nn
+
+
+@jit_inline
+def _advance_straighten(a: float, n: int, straightening: tuple[float, float]) -> float:
+    """The actuator over one control step of STRAIGHT, a_c = -(C / a_max) a, exactly
+    (``straightening``: ``_straightening(s, dt)``): |a| only falls, and a keeps its sign.
+    (SSPRK3 at the step, as the actuator is stepped under a held command, was 0.15% off
+    a step at the paper's rates, C / a_max + p1 = 20.2 / s and 50 Hz, and cost a seventh of
+    the shield's time beside a lagging autopilot: perf, bench_law.py --service.)"""
+    g, q = straightening
+    if n == 2:
+        return a / math.sqrt(1.0 + g - q * a * a)
+    return float(a / (1.0 + g - q * abs(a) ** n) ** (1.0 / n))
 
 
 @jit_inline
@@ -287,6 +299,17 @@ def _decays(tau: float, dt: float) -> tuple[float, float]:
     if tau <= 0.0:
         return 1.0, 1.0
     return math.exp(-(0.5 * dt) / tau), math.exp(-dt / tau)
+
+
+@jit_inline
+def _flight_constants(
+    s: FloatArray, dt: float
+) -> tuple[float, tuple[float, float], tuple[float, float]]:
+    """What every flight at control step ``dt`` shares: the trapezoid's excess
+    (``_trapezoid_excess``), the lag's decays (``_decays``) and STRAIGHT's actuator step
+    (``_straightening``). A turn computes them once and hands them to every exit it tries
+    (each exit flies STRAIGHT), rather than a tanh and three exponentials an exit."""
+    return _trapezoid_excess(s, dt), _decays(s[S_TAU], dt), _straightening(s, dt)
 
 
 @jit_inline
@@ -440,8 +463,9 @@ def _straighten_integral(s: FloatArray, a_abs: float, trapezoid: float) -> tuple
     c^2 = (k + p1) a_max^2 / k, giving a_max^2 / (2 k c) ln((c + |a|) / (c - |a|)). Flown,
     a is linear between control steps: over a decay at rate r the trapezoid exceeds the
     integral by at most ``trapezoid`` = (x / 2) coth(x / 2) with x = (k + p1) dt
-    (``_trapezoid_excess``), and the integrator's own error stays within 1%
-    (tests/test_backup.py checks both against the flown sequence). Other n: the cruder
+    (``_trapezoid_excess``); each bound keeps 1% to spare, left from when the step was
+    integrated (``_advance_straighten`` is exact now; tests/test_backup.py checks both
+    against the flown sequence). Other n: the cruder
     |a| / r(|a|), and |a| / (k + p1) below."""
     amax, p1, nn = s[S_AMAX], s[S_P1], int(s[S_N])
     k = s[S_CMD] / amax
@@ -531,22 +555,26 @@ def _tube_gap(
 
 
 @jit_inline
-def _si_cin(x: float) -> tuple[float, float]:
-    """Si(x) = int_0^x sin(u) / u du and Cin(x) = int_0^x (1 - cos u) / u du, by their power
-    series (alternating, stopped once a term is below 1e-17: at most 15 terms for |x| <= 4,
-    3 for |x| <= 0.01). Each division is a product with ``_INVERSES`` (the lag's screen,
-    which sums these once a zone, took a fifth of the shield's time on a lagging track: perf
-    on bench_law.py --service's states, its kernels not inlined)."""
-    si = cin = 0.0
+def _si_cin(x: float) -> tuple[float, float, float, float]:
+    """Si(x) = int_0^x sin(u) / u du and Cin(x) = int_0^x (1 - cos u) / u du, and with them
+    sin x and 1 - cos x, whose series are the same terms undivided: by their power series
+    (alternating, stopped once a term is below 1e-17: at most 15 terms for |x| <= 4, 3 for
+    |x| <= 0.01; near x = 4 each sum carries some 1e-14 of round-off, its largest term 10).
+    Each division is a product with ``_INVERSES`` (the lag's screen, which sums these once a
+    zone, took a fifth of the shield's time on a lagging track: perf on bench_law.py
+    --service's states, its kernels not inlined)."""
+    si = cin = sin_x = versed = 0.0
     term = x  # +- x^(2j-1) / (2j-1)!
     for j in range(1, 16):
+        sin_x += term
         si += term * _INVERSES[2 * j - 1]
         term *= x * _INVERSES[2 * j]  # +- x^(2j) / (2j)!
+        versed += term
         cin += term * _INVERSES[2 * j]
         term *= -x * _INVERSES[2 * j + 1]
         if abs(term) < 1e-17:
             break
-    return si, cin
+    return si, cin, sin_x, versed
 
 
 _INVERSES = np.concatenate(([math.inf], 1.0 / np.arange(1.0, 32.0)))  # 1 / k at index k
@@ -587,7 +615,7 @@ def _lag_flight_upper(
     _, hi = _straighten_integral(s, abs(a), trapezoid)
     eta = hi / speed
     ch, sh = math.cos(h + c), math.sin(h + c)
-    si_c, cin_c = _si_cin(c)
+    si_c, cin_c, _, _ = _si_cin(c)
     reach_v = speed * tau
     best = math.inf
     which = first
@@ -599,9 +627,9 @@ def _lag_flight_upper(
         we = ze[kz, i] - e
         t = max(0.0, (wn * ch + we * sh - mur + reach_v * cin_c) / speed)
         x = c * math.exp(-t / tau)
-        si_x, cin_x = _si_cin(x)
-        ahead = speed * t - reach_v * (cin_c - cin_x) + mur * math.cos(x)
-        left = -reach_v * (si_c - si_x) - mur * math.sin(x)
+        si_x, cin_x, sin_x, versed_x = _si_cin(x)
+        ahead = speed * t - reach_v * (cin_c - cin_x) + mur * (1.0 - versed_x)
+        left = -reach_v * (si_c - si_x) - mur * sin_x
         dn = wn - (ahead * ch - left * sh)
         de = we - (ahead * sh + left * ch)
         value = (math.sqrt(dn * dn + de * de) - zreach[kz, i] - s[S_EPS]
@@ -660,11 +688,25 @@ def _straight_tail(
     return max(cone, tube)
 
 
-@jit_borrow
+@jit_inline
 def straight_certificate(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
     stop_below: float, enough: float,
+) -> float:
+    """Certificate of STRAIGHT from this state (``_straight_flight``, with the cosine and
+    sine of ``h`` and the flight's constants computed here)."""
+    return _straight_flight(s, zn, ze, zmur, zreach, kz, n, e, h, math.cos(h), math.sin(h), a,
+                            av, speed, dt, stop_below, enough,
+                            _flight_constants(s, dt))  # fmt: skip
+
+
+@jit_borrow
+def _straight_flight(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, n: float, e: float, h: float, ch: float, sh: float, a: float, av: float,
+    speed: float, dt: float, stop_below: float, enough: float,
+    constants: tuple[float, tuple[float, float], tuple[float, float]],
 ) -> float:
     """Certificate of STRAIGHT from this state: the turn dies out under a_c = -(C / a_max) a,
     then a straight line for ever. Flown control step by control step (``dt``, the actuator
@@ -684,8 +726,9 @@ def straight_certificate(
     whole flight's gap, the certificate included, is below it too, so a caller that only
     asks whether the certificate reaches ``stop_below`` (a turn's exit) gets the same
     answer without flying the rest. With an abandon profile the tail is only taken at the
-    end (the abandon paths of a turning flight are not in its cone)."""  # fmt: skip
-    amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
+    end (the abandon paths of a turning flight are not in its cone). (``ch``, ``sh``: the
+    cosine and sine of ``h``; ``constants``: ``_flight_constants(s, dt)``.)"""  # fmt: skip
+    amax, tau, eps = s[S_AMAX], s[S_TAU], s[S_EPS]
     rate = _av_rate_bound(s)
     ticks = sample_ticks(s, speed, dt)
     step = ticks * dt
@@ -694,9 +737,8 @@ def straight_certificate(
     certified = -math.inf
     screen = stop_below - _SCREEN_SLACK * speed * speed / amax  # -inf: no screen
     blocker = 0
-    ch, sh = math.cos(h), math.sin(h)
-    trapezoid = _trapezoid_excess(s, dt)
-    decays = _decays(tau, dt)
+    trapezoid, decays, straightening = constants
+    nn = int(s[S_N])
     for j in range(_MAX_SAMPLES):
         if early and j % _TAIL_EVERY == 0:
             tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, trapezoid)
@@ -722,7 +764,7 @@ def straight_certificate(
             if upper < screen:
                 return -math.inf
         for _ in range(ticks):
-            a1 = _advance_straighten(a, dt, amax, p1, int(s[S_N]), s[S_CMD])
+            a1 = _advance_straighten(a, nn, straightening)
             n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a, a1, av, speed, tau, dt, decays)
             a = a1
     tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, trapezoid)
@@ -732,13 +774,13 @@ def straight_certificate(
 @jit_inline
 def _straight_upper_bound(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
-    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
-    first: int, below: float,
+    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float,
+    trapezoid: float, first: int, below: float,
 ) -> tuple[float, int]:
     """An upper bound on the least gap of STRAIGHT's flight from this state, so on its
     certificate (which is below that gap): cheap, to screen a turn's exits (``_rest_upper``).
-    Stops below ``below``, from zone ``first`` round."""
-    trapezoid = _trapezoid_excess(s, dt)
+    Stops below ``below``, from zone ``first`` round (``trapezoid``: ``_trapezoid_excess``
+    at the control step)."""
     delta, mid, w, drift = _straight_to_come(s, a, av, speed, trapezoid)
     return _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, trapezoid, delta, mid,
                        w, drift, first, below)  # fmt: skip
@@ -747,19 +789,21 @@ def _straight_upper_bound(
 @jit_borrow  # on its own, not inlined: two inlined copies took most of its callers' compile
 def _exit_here(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
-    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
-    blocker: int, screen_level: float, exit_level: float, enough: float,
+    kz: int, n: float, e: float, h: float, ch: float, sh: float, a: float, av: float,
+    speed: float, dt: float, blocker: int, screen_level: float, exit_level: float,
+    enough: float, constants: tuple[float, tuple[float, float], tuple[float, float]],
 ) -> tuple[float, int]:
     """STRAIGHT's certificate here, as a turn's exit (exact up to ``enough``), and the zone
     that stopped the screen; -inf where the screen, an upper bound on it, is below
     ``screen_level`` (any subset of the exits keeps the argument; the screen drops only
-    exits whose certificate is surely below the level)."""
+    exits whose certificate is surely below the level). (``ch``, ``sh``: the turn's cosine
+    and sine of ``h``; ``constants``: ``_flight_constants(s, dt)``, the turn's.)"""
     upper, blocker = _straight_upper_bound(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
-                                           dt, blocker, screen_level)  # fmt: skip
+                                           constants[0], blocker, screen_level)  # fmt: skip
     if upper < screen_level:
         return -math.inf, blocker
-    leave = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
-                                 exit_level, max(exit_level, enough))  # fmt: skip
+    leave = _straight_flight(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av, speed, dt,
+                             exit_level, max(exit_level, enough), constants)  # fmt: skip
     return leave, blocker
 
 
@@ -819,7 +863,8 @@ def turn_certificate(
     up to the next)."""  # fmt: skip
     amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
     cmd, ticks, step, rate, limit = _turn_setup(s, policy, speed, dt)
-    decays = _decays(tau, dt)
+    constants = _flight_constants(s, dt)
+    decays = constants[1]
     best = math.inf
     turned = 0.0
     converged = False
@@ -838,8 +883,9 @@ def turn_certificate(
         if j == 0:
             leave = exit_now
         elif j % _EXIT_EVERY == 0:
-            leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
-                                        blocker, screen_level, exit_level, enough)  # fmt: skip
+            leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av,
+                                        speed, dt, blocker, screen_level, exit_level, enough,
+                                        constants)  # fmt: skip
         if leave >= exit_level:
             return min(best, leave)
         circled, converged = _circled(s, a, av, limit, speed, converged, turned)
@@ -850,9 +896,9 @@ def turn_certificate(
             n, e, h, a, av, ch, sh = _turn_step(s, cmd, n, e, h, a, av, ch, sh, speed, dt, amax,
                                                 p1, tau, decays)  # fmt: skip
             if every_step and tick < ticks - 1:
-                leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
-                                            dt, blocker, screen_level, exit_level,
-                                            enough)  # fmt: skip
+                leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av,
+                                            speed, dt, blocker, screen_level, exit_level,
+                                            enough, constants)  # fmt: skip
                 if leave >= exit_level:
                     return min(best, leave)
         if converged:
@@ -972,7 +1018,8 @@ def _rung_turn(
     the stop: nothing after it is needed). ``rung_value`` reads a rung's value from this."""
     amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
     cmd, ticks, step, rate, limit = _turn_setup(s, policy, speed, dt)
-    decays = _decays(tau, dt)
+    constants = _flight_constants(s, dt)
+    decays = constants[1]
     slack = _SCREEN_SLACK * speed * speed / amax
     waiting = levels.shape[0]  # the rungs [0, waiting) have not found their exit yet
     for r in range(waiting):
@@ -995,8 +1042,9 @@ def _rung_turn(
             leave = exit_now
         elif j % _EXIT_EVERY == 0:
             low = levels[waiting - 1]
-            leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
-                                        blocker, low - slack, low, math.inf)  # fmt: skip
+            leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av,
+                                        speed, dt, blocker, low - slack, low, math.inf,
+                                        constants)  # fmt: skip
         while waiting > 0 and leave >= levels[waiting - 1]:
             waiting -= 1
             exit_at[waiting], exit_value[waiting] = j, leave
@@ -1011,9 +1059,9 @@ def _rung_turn(
                                                 p1, tau, decays)  # fmt: skip
             if tick < ticks - 1:
                 low = levels[waiting - 1]
-                leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
-                                            dt, blocker, low - slack, low,
-                                            math.inf)  # fmt: skip
+                leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av,
+                                            speed, dt, blocker, low - slack, low, math.inf,
+                                            constants)  # fmt: skip
                 while waiting > 0 and leave >= levels[waiting - 1]:
                     waiting -= 1
                     exit_at[waiting], exit_value[waiting] = j, leave
@@ -1113,7 +1161,7 @@ def _fly_step(
         command = -cmd
     elif side == BACKUP_RIGHT:
         command = cmd
-    a_end = _advance_straighten(a, dt, amax, p1, nn, cmd) if policy == BACKUP_STRAIGHT else (
+    a_end = _advance_straighten(a, nn, _straightening(s, dt)) if policy == BACKUP_STRAIGHT else (
         advance_one(a, command, dt, amax, p1, nn, cmd)
     )
     best, n, e, h, av = _fly_ramp(s, zn, ze, zmur, zreach, kz, n, e, h, a, a_end, av, speed,

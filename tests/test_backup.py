@@ -934,7 +934,8 @@ def test_straights_closed_form_bounds_hold_along_its_flight(
     params = dataclasses.replace(PARAMS, response_lag_s=tau)
     s = settings_for(params)
     av0 = av0 if tau > 0.0 else a0
-    delta, mid, w, drift = bk._straight_to_come(s, a0, av0, 1.0, bk._trapezoid_excess(s, dt))
+    delta, mid, w, drift, eta = bk._straight_to_come(s, a0, av0, 1.0,
+                                                     bk._trapezoid_excess(s, dt))  # fmt: skip
     z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
     n, e, h, a, av = n0, e0, h0, a0, av0
     least = lk.lookahead_gap(*z[:4], n, e, h, PARAMS.shield_margin_m)
@@ -948,10 +949,10 @@ def test_straights_closed_form_bounds_hold_along_its_flight(
                       - math.hypot(n - n0, e - e0) * math.sin(w))  # fmt: skip
     assert abs(h - (h0 + mid)) <= w + 1e-6
     assert lateral <= drift + 1e-6
-    lower, _ = bk._tube_gap(s, *z, n0, e0, h0 + mid, w, delta, drift, False, 0, -math.inf)
-    upper, _ = bk._tube_gap(s, *z, n0, e0, h0 + mid, w, delta, drift, True, 0, -math.inf)
-    lag_upper, _ = bk._lag_flight_upper(s, *z, n0, e0, h0, a0, av0, 1.0,
-                                        bk._trapezoid_excess(s, dt), 0, -math.inf)  # fmt: skip
+    final = (math.cos(h0 + mid), math.sin(h0 + mid))
+    lower, _ = bk._tube_gap(s, *z, n0, e0, *final, w, delta, drift, False, 0, -math.inf)
+    upper, _ = bk._tube_gap(s, *z, n0, e0, *final, w, delta, drift, True, 0, -math.inf)
+    lag_upper, _ = bk._lag_flight_upper(s, *z, n0, e0, h0, av0, 1.0, eta, 0, -math.inf)
     assert lower <= least + 1e-6
     # (the flight is sampled at its control steps: its least gap may sit between them, up
     # to the look-ahead point's speed, at most 2 v, over half a step)
@@ -1070,9 +1071,10 @@ def test_the_lags_closed_form_bounds_the_flight_from_above_and_tighter_than_the_
             continue
         lagged += 1
         trapezoid = bk._trapezoid_excess(s, 0.02)
-        upper, _ = bk._lag_flight_upper(s, *z, n, e, h, a, av, 1.0, trapezoid, 0, -math.inf)
-        delta, mid, w, drift = bk._straight_to_come(s, a, av, 1.0, trapezoid)
-        tube, _ = bk._tube_gap(s, *z, n, e, h + mid, w, delta, drift, True, 0, -math.inf)
+        delta, mid, w, drift, eta = bk._straight_to_come(s, a, av, 1.0, trapezoid)
+        upper, _ = bk._lag_flight_upper(s, *z, n, e, h, av, 1.0, eta, 0, -math.inf)
+        tube, _ = bk._tube_gap(s, *z, n, e, math.cos(h + mid), math.sin(h + mid), w, delta, drift,
+                               True, 0, -math.inf)  # fmt: skip
         least = lk.lookahead_gap(*z[:4], n, e, h, PARAMS.shield_margin_m)
         for _ in range(int((12.0 * s[bk.S_TAU] + 30.0) / 0.02)):
             _, n, e, h, a, av = bk._fly_step(s, *z, bk.BACKUP_STRAIGHT, 0.0, n, e, h, a, av,
@@ -1105,8 +1107,9 @@ def test_the_running_screen_refuses_only_exits_whose_certificate_is_below_the_le
                 assert full < level, (full, level)
             # the screen before the flight (a turn's exit: the tube, and with a lag the
             # lag's closed form)
-            upper, _ = bk._straight_upper_bound(s, *z, n, e, h, a, av, 1.0,
-                                                bk._trapezoid_excess(s, dt), 0, level)
+            upper, _ = bk._straight_upper_bound(s, *z, n, e, h, math.cos(h), math.sin(h), a, av,
+                                                1.0, bk._trapezoid_excess(s, dt), 0,
+                                                level)  # fmt: skip
             if upper < level:
                 screened += 1
                 assert full < level, (full, level, upper)
@@ -1372,13 +1375,15 @@ def test_a_screen_that_stops_at_the_first_zone_below_its_level_decides_as_the_fu
     value where it is not, and the zone it names gives the value it returns. The level is
     drawn among the zones' own values (2 to 6 zones), where stopping early matters."""
     s = settings_for(PARAMS)
-    delta, mid, w, drift = bk._straight_to_come(s, a0, a0, 1.0, bk._trapezoid_excess(s, 0.02))
+    delta, mid, w, drift, _ = bk._straight_to_come(s, a0, a0, 1.0,
+                                                   bk._trapezoid_excess(s, 0.02))  # fmt: skip
     z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
-    args = (s, *z, n0, e0, h0 + mid, w, delta, drift, upper)
+    final = (math.cos(h0 + mid), math.sin(h0 + mid))
+    args = (s, *z, n0, e0, *final, w, delta, drift, upper)
     full, _ = bk._tube_gap(*args, 0, -math.inf)
 
     def alone(i: int) -> float:
-        value, _ = bk._tube_gap(s, *(x[:, i : i + 1] for x in z[:4]), 0, n0, e0, h0 + mid, w,
+        value, _ = bk._tube_gap(s, *(x[:, i : i + 1] for x in z[:4]), 0, n0, e0, *final, w,
                                 delta, drift, upper, 0, -math.inf)  # fmt: skip
         return float(value)
 

@@ -339,24 +339,27 @@ def _fly(n: float, e: float, h: float, cos_h: float, sin_h: float, a0: float, a1
     to (tests/test_backup.py: 20,000 steps), far below what Simpson's rule leaves. (``h``,
     a running sum, rounds by up to ulp(h) a step itself: one way round, 400 rad in 20,000
     steps, cos h is 9e-11 from that, as the code before computed it.) A turn beyond
-    ``_ROTATE_RAD`` a step computes them afresh."""  # fmt: skip
+    ``_ROTATE_RAD`` computes them afresh (``_turned``)."""  # fmt: skip
     _, half = _lag_response(a0, a1, av0, tau, 0.5 * dt, dt, decays[0])
     av1, full = _lag_response(a0, a1, av0, tau, dt, dt, decays[1])
     turn_mid = half / speed
     turn = full / speed
-    h1 = h + turn
-    if abs(turn) <= _ROTATE_RAD and abs(turn_mid) <= _ROTATE_RAD:
-        cm, sm = _small_cos_sin(turn_mid)
-        c1, s1 = _small_cos_sin(turn)
-        cos_hm, sin_hm = cos_h * cm - sin_h * sm, sin_h * cm + cos_h * sm
-        cos_h1, sin_h1 = cos_h * c1 - sin_h * s1, sin_h * c1 + cos_h * s1
-    else:
-        cos_hm, sin_hm = math.cos(h + turn_mid), math.sin(h + turn_mid)
-        cos_h1, sin_h1 = math.cos(h1), math.sin(h1)
+    cos_hm, sin_hm = _turned(h, cos_h, sin_h, turn_mid)
+    cos_h1, sin_h1 = _turned(h, cos_h, sin_h, turn)
     step = speed * dt / 6.0
     n1 = n + step * (cos_h + 4.0 * cos_hm + cos_h1)
     e1 = e + step * (sin_h + 4.0 * sin_hm + sin_h1)
-    return n1, e1, h1, av1, cos_h1, sin_h1
+    return n1, e1, h + turn, av1, cos_h1, sin_h1
+
+
+@jit_inline
+def _turned(h: float, cos_h: float, sin_h: float, x: float) -> tuple[float, float]:
+    """cos(h + x) and sin(h + x) from those of h: rotated by x (``_small_cos_sin``) up to
+    ``_ROTATE_RAD``, computed afresh beyond."""
+    if abs(x) > _ROTATE_RAD:
+        return math.cos(h + x), math.sin(h + x)
+    cos_x, sin_x = _small_cos_sin(x)
+    return cos_h * cos_x - sin_h * sin_x, sin_h * cos_x + cos_h * sin_x
 
 
 @jit_inline
@@ -479,9 +482,9 @@ def _straighten_integral(s: FloatArray, a_abs: float, trapezoid: float) -> tuple
 @jit_inline
 def _straight_to_come(
     s: FloatArray, a: float, av: float, speed: float, trapezoid: float
-) -> tuple[float, float, float, float]:
-    """What is left of the turn once STRAIGHT is flown from (a, a_v): (delta, mid, w, drift)
-    (``trapezoid``: ``_trapezoid_excess`` at the control step).
+) -> tuple[float, float, float, float, float]:
+    """What is left of the turn once STRAIGHT is flown from (a, a_v): (delta, mid, w, drift,
+    eta) (``trapezoid``: ``_trapezoid_excess`` at the control step).
 
     The heading changes by the integral of a_v over v, and that integral is
     tau a_v + the integral of a (the lag keeps the area); with the integral of |a| within
@@ -490,7 +493,8 @@ def _straight_to_come(
     h + mid, mid = (tau a_v + sign(a) (lo + hi) / 2) / v, and the path within
     drift = tau^2 |a_v| + tau hi + hi^2 / |a| of the line from here along the final heading
     (the lateral drift is at most int (t' - t) |a_v(t')| dt', and the integral of t |a| is
-    at most hi^2 / |a| because a decays faster the smaller it is)."""
+    at most hi^2 / |a| because a decays faster the smaller it is); eta = hi / v bounds the
+    heading change the actuator alone still makes (``_lag_flight_upper``)."""
     tau = s[S_TAU]
     lo, hi = _straighten_integral(s, abs(a), trapezoid)
     sign = 1.0 if a >= 0.0 else -1.0
@@ -498,7 +502,7 @@ def _straight_to_come(
     mid = (tau * av + sign * 0.5 * (lo + hi)) / speed
     w = 0.5 * (hi - lo) / speed
     drift = tau * tau * abs(av) + tau * hi + (hi * hi / abs(a) if a != 0.0 else 0.0)
-    return delta, mid, w, drift
+    return delta, mid, w, drift, hi / speed
 
 
 @jit_inline
@@ -512,13 +516,14 @@ def _zone_round(first: int, j: int, count: int) -> int:
 @jit_inline
 def _tube_gap(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
-    kz: int, n: float, e: float, h_final: float, w: float, delta: float, drift: float,
+    kz: int, n: float, e: float, ch: float, sh: float, w: float, delta: float, drift: float,
     upper: bool, first: int, below: float,
 ) -> tuple[float, int]:
     """The look-ahead points of STRAIGHT's flight from here against the ray of look-ahead
     points along the final heading (``_straight_to_come``): each lies within
     rho_i = drift + (|d_i - p| + reach_i + mu_i R_i + drift) tan(w) + 2 mu_i R_i delta of
-    the ray from p + mu_i R_i u(h_final). ``upper`` False: the least gap of the ray less
+    the ray from p + mu_i R_i u(h_final) (``ch``, ``sh``: the cosine and sine of h_final,
+    h + mid). ``upper`` False: the least gap of the ray less
     rho_i, a lower bound on the flight's; True: the ray's gap at its point nearest each zone
     plus rho_i, an upper bound (some look-ahead point of the flight passes that point). Only
     where the headings stay within a right angle of the ray (else -inf, or inf).
@@ -530,8 +535,11 @@ def _tube_gap(
     time looks at one zone where the same zone still blocks)."""
     if 2.0 * delta + w >= 1.2:
         return (math.inf if upper else -math.inf), first
-    ch, sh = math.cos(h_final), math.sin(h_final)
-    slope = math.tan(w)
+    if w <= _ROTATE_RAD:  # (w >= 0) the usual case, a few mrad: no libm tan
+        cos_w, sin_w = _small_cos_sin(w)
+        slope = sin_w / cos_w
+    else:
+        slope = math.tan(w)
     best = math.inf
     which = first
     count = zn.shape[1]
@@ -591,8 +599,8 @@ _LAG_SCREEN_MIN_RAD = 0.2
 @jit_inline
 def _lag_flight_upper(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
-    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float,
-    trapezoid: float, first: int, below: float,
+    kz: int, n: float, e: float, h: float, av: float, speed: float, eta: float, first: int,
+    below: float,
 ) -> tuple[float, int]:
     """An upper bound on the least gap of STRAIGHT's flight from this state with a lag,
     tight where the tube (``_tube_gap``) is not: once the actuator has died out the
@@ -603,7 +611,8 @@ def _lag_flight_upper(
     and its left normal, v t - v tau (Cin(c) - Cin(x)) and -v tau (Si(c) - Si(x)); its
     look-ahead point adds mu R (cos x, -sin x). STRAIGHT's actuator moves the heading from
     that by at most eta = (the integral of |a| to come) / v at every time (the lag keeps
-    the sign and the area of a, which decays without changing sign), so the look-ahead
+    the sign and the area of a, which decays without changing sign; ``_straight_to_come``
+    gives eta), so the look-ahead
     point at time t lies within eta (v t + mu R) of that one. For each zone, at the time
     the asymptote passes nearest it, that point's gap plus eta (v t + mu R) bounds the
     flight's least gap from above. Returns the least over the zones, from zone ``first``
@@ -612,8 +621,6 @@ def _lag_flight_upper(
     c = tau * av / speed
     if tau <= 0.0 or not _LAG_SCREEN_MIN_RAD <= abs(c) <= _LAG_SCREEN_RAD:
         return math.inf, first
-    _, hi = _straighten_integral(s, abs(a), trapezoid)
-    eta = hi / speed
     ch, sh = math.cos(h + c), math.sin(h + c)
     si_c, cin_c, _, _ = _si_cin(c)
     reach_v = speed * tau
@@ -644,20 +651,22 @@ def _lag_flight_upper(
 @jit_inline
 def _rest_upper(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
-    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float,
-    trapezoid: float, delta: float, mid: float, w: float, drift: float, first: int,
-    below: float,
+    kz: int, n: float, e: float, h: float, ch: float, sh: float, av: float, speed: float,
+    to_come: tuple[float, float, float, float, float], first: int, below: float,
 ) -> tuple[float, int]:
     """An upper bound on the least gap of STRAIGHT's flight from this state, the exit
-    screens' (``delta, mid, w, drift``: ``_straight_to_come`` here): the tube's
+    screens' (``ch``, ``sh``: the cosine and sine of ``h``; ``to_come``:
+    ``_straight_to_come`` here): the tube's
     (``_tube_gap``), and where that does not reach below ``below``, the lesser of it and the
     lag's closed form (``_lag_flight_upper``; inf without a lag). From zone ``first`` round,
     stopping at the first zone below ``below``; returns the bound and that zone."""
-    upper, which = _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, h + mid, w, delta, drift, True,
-                             first, below)  # fmt: skip
+    delta, mid, w, drift, eta = to_come
+    c_final, s_final = _turned(h, ch, sh, mid)
+    upper, which = _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, c_final, s_final, w, delta,
+                             drift, True, first, below)  # fmt: skip
     if upper >= below:
-        lag, lag_zone = _lag_flight_upper(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
-                                          trapezoid, which, below)  # fmt: skip
+        lag, lag_zone = _lag_flight_upper(s, zn, ze, zmur, zreach, kz, n, e, h, av, speed, eta,
+                                          which, below)  # fmt: skip
         if lag < upper:
             upper, which = lag, lag_zone
     return upper, which
@@ -666,25 +675,27 @@ def _rest_upper(
 @jit_borrow  # on its own, not inlined: two inlined copies took most of its callers' compile
 def _straight_tail(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
-    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, trapezoid: float,
+    kz: int, n: float, e: float, h: float, ch: float, sh: float, speed: float,
+    to_come: tuple[float, float, float, float, float],
 ) -> float:
     """The gap of all of STRAIGHT's flight from this state on, in closed form, from below
-    (``trapezoid``: ``_trapezoid_excess`` at the control step):
+    (``ch``, ``sh``: the cosine and sine of ``h``; ``to_come``: ``_straight_to_come`` here):
     its headings stay within delta of h (``_straight_to_come``), so its look-ahead points
     lie in the cone of that half-angle about the ray from here, which ``segment_gap``
     widens for; and (no abandon profile) within the tube about the ray along the final
     heading (``_tube_gap``). The larger bound is taken. With an abandon profile, the cone
     alone and from min(mu R, v hold) ahead: the abandon paths from points of the line are
     parts of the line (used once the turn has died out)."""
-    delta, mid, w, drift = _straight_to_come(s, a, av, speed, trapezoid)
+    delta, mid, w, drift, _ = to_come
     hold = s[S_AB_HOLD]
     start = speed * hold if hold > 0.0 else math.inf
-    cone = segment_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h), start,
-                       math.inf, True, s[S_EPS], delta)  # fmt: skip
+    cone = segment_gap(zn, ze, zmur, zreach, kz, n, e, ch, sh, start, math.inf, True, s[S_EPS],
+                       delta)  # fmt: skip
     if hold > 0.0:
         return cone
-    tube, _ = _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, h + mid, w, delta, drift, False, 0,
-                        -math.inf)  # fmt: skip
+    c_final, s_final = _turned(h, ch, sh, mid)
+    tube, _ = _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, c_final, s_final, w, delta, drift,
+                        False, 0, -math.inf)  # fmt: skip
     return max(cone, tube)
 
 
@@ -740,8 +751,9 @@ def _straight_flight(
     trapezoid, decays, straightening = constants
     nn = int(s[S_N])
     for j in range(_MAX_SAMPLES):
+        to_come = _straight_to_come(s, a, av, speed, trapezoid)
         if early and j % _TAIL_EVERY == 0:
-            tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, trapezoid)
+            tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed, to_come)
             certified = max(certified, min(best, tail))
             if certified >= enough:
                 return certified
@@ -752,38 +764,36 @@ def _straight_flight(
             return max(best, certified)
         if best <= certified:
             return certified
-        delta, mid, w, drift = _straight_to_come(s, a, av, speed, trapezoid)
-        if delta < _RESIDUAL_RAD:
+        if to_come[0] < _RESIDUAL_RAD:  # delta
             break
         if j > 0 and screen > -math.inf and (j <= _SCREEN_EVERY or j % _SCREEN_EVERY == 0):
             # the rest of the flight from here, from above: where even that is below the
             # level, so is every lower bound of the whole flight (the certificate)
-            upper, blocker = _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
-                                         trapezoid, delta, mid, w, drift, blocker,
-                                         screen)  # fmt: skip
+            upper, blocker = _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, av, speed,
+                                         to_come, blocker, screen)  # fmt: skip
             if upper < screen:
                 return -math.inf
         for _ in range(ticks):
             a1 = _advance_straighten(a, nn, straightening)
             n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a, a1, av, speed, tau, dt, decays)
             a = a1
-    tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, trapezoid)
+    tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed,
+                          _straight_to_come(s, a, av, speed, trapezoid))  # fmt: skip
     return max(certified, min(best, tail))
 
 
 @jit_inline
 def _straight_upper_bound(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
-    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float,
-    trapezoid: float, first: int, below: float,
+    kz: int, n: float, e: float, h: float, ch: float, sh: float, a: float, av: float,
+    speed: float, trapezoid: float, first: int, below: float,
 ) -> tuple[float, int]:
     """An upper bound on the least gap of STRAIGHT's flight from this state, so on its
     certificate (which is below that gap): cheap, to screen a turn's exits (``_rest_upper``).
-    Stops below ``below``, from zone ``first`` round (``trapezoid``: ``_trapezoid_excess``
-    at the control step)."""
-    delta, mid, w, drift = _straight_to_come(s, a, av, speed, trapezoid)
-    return _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, trapezoid, delta, mid,
-                       w, drift, first, below)  # fmt: skip
+    Stops below ``below``, from zone ``first`` round (``ch``, ``sh``: the cosine and sine of
+    ``h``; ``trapezoid``: ``_trapezoid_excess`` at the control step)."""
+    return _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, av, speed,
+                       _straight_to_come(s, a, av, speed, trapezoid), first, below)  # fmt: skip
 
 
 @jit_borrow  # on its own, not inlined: two inlined copies took most of its callers' compile
@@ -798,8 +808,9 @@ def _exit_here(
     ``screen_level`` (any subset of the exits keeps the argument; the screen drops only
     exits whose certificate is surely below the level). (``ch``, ``sh``: the turn's cosine
     and sine of ``h``; ``constants``: ``_flight_constants(s, dt)``, the turn's.)"""
-    upper, blocker = _straight_upper_bound(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
-                                           constants[0], blocker, screen_level)  # fmt: skip
+    upper, blocker = _straight_upper_bound(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av,
+                                           speed, constants[0], blocker,
+                                           screen_level)  # fmt: skip
     if upper < screen_level:
         return -math.inf, blocker
     leave = _straight_flight(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av, speed, dt,

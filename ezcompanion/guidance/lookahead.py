@@ -106,6 +106,7 @@ def segment_gap(
     s1_i = stop_m + mu_i R_i (stop_m = inf: a ray). ``widen`` (rad) subtracts the lateral
     uncertainty of a heading known to within +-widen: (|d - p| + reach + mu R) sin(widen)."""
     best = math.inf
+    spread = math.sin(min(widen, 1.5))  # once, not once a zone
     for i in range(zn.shape[1]):
         mur = zmur[kz, i]
         s0 = min(mur, start_m) if lookahead_start else start_m
@@ -118,7 +119,7 @@ def segment_gap(
         de = we - s * sin_h
         g = math.sqrt(dn * dn + de * de) - zreach[kz, i] - eps
         if widen > 0.0:
-            g -= (math.sqrt(wn * wn + we * we) + zreach[kz, i] + mur) * math.sin(min(widen, 1.5))
+            g -= (math.sqrt(wn * wn + we * we) + zreach[kz, i] + mur) * spread
         best = min(best, g)
     return best
 

@@ -241,8 +241,10 @@ def jit_borrow(function: F) -> F:
 
 
 def jit_inline(function: F) -> F:
-    """Like ``jit``, and inlined into its compiled callers (for the per-vehicle kernel, whose
-    array arguments would otherwise be reference-counted on every call)."""
+    """Like ``jit``, and inlined into its compiled callers: for the per-vehicle kernel, whose
+    array arguments would otherwise be reference-counted on every call, and for small
+    helpers called in hot loops (the actuator's rate, three times a control step), where
+    the call itself costs more than the work."""
     return _compile(function, inline="always")
 
 

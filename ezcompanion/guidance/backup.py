@@ -267,29 +267,31 @@ def _abandon(
 
 @jit_inline
 def _straightening(s: FloatArray, dt: float) -> tuple[float, float]:
-    """STRAIGHT's actuator step in closed form, its constants (g, q): the same for every
+    """STRAIGHT's actuator step in closed form, its constants (d, q): the same for every
     step of a flight, so computed once a flight. Under the feedback a_c = -(C / a_max) a
     the saturation model is a' = -r a + b a^(n+1) (r = k + p1, k = C / a_max,
     b = k / a_max^n), a Bernoulli equation: u = a^-n follows u' = n r u - n b, so over dt
-    u grows to b / r + (u - b / r) e^(n r dt), and with g = e^(n r dt) - 1,
-    a after = a / (1 + g - q |a|^n)^(1/n), q = g b / r (``_advance_straighten``)."""
+    u grows to b / r + (u - b / r) e^(n r dt), and
+    a after = d a / (1 - q |a|^n)^(1/n), d = e^(-r dt), q = (b / r) (1 - e^(-n r dt))
+    (``_advance_straighten``). Written so, nothing overflows however long dt is, and
+    1 - q |a|^n >= 1 - k / (k + p1) > 0 for |a| <= a_max."""
     amax, p1, nn = s[S_AMAX], s[S_P1], int(s[S_N])
     k = s[S_CMD] / amax
-    g = math.expm1(nn * (k + p1) * dt)
-    return g, g * k / (k + p1) / amax**nn
+    r = k + p1
+    return math.exp(-r * dt), -math.expm1(-nn * r * dt) * k / r / amax**nn
 
 
 @jit_inline
 def _advance_straighten(a: float, n: int, straightening: tuple[float, float]) -> float:
     """The actuator over one control step of STRAIGHT, a_c = -(C / a_max) a, exactly
     (``straightening``: ``_straightening(s, dt)``): |a| only falls, and a keeps its sign.
-    (SSPRK3 at the step, as the actuator is stepped under a held command, was 0.15% off
-    a step at the paper's rates, C / a_max + p1 = 20.2 / s and 50 Hz, and cost a seventh of
-    the shield's time beside a lagging autopilot: perf, bench_law.py --service.)"""
-    g, q = straightening
+    (SSPRK3 at the step, its feedback evaluated at each stage, was 0.15% off a step at the
+    paper's rates, C / a_max + p1 = 20.2 / s and 50 Hz, and cost a seventh of the shield's
+    time beside a lagging autopilot: perf, bench_law.py --service.)"""
+    d, q = straightening
     if n == 2:
-        return a / math.sqrt(1.0 + g - q * a * a)
-    return float(a / (1.0 + g - q * abs(a) ** n) ** (1.0 / n))
+        return d * a / math.sqrt(1.0 - q * a * a)
+    return float(d * a / (1.0 - q * abs(a) ** n) ** (1.0 / n))
 
 
 @jit_inline
@@ -566,8 +568,9 @@ def _tube_gap(
 def _si_cin(x: float) -> tuple[float, float, float, float]:
     """Si(x) = int_0^x sin(u) / u du and Cin(x) = int_0^x (1 - cos u) / u du, and with them
     sin x and 1 - cos x, whose series are the same terms undivided: by their power series
-    (alternating, stopped once a term is below 1e-17: at most 15 terms for |x| <= 4, 3 for
-    |x| <= 0.01; near x = 4 each sum carries some 1e-14 of round-off, its largest term 10).
+    (alternating, stopped once a term is below 1e-17 or after 15 terms: at |x| = 4 the term
+    left out is 6e-16, below the sums' own round-off there, some 1e-14, their largest term
+    10; 3 terms for |x| <= 0.01).
     Each division is a product with ``_INVERSES`` (the lag's screen, which sums these once a
     zone, took a fifth of the shield's time on a lagging track: perf on bench_law.py
     --service's states, its kernels not inlined)."""

@@ -753,8 +753,8 @@ def _straight_flight(
     blocker = 0
     trapezoid, decays, straightening = constants
     nn = int(s[S_N])
+    to_come = _straight_to_come(s, a, av, speed, trapezoid)  # at each sample, for its state
     for j in range(_MAX_SAMPLES):
-        to_come = _straight_to_come(s, a, av, speed, trapezoid)
         if early and j % _TAIL_EVERY == 0:
             tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed, to_come)
             certified = max(certified, min(best, tail))
@@ -780,8 +780,8 @@ def _straight_flight(
             a1 = _advance_straighten(a, nn, straightening)
             n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a, a1, av, speed, tau, dt, decays)
             a = a1
-    tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed,
-                          _straight_to_come(s, a, av, speed, trapezoid))  # fmt: skip
+        to_come = _straight_to_come(s, a, av, speed, trapezoid)
+    tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed, to_come)
     return max(certified, min(best, tail))
 
 

@@ -12,7 +12,8 @@ import sys
 import zipfile
 from pathlib import Path
 
-from ezcompanion.guidance._jit import kernel_fingerprint, python_sources
+from ezcompanion.guidance import _jit
+from ezcompanion.guidance._jit import kernel_fingerprint, python_sources, user_cache_dir
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -28,6 +29,19 @@ stats = step_one.stats
 print(json.dumps({"package": ezcompanion.__file__, "hits": len(stats.cache_hits),
                   "misses": len(stats.cache_misses)}))
 """
+
+# the same, where the package cannot be written: as a user who does not own it sees it, the
+# check numba and the package make (a file made and removed there) fails (the tests may run
+# as root, who writes anywhere)
+_READ_ONLY = """
+import tempfile
+opened = tempfile.TemporaryFile
+def refused(*args, dir=None, **kwargs):
+    if dir is not None and str(dir).startswith({site!r}):
+        raise PermissionError(13, "Permission denied", str(dir))
+    return opened(*args, dir=dir, **kwargs)
+tempfile.TemporaryFile = refused
+""" + _FIRST_RUN.replace("{", "{{").replace("}", "}}")
 
 
 def _compiled_environment() -> dict[str, str]:
@@ -97,6 +111,20 @@ def test_the_wheel_carries_the_kernels_and_its_first_run_loads_them(tmp_path: Pa
     assert seen["hits"] >= 1 and seen["misses"] == 0, seen
     assert _index_files(site) == indexed  # nothing compiled, nothing re-indexed
 
+    # installed where the running user cannot write (a system-wide install): the first run
+    # loads a copy of the shipped cache, made in the user's cache, and still compiles nothing
+    users = tmp_path / "user-cache"
+    env = {**env, "XDG_CACHE_HOME": str(users)}
+    read_only = subprocess.run([sys.executable, "-c", _READ_ONLY.format(site=str(site))],
+                               env=env, cwd=tmp_path, capture_output=True, text=True,
+                               timeout=600, check=True)  # fmt: skip
+    seen = json.loads(read_only.stdout.strip().splitlines()[-1])
+    assert "already in numba's cache, loaded" in read_only.stdout, read_only.stdout
+    assert seen["hits"] >= 1 and seen["misses"] == 0, seen
+    assert _index_files(site) == indexed
+    copied = {p.name: p.read_bytes() for p in users.rglob("*.nbi")}
+    assert copied == {Path(name).name: data for name, data in indexed.items()}
+
 
 def test_a_wheel_built_without_the_compile_carries_no_cache(tmp_path: Path) -> None:
     """``EZCOMPANION_BUILD_COMPILE=0``: nothing compiled, and no cache an earlier build left
@@ -107,3 +135,30 @@ def test_a_wheel_built_without_the_compile_carries_no_cache(tmp_path: Path) -> N
     names = zipfile.ZipFile(wheel).namelist()
     assert "ezcompanion/guidance/_jit.py" in names
     assert not [n for n in names if "numba-" in n], names
+
+
+def test_a_read_only_install_seeds_the_users_cache_once(tmp_path: Path) -> None:
+    """``_seeded``: the shipped cache copied to the user's where that does not exist yet,
+    whole (nothing half-made left beside it); an existing copy kept as it is (another
+    process made it, or numba has added to it); with nothing shipped, an empty directory
+    for numba to compile into; where the user's cache cannot be made, the shipped path."""
+    shipped = tmp_path / "site" / "numba-0123"
+    (shipped / "guidance").mkdir(parents=True)
+    (shipped / "guidance" / "single.step_one-1.py311.nbi").write_bytes(b"index")
+    target = tmp_path / "users" / "ezcompanion" / "numba-0123"
+    assert _jit._seeded(target, shipped) == target
+    assert (target / "guidance" / "single.step_one-1.py311.nbi").read_bytes() == b"index"
+    assert [p.name for p in target.parent.iterdir()] == ["numba-0123"]
+    (shipped / "guidance" / "law.evaluate-1.py311.nbi").write_bytes(b"new")
+    (target / "guidance" / "single.step_one-1.py311.nbi").write_bytes(b"numba's since")
+    assert _jit._seeded(target, shipped) == target
+    kept = sorted(p.name for p in (target / "guidance").iterdir())
+    assert kept == ["single.step_one-1.py311.nbi"]
+    assert (target / "guidance" / "single.step_one-1.py311.nbi").read_bytes() == b"numba's since"
+    empty = tmp_path / "users" / "ezcompanion" / "numba-4567"
+    assert _jit._seeded(empty, tmp_path / "nothing-shipped") == empty
+    assert empty.is_dir() and not list(empty.iterdir())
+    (tmp_path / "a-file").write_text("")
+    blocked = tmp_path / "a-file" / "ezcompanion" / "numba-0123"
+    assert _jit._seeded(blocked, shipped) == shipped
+    assert user_cache_dir().name == "ezcompanion"

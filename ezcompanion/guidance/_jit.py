@@ -10,7 +10,8 @@ carries the code of every kernel it calls, from other files: the service's one-v
 (:mod:`ezcompanion.guidance.single`) holds the law, the actuator and the shield from five.
 An edit to ``backup.py`` alone would leave it running the old shield. So the cache lives in
 a directory named by a digest of every source file of this package
-(``__pycache__/numba-<digest>`` here, or under ``NUMBA_CACHE_DIR`` when that is set): any
+(``__pycache__/numba-<digest>`` here, or under ``NUMBA_CACHE_DIR`` when that is set, or,
+where this package cannot be written, a copy in the user's cache: ``cache_dir``): any
 edit here compiles afresh. (Set in numba's config for this process only, not in the
 environment, so child processes find the same directory.) The kernels elsewhere
 (``validation/``, ``service/``) compile in code and constants from their own module and
@@ -32,6 +33,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import shutil
 import sys
 import tempfile
 from collections.abc import Callable, Iterable
@@ -49,6 +51,7 @@ __all__ = [
     "kernel_fingerprint",
     "kernels_cached",
     "prange",
+    "user_cache_dir",
 ]
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -80,10 +83,46 @@ def kernel_fingerprint(paths: Iterable[Path]) -> str:
 
 
 def cache_dir(base: str) -> str:
-    """numba's cache directory for this package's sources as they are now, under ``base``
-    (the user's ``NUMBA_CACHE_DIR``) or, if empty, in this package's ``__pycache__``."""
+    """numba's cache directory for this package's sources as they are now: under ``base``
+    (the user's ``NUMBA_CACHE_DIR``) if set; else in this package's ``__pycache__``, where a
+    wheel ships it; or, where the running user cannot write there (a system-wide install),
+    a copy of that one in the user's cache (``user_cache_dir``, ``_seeded``): numba writes
+    into the directory it loads from, and kept its cache elsewhere then, compiling afresh
+    (35 to 46 s) on a first run that had the compiled kernels beside it."""
     name = f"numba-{kernel_fingerprint(python_sources(_HERE))}"
-    return os.path.join(base, name) if base else str(_HERE / "__pycache__" / name)
+    if base:
+        return os.path.join(base, name)
+    shipped = _HERE / "__pycache__" / name
+    if _writable(shipped):
+        return str(shipped)
+    return str(_seeded(user_cache_dir() / name, shipped))
+
+
+def user_cache_dir() -> Path:
+    """Where this package keeps numba's cache when its own directory is not writable:
+    ``$XDG_CACHE_HOME/ezcompanion``, by default ``~/.cache/ezcompanion``."""
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "ezcompanion"
+
+
+def _seeded(target: Path, shipped: Path) -> Path:
+    """``target``, made a copy of the cache ``shipped`` (if there is one) where it does not
+    exist yet: copied beside it, then renamed into place, so that a process starting at the
+    same time finds all of it or none. Where it cannot be made, ``shipped``: numba then
+    keeps its cache where it can, and compiles, as before."""
+    if target.is_dir():
+        return target
+    partial = None
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        partial = Path(tempfile.mkdtemp(prefix=f".{target.name}-", dir=target.parent))
+        if shipped.is_dir():
+            shutil.copytree(shipped, partial, dirs_exist_ok=True)
+        partial.rename(target)
+    except (OSError, RuntimeError):  # (RuntimeError: no home directory to be found)
+        if partial is not None:
+            shutil.rmtree(partial, ignore_errors=True)
+        return target if target.is_dir() else shipped  # another process's copy, or none
+    return target
 
 
 def kernels_cached(kernel: str = "guidance/single.step_one", directory: str | None = None) -> bool:

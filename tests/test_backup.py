@@ -56,6 +56,14 @@ def settings_for(params: GuidanceParams) -> FloatArray:
     return bk.pack_shield(params)
 
 
+def room(z: Sequence[object]) -> npt.NDArray[np.int64]:
+    """Room for the zones a turn's samples ask (the shield's kernels that take it), for the
+    zones ``z`` (north, east, ...)."""
+    north = z[0]
+    assert isinstance(north, np.ndarray)
+    return np.empty(north.shape[1], dtype=np.int64)
+
+
 def true_gap(zones: ZoneSet, north: float, east: float, course: float) -> float:
     """min_i |p + mu_i R_i u - d_i| - reach_i, computed here with numpy."""
     q_n = north + zones.mu_range_m[0] * math.cos(course) - zones.north_m[0]
@@ -187,6 +195,43 @@ def test_the_pruned_point_gap_is_the_point_gap(
     z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
     args = (*z, n, e, math.cos(h), math.sin(h), 0.1, 1.0, 1.0, 21.0, step)
     assert lk.point_gap_below(*args, below) == min(below, lk.point_gap(*args))
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    count=st.integers(1, 40), seed=st.integers(0, 2**32 - 1), radius=st.floats(0.0, 6.0),
+    below=st.floats(-1.0, 8.0) | st.just(math.inf), step=st.sampled_from([0.0, 0.04, 0.2]),
+)  # fmt: skip
+def test_the_near_zones_give_the_point_gap_within_their_radius(
+    count: int, seed: int, radius: float, below: float, step: float
+) -> None:
+    """A turn's samples ask only the zones ``near_zones`` lists (``_sample_gap``): at every
+    point within 0.999 of its radius (where the flight uses it), on any heading, and for
+    any running least gap at or below the one it was made with, the value over those must
+    be the value over all zones, to the bit; and the list must leave some out (here, where
+    zones lie up to 60 m off and the least gap is a few metres: else it saves nothing)."""
+    rng = np.random.default_rng(seed)
+    zones = ZoneSet.from_defenders([
+        Defender(north_m=rng.uniform(-30, 30), east_m=rng.uniform(-30, 30),
+                 range_m=rng.uniform(0.5, 2.5), capture_radius_m=rng.uniform(0, 1),
+                 speed_ratio=rng.uniform(0.2, 0.95))
+        for _ in range(count)
+    ])  # fmt: skip
+    z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
+    cn, ce = rng.uniform(-10, 10, 2)
+    near = np.full(count, -1, dtype=np.int64)
+    listed = lk.near_zones(*z, cn, ce, radius, 0.1, 1.0, 1.0, step, below, near)
+    assert 0 <= listed <= count and sorted(set(near[:listed])) == list(near[:listed])
+    for _ in range(20):
+        reach = 0.999 * radius * rng.uniform(0, 1)
+        bearing, h = rng.uniform(-4, 4, 2)
+        point = (cn + reach * math.cos(bearing), ce + reach * math.sin(bearing),
+                 math.cos(h), math.sin(h), 0.1, 1.0, 1.0, 21.0, step)  # fmt: skip
+        lower = below - rng.choice([0.0, rng.uniform(0, 3)])
+        assert lk.point_gap_among(*z[:5], near, listed, *point, lower) == lk.point_gap_below(
+            *z, *point, lower)  # fmt: skip
+    if count == 40 and below <= 3.0 and radius <= 2.0:
+        assert listed < count
 
 
 def test_on_the_boundary_the_gap_is_zero() -> None:
@@ -437,7 +482,8 @@ def test_with_no_lag_a_nominal_that_leaves_nothing_certified_if_held_late_is_ref
         command = float(rng.uniform(-1.0, 1.0)) * PARAMS.command_limit_m_s3
         theta = bk.acceptance_level_m(s, z[2], z[3], 0, 1.0, dt)
         certs = np.full(bk.N_POLICIES, -math.inf)
-        one = bk._ahead(s, *z, command, n, e, h, a, av, 1.0, dt, dt, theta, theta, certs)[0]
+        one = bk._ahead(s, *z, command, n, e, h, a, av, 1.0, dt, dt, theta, theta, certs,
+                        room(z))[0]
         a_end = advance_one(a, command, dt, PARAMS.accel_max_m_s2, PARAMS.actuator_p1_1_s,
                             PARAMS.actuator_n, PARAMS.command_limit_m_s3)  # fmt: skip
         zones = SimpleNamespace(north_m=z[0], east_m=z[1], mu_range_m=z[2], reach_m=z[3])
@@ -1263,7 +1309,7 @@ def test_a_backup_the_shield_holds_as_certified_is_certified_by_its_exact_certif
         certs = np.empty(3)
         bk.backup_certificates(s, *z, n, e, h, a, av, 1.0, dt, math.inf, -math.inf, certs)
         right_short = bk._floor_certificate(s, *z, bk.BACKUP_RIGHT, n, e, h, a, av, 1.0, dt,
-                                            theta) < theta <= certs[bk.BACKUP_RIGHT]  # fmt: skip
+                                            theta, room(z)) < theta <= certs[bk.BACKUP_RIGHT]
         short += bool(right_short)
         for held in (bk.BACKUP_LEFT, bk.BACKUP_RIGHT, bk.BACKUP_STRAIGHT):
             plan = np.zeros(bk.PLAN_SIZE, dtype=np.int64)
@@ -1272,7 +1318,7 @@ def test_a_backup_the_shield_holds_as_certified_is_certified_by_its_exact_certif
             flown = int(out[0, 2])
             if out[0, 4] >= theta and flown in (bk.BACKUP_LEFT, bk.BACKUP_RIGHT,
                                                  bk.BACKUP_STRAIGHT):  # (a plan: its own value)
-                exact = bk._floor_certificate(s, *z, flown, n, e, h, a, av, 1.0, dt, theta)
+                exact = bk._floor_certificate(s, *z, flown, n, e, h, a, av, 1.0, dt, theta, room(z))
                 assert exact >= theta, (held, flown, out[0, 4], exact, theta)
                 checked += 1
     assert short >= 5  # the states that broke it are among those drawn
@@ -1323,7 +1369,8 @@ def test_a_check_whose_certificate_overflows_refuses_the_nominal() -> None:
                            certs)  # fmt: skip
     assert (certs == -math.inf).all(), certs
     for policy in (bk.BACKUP_LEFT, bk.BACKUP_RIGHT, bk.BACKUP_STRAIGHT):
-        floor = bk._floor_certificate(s, *z, policy, 8.0, -4.0, 2.5, 0.0, 0.0, 1.0, 0.02, theta)
+        floor = bk._floor_certificate(s, *z, policy, 8.0, -4.0, 2.5, 0.0, 0.0, 1.0, 0.02, theta,
+                                      room(z))
         assert floor == -math.inf, (policy, floor)
 
 
@@ -1356,7 +1403,7 @@ def test_a_backup_counts_as_plainly_certified_only_by_its_exact_certificate() ->
                 given[policy] >= theta
             ):
                 differs[straight < theta] += 1  # STRAIGHT's value, or an early stop's
-            got = bk._floor_certificate(s, *z, policy, n, e, h, a, av, 1.0, dt, theta)
+            got = bk._floor_certificate(s, *z, policy, n, e, h, a, av, 1.0, dt, theta, room(z))
             assert (got >= theta) == (exact >= theta), (policy, got, exact, theta)
     assert min(differs) > 0  # both ways of trusting backup_certificates' values go wrong here
 
@@ -1384,9 +1431,11 @@ def test_a_screen_that_stops_at_the_first_zone_below_its_level_decides_as_the_fu
     zones: ZoneSet, n0: float, e0: float, h0: float, a0: float, rank: float, upper: bool
 ) -> None:
     """The exit screen stops at the first zone below its level, from any zone round: it is
-    below the level exactly where the least value over every zone is, equal to that least
-    value where it is not, and the zone it names gives the value it returns. The level is
-    drawn among the zones' own values (2 to 6 zones), where stopping early matters."""
+    below the level exactly where the least value over every zone is; where it is not, the
+    lower bound's is that least value, and the upper bound's at least that (it skips the
+    zones whose distance from the ray alone keeps them at or above the level); and the
+    zone it names gives the value it returns. The level is drawn among the zones' own
+    values (2 to 6 zones), where stopping early matters."""
     s = settings_for(PARAMS)
     delta, mid, w, drift, _ = bk._straight_to_come(s, a0, a0, 1.0,
                                                    bk._trapezoid_excess(s, 0.02))  # fmt: skip
@@ -1408,7 +1457,7 @@ def test_a_screen_that_stops_at_the_first_zone_below_its_level_decides_as_the_fu
         value, which = bk._tube_gap(*args, first, level)
         assert (value < level) == (full < level)
         if value >= level:
-            assert value == full
+            assert value >= full if upper else value == full
         if math.isfinite(value):
             assert alone(which) == value
 
@@ -1800,9 +1849,9 @@ def test_an_abandon_check_keeps_a_backup_only_where_its_plain_certificate_holds(
         # rule is whether that backup's plain certificate holds
         alone = np.empty((1, 6))
         bk._shield_step(s, *z, n, e, h, a, av, 1.0, nominal, dt, current, weight, plan.copy(),
-                        alone, 0)  # fmt: skip
+                        alone, 0, room(z))  # fmt: skip
         keep = alone[0, 3] == 0.0 and alone[0, 4] < theta and bk._floor_certificate(
-            plain, *z, int(alone[0, 2]), n, e, h, a, av, 1.0, dt, theta) >= theta
+            plain, *z, int(alone[0, 2]), n, e, h, a, av, 1.0, dt, theta, room(z)) >= theta
         bk.shield_one(s, *z, n, e, h, a, av, 1.0, nominal, dt, current, weight, plan, out, 0)
         if keep:  # the step with the path stands, its certificate the plain one
             kept += 1
@@ -1881,3 +1930,42 @@ def test_a_hover_starts_on_its_yaw_or_the_nearest_course_whose_line_is_clear(
         taken = min(range(len(offsets)), key=lambda k: abs(yaw + offsets[k] - course))
         assert abs(yaw + offsets[taken] - course) < 1e-12
         assert clear[taken] and not any(clear[:taken])
+
+
+def test_the_turns_near_zones_change_no_certificate() -> None:
+    """The turns' samples ask only the zones near them (``_sample_gap``, with more than
+    ``_NEAR_FEWEST`` zones). Three zones around the vehicle and three 40 to 60 m off (6
+    zones: every sample asks all of them) against the same six listed three times each
+    (18: the samples ask a list; the far ones are left out of it), from 150 drawn states
+    with lags: every backup's certificate and every rung's value the same, to the bit. A
+    zone listed more than once changes no least and no screen's verdict, so any
+    difference is the list's: a zone left out that the flight comes near."""
+    rng = np.random.default_rng(2052)
+    checked = 0
+    for _ in range(150):
+        near_ones = [Defender(north_m=rng.uniform(-5, 5), east_m=rng.uniform(-5, 5),
+                              range_m=rng.uniform(0.5, 2.5), capture_radius_m=rng.uniform(0, 1),
+                              speed_ratio=rng.uniform(0.2, 0.95)) for _ in range(3)]  # fmt: skip
+        far_ones = [Defender(north_m=d * math.cos(b), east_m=d * math.sin(b), range_m=1.5,
+                             capture_radius_m=0.5, speed_ratio=0.7)
+                    for d, b in zip(rng.uniform(40, 60, 3), rng.uniform(-4, 4, 3), strict=True)]
+        tau = float(rng.choice([0.0, 0.4, 1.4]))
+        s = settings_for(dataclasses.replace(PARAMS, response_lag_s=tau))
+        state = (rng.uniform(-8, 8), rng.uniform(-8, 8), rng.uniform(-4, 4))
+        a = rng.uniform(-0.99, 0.99)
+        av = rng.uniform(-0.99, 0.99) if tau > 0.0 else a
+        values = []
+        for listed in (near_ones + far_ones, (near_ones + far_ones) * 3):
+            zones = ZoneSet.from_defenders(listed)
+            z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
+            certs = np.full(bk.N_POLICIES, -math.inf)
+            bk.backup_certificates(s, *z, *state, a, av, 1.0, 0.02, math.inf, -math.inf, certs)
+            theta = bk.acceptance_level_m(s, z[2], z[3], 0, 1.0, 0.02)
+            single = max(certs[: bk.BACKUP_STRAIGHT + 1])
+            bk.rung_certificates(s, *z, *state, a, av, 1.0, 0.02, theta,
+                                 certs[bk.BACKUP_STRAIGHT], single, certs)  # fmt: skip
+            values.append(certs)
+        assert len(ZoneSet.from_defenders((near_ones + far_ones) * 3).north_m[0]) > bk._NEAR_FEWEST
+        np.testing.assert_array_equal(values[0], values[1])
+        checked += int(np.isfinite(values[0][bk.BACKUP_LEFT]))
+    assert checked >= 50  # the turns were flown, not left at once

@@ -89,7 +89,9 @@ from ezcompanion.guidance.actuator import advance_one
 from ezcompanion.guidance.lookahead import (
     annulus_gap,
     dip,
+    near_zones,
     point_gap,
+    point_gap_among,
     point_gap_below,
     segment_gap,
 )
@@ -204,6 +206,13 @@ _SCREEN_EVERY = 4
 # sine of the next heading are the last ones rotated by it (``_fly``), not computed afresh
 # (sincos had been a quarter of the shield's time on a lagging track: docs/service.md).
 _ROTATE_RAD = 0.1
+# A flight's samples ask only the zones that can still lower its least gap within this
+# many v^2 / a_max of where that list was made (``near_zones``), and make it again where a
+# sample is farther (within 0.999 of it: the bound's round-off, some 1e-16 of the
+# distances, is far inside that).
+_NEAR_RADIUS = 2.0
+# ... with more zones than this (with fewer, a list saves less than it costs)
+_NEAR_FEWEST = 8
 # turn_certificate's bool argument every_step, read from here so that it is a bool at run
 # time: numba compiles a kernel once more for each literal value of a bool or int
 # argument, and a cold compile of turn_certificate took 6.7 s (twice, with True and False,
@@ -406,6 +415,37 @@ def _or_none(value: float) -> float:
     return value if value < math.inf else -math.inf
 
 
+@jit_inline
+def _sample_gap(
+    zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
+    n: float, e: float, ch: float, sh: float, eps: float, speed: float, amax: float,
+    rate: float, step: float, best: float, near: IntArray, made: tuple[int, float, float],
+) -> tuple[float, tuple[int, float, float]]:
+    """``point_gap_below`` at a sample of a flight, over the zones of ``near`` where the
+    sample is within ``_NEAR_RADIUS`` v^2 / a_max of where that list was made (``made``:
+    its length and where; length -1: none yet), else over all zones, then the list made
+    afresh here. A flight's least gap (``best``) only falls, and the list holds every
+    zone that can come below the least gap it was made with: the same value as over all
+    zones. Returns it and the list's ``made``."""
+    count, cn, ce = made
+    if zn.shape[1] <= _NEAR_FEWEST:
+        best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, ch, sh, eps, speed, amax, rate,
+                               step, best)  # fmt: skip
+        return best, made
+    radius = _NEAR_RADIUS * speed * speed / amax
+    dn = n - cn
+    de = e - ce
+    if count >= 0 and dn * dn + de * de <= (0.999 * radius) ** 2:
+        best = point_gap_among(zn, ze, zmur, zreach, kz, near, count, n, e, ch, sh, eps, speed,
+                               amax, rate, step, best)  # fmt: skip
+        return best, made
+    best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, ch, sh, eps, speed, amax, rate, step,
+                           best)  # fmt: skip
+    count = near_zones(zn, ze, zmur, zreach, kz, n, e, radius, eps, speed, amax, step, best,
+                       near)  # fmt: skip
+    return best, (count, n, e)
+
+
 @jit_borrow
 def acceptance_level_m(s: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
                        speed: float, dt: float) -> float:
@@ -534,7 +574,11 @@ def _tube_gap(
     from zone ``first`` round, and the loop stops at the first value below ``below`` (-inf:
     all zones): then the least value is known to be below it, which is all a caller that
     compares it with ``below`` needs (a screen starting at the zone that stopped it last
-    time looks at one zone where the same zone still blocks)."""
+    time looks at one zone where the same zone still blocks). For the same caller, the
+    upper bound skips, before its square roots, every zone whose distance from the ray
+    alone keeps its value at or above ``below`` (rho_i >= 0): where no zone is below, the
+    value returned is then only known to be at or above ``below`` (the least over the
+    zones not skipped, inf if none), and the zone is one of those (``first`` if none)."""
     if 2.0 * delta + w >= 1.2:
         return (math.inf if upper else -math.inf), first
     if w <= _ROTATE_RAD:  # (w >= 0) the usual case, a few mrad: no libm tan
@@ -553,7 +597,11 @@ def _tube_gap(
         along = max(wn * ch + we * sh, mur)
         dn = wn - along * ch
         de = we - along * sh
-        g = math.sqrt(dn * dn + de * de) - zreach[kz, i] - s[S_EPS]
+        d2 = dn * dn + de * de
+        clear = below + zreach[kz, i] + s[S_EPS]
+        if upper and clear > 0.0 and d2 >= clear * clear:
+            continue  # g >= below, so g + rho too: not below (its value is not needed)
+        g = math.sqrt(d2) - zreach[kz, i] - s[S_EPS]
         rho = drift + (math.sqrt(wn * wn + we * we) + zreach[kz, i] + mur + drift) * slope
         rho += 2.0 * mur * delta
         value = g + rho if upper else g - rho
@@ -859,12 +907,25 @@ def _turn_step(
     return n, e, h, a1, av, ch, sh
 
 
-@jit_borrow
+@jit  # not borrowing: it makes the list of near zones
 def turn_certificate(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, policy: int, n: float, e: float, h: float, a: float, av: float, speed: float,
     dt: float, exit_now: float, exit_level: float, stop_below: float, enough: float,
     every_step: bool,
+) -> float:
+    """``_turn_certificate``, with a list of near zones of its own."""
+    return _turn_certificate(s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av, speed, dt,
+                             exit_now, exit_level, stop_below, enough, every_step,
+                             np.empty(zn.shape[1], dtype=np.int64))  # fmt: skip
+
+
+@jit_borrow
+def _turn_certificate(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, policy: int, n: float, e: float, h: float, a: float, av: float, speed: float,
+    dt: float, exit_now: float, exit_level: float, stop_below: float, enough: float,
+    every_step: bool, near: IntArray,
 ) -> float:
     """Certificate of LEFT or RIGHT: turn hard (a_c = -+C held) until a sample where the
     STRAIGHT certificate is at least ``exit_level``, then STRAIGHT; with no such sample
@@ -874,7 +935,7 @@ def turn_certificate(
     certificate is exact up to ``enough`` (the caller needs no more). With ``every_step``
     the exit is looked for at every control step, not only at the samples: the first one
     the flown rule can take, wherever the samples fall (each sample's dip covers the steps
-    up to the next)."""  # fmt: skip
+    up to the next). ``near``: room for the zones its samples ask (``_sample_gap``)."""  # fmt: skip
     amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
     cmd, ticks, step, rate, limit = _turn_setup(s, policy, speed, dt)
     constants = _flight_constants(s, dt)
@@ -887,9 +948,10 @@ def turn_certificate(
     # the literal 0, which numba would compile _exit_here for a second time: 0.5 s)
     blocker = int(np.int64(0))
     ch, sh = math.cos(h), math.sin(h)
+    made = (-1, 0.0, 0.0)  # no list of near zones yet (``_sample_gap``)
     for j in range(_MAX_SAMPLES):
-        best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, ch, sh, eps, speed, amax, rate,
-                               step, best)  # fmt: skip
+        best, made = _sample_gap(zn, ze, zmur, zreach, kz, n, e, ch, sh, eps, speed, amax, rate,
+                                 step, best, near, made)  # fmt: skip
         best = _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, best)
         if best < stop_below:
             return best
@@ -953,11 +1015,22 @@ def _circle_tail(
     return float(tail)
 
 
-@jit_borrow
+@jit  # not borrowing: it makes the list of near zones
 def backup_certificates(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
     enough: float, below: float, out: FloatArray,
+) -> None:
+    """``_backup_certificates``, with a list of near zones of its own."""
+    _backup_certificates(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, enough, below,
+                         out, np.empty(zn.shape[1], dtype=np.int64))  # fmt: skip
+
+
+@jit_borrow
+def _backup_certificates(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
+    enough: float, below: float, out: FloatArray, near: IntArray,
 ) -> None:
     """The certificates of LEFT, RIGHT and STRAIGHT at this state into ``out[0:3]``,
     exact from ``below`` up to ``enough``.
@@ -966,7 +1039,8 @@ def backup_certificates(
     certificate that cannot beat the best so far, or that falls below ``below`` (-inf:
     exact however low), stops early, below it (a value only known to be lower). STRAIGHT's
     is exact from theta up whatever ``below`` is: whether it reaches theta decides where
-    the turns leave (at once where it does)."""
+    the turns leave (at once where it does). ``near``: room for the zones a turn's samples
+    ask (``_sample_gap``)."""
     theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
     straight = _or_none(straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
                                              dt, min(below, theta), enough))  # fmt: skip
@@ -979,9 +1053,9 @@ def backup_certificates(
         if best >= enough:
             out[policy] = -math.inf
             continue
-        out[policy] = _or_none(turn_certificate(
+        out[policy] = _or_none(_turn_certificate(
             s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av, speed, dt, straight, theta,
-            max(best, below), enough, _FLAGS[0]))  # fmt: skip
+            max(best, below), enough, _FLAGS[0], near))  # fmt: skip
         best = max(best, out[policy])
 
 
@@ -1016,7 +1090,7 @@ def _rung_turn(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, policy: int, n: float, e: float, h: float, a: float, av: float, speed: float,
     dt: float, exit_now: float, levels: FloatArray, stop_below: float, floors: FloatArray,
-    exit_at: IntArray, exit_value: FloatArray,
+    exit_at: IntArray, exit_value: FloatArray, near: IntArray,
 ) -> tuple[int, float]:
     """LEFT or RIGHT flown once for the exits of every rung (``levels``, descending), as
     ``turn_certificate`` with ``every_step`` flies it for each level alone: the turn does
@@ -1029,7 +1103,8 @@ def _rung_turn(
     ``stop_below`` (the first rung's, the lowest any rung stops at), or as a turn's does
     (half a revolution after converging). Returns the samples recorded and the circle's
     closed form after them where the flight ended so (-inf where it ended on an exit or
-    the stop: nothing after it is needed). ``rung_value`` reads a rung's value from this."""
+    the stop: nothing after it is needed). ``rung_value`` reads a rung's value from this.
+    ``near``: room for the zones its samples ask (``_sample_gap``)."""
     amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
     cmd, ticks, step, rate, limit = _turn_setup(s, policy, speed, dt)
     constants = _flight_constants(s, dt)
@@ -1043,10 +1118,11 @@ def _rung_turn(
     converged = False
     blocker = int(np.int64(0))
     ch, sh = math.cos(h), math.sin(h)
+    made = (-1, 0.0, 0.0)  # no list of near zones yet (``_sample_gap``)
     j = 0
     for j in range(_MAX_SAMPLES):
-        best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, ch, sh, eps, speed, amax, rate,
-                               step, best)  # fmt: skip
+        best, made = _sample_gap(zn, ze, zmur, zreach, kz, n, e, ch, sh, eps, speed, amax, rate,
+                                 step, best, near, made)  # fmt: skip
         best = _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, best)
         floors[j] = best
         if best < stop_below:
@@ -1137,6 +1213,7 @@ def rung_certificates(
     exit_value = np.empty((2, rungs))
     samples = np.zeros(2, dtype=np.int64)
     tails = np.empty(2)
+    near = np.empty(zn.shape[1], dtype=np.int64)
     best = below
     for rung in range(1, rungs + 1):
         level = levels[rung - 1]
@@ -1146,7 +1223,7 @@ def rung_certificates(
             if rung == 1:  # flown as far as the first rung needs: no later rung needs more
                 samples[side], tails[side] = _rung_turn(
                     s, zn, ze, zmur, zreach, kz, side, n, e, h, a, av, speed, dt, straight,
-                    levels, best, floors[side], exit_at[side], exit_value[side],
+                    levels, best, floors[side], exit_at[side], exit_value[side], near,
                 )  # fmt: skip
             value = min(level - theta, rung_value(
                 floors[side], samples[side], tails[side], exit_at[side, rung - 1],
@@ -1212,18 +1289,18 @@ def _fly_ramp(
 def _ahead(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, command: float, n: float, e: float, h: float, a: float, av: float, speed: float,
-    dt: float, fly_s: float, accept: float, enough: float, certs: FloatArray,
+    dt: float, fly_s: float, accept: float, enough: float, certs: FloatArray, near: IntArray,
 ) -> tuple[float, int, float, float]:
     """Fly ``command`` held for ``fly_s``: the best certificate after it (with the flight's
     own least gap; exact from ``accept`` up to ``enough``, below ``accept`` only known to
     be below it: the shield flies nothing that falls short of ``accept``, whatever by),
     which backup holds it, and the actuator and model a_v at the end. ``dt`` is the control
-    step the certificates align with."""
+    step the certificates align with (``near``: room for the zones a turn's samples ask)."""
     held = int(np.int64(-1))  # the command held (not the literal -1: one compile of _fly_step)
     gap, n1, e1, h1, a1, av1 = _fly_step(s, zn, ze, zmur, zreach, kz, held, command, n, e, h, a,
                                          av, speed, fly_s)  # fmt: skip
     value, which = _best_after(s, zn, ze, zmur, zreach, kz, gap, n1, e1, h1, a1, av1, speed, dt,
-                               accept, enough, certs)  # fmt: skip
+                               accept, enough, certs, near)  # fmt: skip
     return value, which, a1, av1
 
 
@@ -1231,12 +1308,12 @@ def _ahead(
 def _best_after(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, gap: float, n: float, e: float, h: float, a: float, av: float, speed: float,
-    dt: float, accept: float, enough: float, certs: FloatArray,
+    dt: float, accept: float, enough: float, certs: FloatArray, near: IntArray,
 ) -> tuple[float, int]:
     """After a flight whose own least gap was ``gap``, ending in this state: the best
     single backup's certificate (as ``_ahead`` says) with that gap, and which backup it is."""
-    backup_certificates(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, enough, accept,
-                        certs)  # fmt: skip
+    _backup_certificates(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, enough, accept,
+                         certs, near)  # fmt: skip
     which = int(np.argmax(certs[:_N_BACKUPS]))
     # (the certificates are -inf for an overflow already; the flight's own gap, NaN or
     # +inf, would leave min() the certificate)
@@ -1247,7 +1324,7 @@ def _best_after(
 def _ahead_held(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, command: float, n: float, e: float, h: float, a: float, av: float, speed: float,
-    dt: float, accept: float, certs: FloatArray,
+    dt: float, accept: float, certs: FloatArray, near: IntArray,
 ) -> tuple[float, int, float, float]:
     """``_ahead`` for ``command`` held one step; with no lag, where that reaches ``accept``,
     the least of it and the same step's setpoint held ``LATE_HOLD_STEPS`` steps: the latest
@@ -1264,12 +1341,12 @@ def _ahead_held(
     docs/guidance.md, "Assumption 4 and the measured a_v"), so with a lag it is not
     checked (docs/validation.md, "A jittered stream")."""
     ahead, which, a1, av1 = _ahead(s, zn, ze, zmur, zreach, kz, command, n, e, h, a, av, speed,
-                                   dt, dt, accept, accept, certs)  # fmt: skip
+                                   dt, dt, accept, accept, certs, near)  # fmt: skip
     if ahead >= accept and s[S_TAU] == 0.0:
         gap, n2, e2, h2, av2 = _fly_ramp(s, zn, ze, zmur, zreach, kz, n, e, h, a, a1, av, speed,
                                          LATE_HOLD_STEPS * dt)  # fmt: skip
         late, _ = _best_after(s, zn, ze, zmur, zreach, kz, gap, n2, e2, h2, a1, av2, speed, dt,
-                              accept, accept, certs)  # fmt: skip
+                              accept, accept, certs, near)  # fmt: skip
         ahead = min(ahead, late)
     return ahead, which, a1, av1
 
@@ -1494,8 +1571,9 @@ def shield_one(
     taken as it is only where ``_floor_certificate`` agrees.)"""
     checked = s[S_AB_HOLD] > 0.0
     kept = plan.copy() if checked else plan
+    near = np.empty(zn.shape[1], dtype=np.int64)  # room for the zones a turn's samples ask
     _shield_step(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, nominal, dt, current,
-                 weight_before, plan, out, k)  # fmt: skip
+                 weight_before, plan, out, k, near)  # fmt: skip
     if not checked or out[k, 3] > 0.0:
         return  # no profile, or the nominal (or a blend) flown: certified with the path
     theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
@@ -1503,26 +1581,27 @@ def shield_one(
     # the held backup's value from backup_certificates may be an early stop's (a turn asked
     # above another's value): a single backup is asked again with theta as its floor
     if out[k, 4] >= theta and (not 0 <= flown < _N_BACKUPS or _floor_certificate(
-            s, zn, ze, zmur, zreach, kz, flown, n, e, h, a, av, speed, dt, theta) >= theta):
+            s, zn, ze, zmur, zreach, kz, flown, n, e, h, a, av, speed, dt, theta,
+            near) >= theta):
         return
     plain = s.copy()
     plain[S_AB_HOLD] = 0.0
     held = _floor_certificate(plain, zn, ze, zmur, zreach, kz, flown, n, e, h, a, av, speed, dt,
-                              theta)  # fmt: skip
+                              theta, near)  # fmt: skip
     if held >= theta:
         out[k, 4] = held  # the backup flown keeps the plain claim: the step stands
         return
     for i in range(PLAN_SIZE):  # (not plan[:] = kept: its shape check's message took
         plan[i] = kept[i]  # numba 1.5 s of the first run's compile)
     _shield_step(plain, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, nominal, dt, current,
-                 weight_before, plan, out, k)  # fmt: skip
+                 weight_before, plan, out, k, near)  # fmt: skip
 
 
 @jit_borrow
 def _floor_certificate(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, policy: int, n: float, e: float, h: float, a: float, av: float, speed: float,
-    dt: float, theta: float,
+    dt: float, theta: float, near: IntArray,
 ) -> float:
     """The certificate with the settings ``s`` (with an abandon profile or, plain, without)
     of single backup ``policy`` (LEFT, RIGHT or STRAIGHT) flown by its rule from this state,
@@ -1531,7 +1610,7 @@ def _floor_certificate(
     certificate, never an early stop's (``backup_certificates`` asks the turns with a
     higher floor: a value it returns above theta may be one). A turn is -inf where STRAIGHT
     reaches theta: there its rule leaves the turn at once, and the turn's own value is not
-    the flight's."""
+    the flight's. (``near``: room for the zones a turn's samples ask.)"""
     if not 0 <= policy < _N_BACKUPS:  # a rung or a plan
         return -math.inf
     straight = _or_none(straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
@@ -1540,8 +1619,9 @@ def _floor_certificate(
         return straight
     if straight >= theta:
         return -math.inf
-    return _or_none(turn_certificate(s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av, speed,
-                                     dt, straight, theta, theta, theta, _FLAGS[0]))  # fmt: skip
+    return _or_none(_turn_certificate(s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av, speed,
+                                      dt, straight, theta, theta, theta, _FLAGS[0],
+                                      near))  # fmt: skip
 
 
 @jit
@@ -1549,10 +1629,10 @@ def _shield_step(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float,
     nominal: float, dt: float, current: int, weight_before: float, plan: IntArray,
-    out: FloatArray, k: int,
+    out: FloatArray, k: int, near: IntArray,
 ) -> None:
     """``shield_one``'s step with the certificates of ``s`` (with its abandon profile, if
-    any)."""
+    any; ``near``: room for the zones a turn's samples ask)."""
     theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
     accept = accept_level_m(s, theta)
     band = s[S_BAND]
@@ -1562,8 +1642,8 @@ def _shield_step(
     # the weight is 0 whatever the preview says, so the preview is not flown)
     if math.isfinite(nominal):
         ahead, which, a_next, av_next = _ahead_held(s, zn, ze, zmur, zreach, kz, nominal, n, e,
-                                                    h, a, av, speed, dt, accept,
-                                                    certs)  # fmt: skip
+                                                    h, a, av, speed, dt, accept, certs,
+                                                    near)  # fmt: skip
     else:  # refused: a flight of NaN keeps no gap, so it would beat every level (fail closed)
         # (an infinite one the actuator clips, but no law means it)
         ahead, which, a_next, av_next = -math.inf, current, a, av
@@ -1571,7 +1651,8 @@ def _shield_step(
     if ahead >= accept:
         preview_s = max(dt, _PREVIEW_SAMPLES * sample_ticks(s, speed, dt) * dt)
         preview, _, _, _ = _ahead(s, zn, ze, zmur, zreach, kz, nominal, n, e, h, a, av, speed,
-                                  dt, preview_s, accept, accept + band, certs)  # fmt: skip
+                                  dt, preview_s, accept, accept + band, certs,
+                                  near)  # fmt: skip
         x = min(max((preview - accept) / band, 0.0), 1.0)
         weight = x * x * (3.0 - 2.0 * x)
     fall = s[S_FALL]
@@ -1587,8 +1668,8 @@ def _shield_step(
         # enters a zone (the vehicle has left the model: along its own flow, under the
         # model, it stays within theta and the tail's widening of where it started,
         # >= theta), to any better by 2 theta, certified or not: the least predicted entry
-        backup_certificates(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, math.inf,
-                            -math.inf, certs)  # fmt: skip
+        _backup_certificates(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, math.inf,
+                             -math.inf, certs, near)  # fmt: skip
         single = max(certs[BACKUP_LEFT], certs[BACKUP_RIGHT], certs[BACKUP_STRAIGHT])
         planned = False
         if single < theta:
@@ -1604,7 +1685,8 @@ def _shield_step(
             # kept by the hysteresis below, and asked after LEFT: RIGHT's value may be an
             # early stop's, above its own flight's; asked again with theta as its floor
             certs[BACKUP_RIGHT] = _floor_certificate(s, zn, ze, zmur, zreach, kz, BACKUP_RIGHT,
-                                                     n, e, h, a, av, speed, dt, theta)  # fmt: skip
+                                                     n, e, h, a, av, speed, dt, theta,
+                                                     near)  # fmt: skip
         if planned:
             current = BACKUP_PLAN  # found better by 2 theta than every other, at >= floor
         elif not 0 <= current < N_POLICIES or (certs[best] >= theta and (
@@ -1622,8 +1704,8 @@ def _shield_step(
             # blend with the held backup's command, held over the step, and verify the blend
             blended = weight * nominal + (1.0 - weight) * backup_command(s, flies, a)
             check, which_b, a_b, av_b = _ahead_held(s, zn, ze, zmur, zreach, kz, blended, n, e,
-                                                    h, a, av, speed, dt, accept,
-                                                    certs)  # fmt: skip
+                                                    h, a, av, speed, dt, accept, certs,
+                                                    near)  # fmt: skip
             if check >= accept:
                 accepted = True
                 which, a_next, av_next = which_b, a_b, av_b

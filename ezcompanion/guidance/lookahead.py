@@ -21,10 +21,12 @@ import numpy.typing as npt
 from ezcompanion.guidance._jit import jit_borrow, jit_inline
 
 __all__ = [
-    "annulus_gap", "arc_end", "dip", "lookahead_gap", "point_gap", "point_gap_below", "segment_gap",
+    "annulus_gap", "arc_end", "dip", "lookahead_gap", "near_zones", "point_gap", "point_gap_among",
+    "point_gap_below", "segment_gap",
 ]
 
 FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
 
 
 @jit_inline
@@ -69,30 +71,83 @@ def point_gap(
 
 
 @jit_inline
+def _zone_gap_below(
+    zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int, i: int,
+    n: float, e: float, cos_h: float, sin_h: float, eps: float, speed: float, amax: float,
+    av_rate: float, step: float, below: float,
+) -> float:
+    """min(``below``, zone i's term of ``point_gap``), the zone skipped on its squared
+    distance alone where it cannot come below (the dip is at most
+    (v + mu R a_max / v) step / 2)."""  # fmt: skip
+    mur = zmur[kz, i]
+    qn = n + mur * cos_h - zn[kz, i]
+    qe = e + mur * sin_h - ze[kz, i]
+    d2 = qn * qn + qe * qe
+    reach = zreach[kz, i] + eps
+    far = below + reach + 0.5 * (speed + mur * amax / speed) * step
+    if far > 0.0 and d2 >= far * far:
+        return below
+    dist = math.sqrt(d2)
+    g: float = dist - zreach[kz, i] - eps
+    if step > 0.0:
+        g -= dip(mur, dist, speed, amax, av_rate, step)
+    return min(below, g)
+
+
+@jit_inline
 def point_gap_below(
     zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
     n: float, e: float, cos_h: float, sin_h: float, eps: float, speed: float, amax: float,
     av_rate: float, step: float, below: float,
 ) -> float:
     """min(``below``, ``point_gap``), skipping, on their squared distance alone, the zones
-    that cannot come below it (the dip is at most (v + mu R a_max / v) step / 2): the same
-    value, cheaper where many zones are far."""  # fmt: skip
+    that cannot come below it: the same value, cheaper where many zones are far."""  # fmt: skip
     best = below
     for i in range(zn.shape[1]):
-        mur = zmur[kz, i]
-        qn = n + mur * cos_h - zn[kz, i]
-        qe = e + mur * sin_h - ze[kz, i]
-        d2 = qn * qn + qe * qe
-        reach = zreach[kz, i] + eps
-        far = best + reach + 0.5 * (speed + mur * amax / speed) * step
-        if far > 0.0 and d2 >= far * far:
-            continue
-        dist = math.sqrt(d2)
-        g = dist - zreach[kz, i] - eps
-        if step > 0.0:
-            g -= dip(mur, dist, speed, amax, av_rate, step)
-        best = min(best, g)
+        best = _zone_gap_below(zn, ze, zmur, zreach, kz, i, n, e, cos_h, sin_h, eps, speed,
+                               amax, av_rate, step, best)  # fmt: skip
     return best
+
+
+@jit_inline
+def point_gap_among(
+    zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
+    near: IntArray, count: int, n: float, e: float, cos_h: float, sin_h: float, eps: float,
+    speed: float, amax: float, av_rate: float, step: float, below: float,
+) -> float:
+    """``point_gap_below`` over the zones ``near[:count]`` alone (``near_zones``)."""
+    best = below
+    for j in range(count):
+        best = _zone_gap_below(zn, ze, zmur, zreach, kz, near[j], n, e, cos_h, sin_h, eps,
+                               speed, amax, av_rate, step, best)  # fmt: skip
+    return best
+
+
+@jit_inline
+def near_zones(
+    zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
+    n: float, e: float, radius_m: float, eps: float, speed: float, amax: float, step: float,
+    below: float, near: IntArray,
+) -> int:
+    """Writes to ``near`` the zones whose term of ``point_gap_below`` (its dip included) can
+    be below ``below`` at some point within ``radius_m`` of (n, e), on any heading, and
+    returns how many. Every other zone's term is at least ``below`` there: its look-ahead
+    point is within radius + mu R of (n, e), so its gap is at least
+    |(n, e) - d| - radius - mu R - reach - eps - (v + mu R a_max / v) step / 2.
+    So, for any ``below'`` <= ``below``, ``point_gap_among`` over these is
+    ``point_gap_below`` over all zones, to the bit (a least of the same values)."""
+    count = 0
+    for i in range(zn.shape[1]):
+        mur = zmur[kz, i]
+        dn = zn[kz, i] - n
+        de = ze[kz, i] - e
+        far = below + radius_m + mur + zreach[kz, i] + eps + 0.5 * (
+            speed + mur * amax / speed) * step  # fmt: skip
+        if far > 0.0 and dn * dn + de * de >= far * far:
+            continue
+        near[count] = i
+        count += 1
+    return count
 
 
 @jit_borrow  # on its own: inlined at six places of the service kernel it cost 0.6 s to compile

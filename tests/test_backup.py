@@ -1969,3 +1969,28 @@ def test_the_turns_near_zones_change_no_certificate() -> None:
         np.testing.assert_array_equal(values[0], values[1])
         checked += int(np.isfinite(values[0][bk.BACKUP_LEFT]))
     assert checked >= 50  # the turns were flown, not left at once
+
+
+def test_a_flights_near_zones_are_made_again_as_it_goes() -> None:
+    """``_sample_gap`` along a path 15 list radii long through 40 zones, the least gap
+    falling as a flight's does: at every point the value over its list is the value over
+    all zones, to the bit, and the list is made again as the path leaves each disc (a list
+    kept too long fails: the zones near the later points are not in the first one)."""
+    rng = np.random.default_rng(2053)
+    zones = ZoneSet.from_defenders([
+        Defender(north_m=rng.uniform(-5, 35), east_m=rng.uniform(-6, 6),
+                 range_m=rng.uniform(0.3, 1.0), capture_radius_m=rng.uniform(0, 0.3),
+                 speed_ratio=rng.uniform(0.2, 0.95))
+        for _ in range(40)
+    ])  # fmt: skip
+    z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
+    near = np.empty(40, dtype=np.int64)
+    made, best, remade = (-1, 0.0, 0.0), math.inf, 0
+    for k in range(300):
+        n, e, h = 0.1 * k, 0.5 * math.sin(0.3 * k), rng.uniform(-4, 4)
+        args = (n, e, math.cos(h), math.sin(h), 0.1, 1.0, 1.0, 21.0, 0.04, best)
+        got, after = bk._sample_gap(*z, *args, near, made)
+        assert got == lk.point_gap_below(*z, *args), k
+        remade += after != made
+        made, best = after, got
+    assert remade >= 5 and best < 0.0  # (the path runs into zones: the least falls below 0)

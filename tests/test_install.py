@@ -12,6 +12,8 @@ import sys
 import zipfile
 from pathlib import Path
 
+import pytest
+
 from ezcompanion.guidance import _jit
 from ezcompanion.guidance._jit import kernel_fingerprint, python_sources, user_cache_dir
 
@@ -161,4 +163,35 @@ def test_a_read_only_install_seeds_the_users_cache_once(tmp_path: Path) -> None:
     (tmp_path / "a-file").write_text("")
     blocked = tmp_path / "a-file" / "ezcompanion" / "numba-0123"
     assert _jit._seeded(blocked, shipped) == shipped
-    assert user_cache_dir().name == "ezcompanion"
+    # an install whose directories and files are read-only: the copy is the user's to write
+    for path in (shipped / "guidance" / "law.evaluate-1.py311.nbi", shipped / "guidance", shipped):
+        path.chmod(0o555 if path.is_dir() else 0o444)
+    frozen = tmp_path / "users" / "ezcompanion" / "numba-89ab"
+    assert _jit._seeded(frozen, shipped) == frozen
+    for path in (frozen, *frozen.rglob("*")):
+        assert path.stat().st_mode & (0o700 if path.is_dir() else 0o600) == (
+            0o700 if path.is_dir() else 0o600), (path, oct(path.stat().st_mode))  # fmt: skip
+    for path in (shipped, shipped / "guidance"):
+        path.chmod(0o755)
+
+
+def test_with_no_home_a_read_only_install_starts_as_before(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Where the package cannot be written: the cache is the user's copy under
+    ``$XDG_CACHE_HOME``; with neither that nor a home directory to be found (no HOME, no
+    passwd entry: ``Path.home`` raises), the shipped path, where numba finds its own place
+    and compiles, as before; never an error at import."""
+    monkeypatch.setattr(_jit, "_writable", lambda directory: False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    name = Path(_jit.cache_dir("")).name
+    assert _jit.cache_dir("") == str(tmp_path / "cache" / "ezcompanion" / name)
+    assert (tmp_path / "cache" / "ezcompanion" / name).is_dir()
+    assert user_cache_dir() == tmp_path / "cache" / "ezcompanion"
+    monkeypatch.delenv("XDG_CACHE_HOME")
+
+    def no_home() -> Path:
+        raise RuntimeError("Could not determine home directory.")
+
+    monkeypatch.setattr(Path, "home", no_home)
+    assert _jit.cache_dir("") == str(_jit._HERE / "__pycache__" / name)

@@ -95,7 +95,11 @@ def cache_dir(base: str) -> str:
     shipped = _HERE / "__pycache__" / name
     if _writable(shipped):
         return str(shipped)
-    return str(_seeded(user_cache_dir() / name, shipped))
+    try:
+        users = user_cache_dir()
+    except RuntimeError:  # no home directory to be found (no HOME, no passwd entry)
+        return str(shipped)  # numba keeps its cache where it can, and compiles, as before
+    return str(_seeded(users / name, shipped))
 
 
 def user_cache_dir() -> Path:
@@ -107,8 +111,10 @@ def user_cache_dir() -> Path:
 def _seeded(target: Path, shipped: Path) -> Path:
     """``target``, made a copy of the cache ``shipped`` (if there is one) where it does not
     exist yet: copied beside it, then renamed into place, so that a process starting at the
-    same time finds all of it or none. Where it cannot be made, ``shipped``: numba then
-    keeps its cache where it can, and compiles, as before."""
+    same time finds all of it or none. The copy is the user's to write to whatever the
+    install's modes (a read-only image's 0555 directories would keep numba out of it).
+    Where it cannot be made, ``shipped``: numba then keeps its cache where it can, and
+    compiles, as before."""
     if target.is_dir():
         return target
     partial = None
@@ -116,9 +122,11 @@ def _seeded(target: Path, shipped: Path) -> Path:
         target.parent.mkdir(parents=True, exist_ok=True)
         partial = Path(tempfile.mkdtemp(prefix=f".{target.name}-", dir=target.parent))
         if shipped.is_dir():
-            shutil.copytree(shipped, partial, dirs_exist_ok=True)
+            shutil.copytree(shipped, partial, copy_function=shutil.copyfile, dirs_exist_ok=True)
+        for path in (partial, *partial.rglob("*")):  # (copytree gives directories their modes)
+            path.chmod(path.stat().st_mode | (0o700 if path.is_dir() else 0o600))
         partial.rename(target)
-    except (OSError, RuntimeError):  # (RuntimeError: no home directory to be found)
+    except OSError:
         if partial is not None:
             shutil.rmtree(partial, ignore_errors=True)
         return target if target.is_dir() else shipped  # another process's copy, or none

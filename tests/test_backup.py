@@ -99,14 +99,15 @@ def layouts(draw: st.DrawFn) -> ZoneSet:
     return ZoneSet.from_defenders(defenders(draw, draw(st.integers(1, 3))))
 
 
-def random_layout(rng: np.random.Generator, extent_m: float) -> ZoneSet:
-    """1 to 3 defenders drawn as ``defenders`` draws them, centred within +-``extent_m``
-    (for the tests that draw from a seeded stream rather than with hypothesis)."""
+def random_layout(rng: np.random.Generator, extent_m: float, count: int = 0) -> ZoneSet:
+    """``count`` defenders (0: 1 to 3) drawn as ``defenders`` draws them, centred within
+    +-``extent_m`` (for the tests that draw from a seeded stream rather than with
+    hypothesis)."""
     return ZoneSet.from_defenders([
         Defender(north_m=rng.uniform(-extent_m, extent_m),
                  east_m=rng.uniform(-extent_m, extent_m), range_m=rng.uniform(0.5, 2.5),
                  capture_radius_m=rng.uniform(0, 1), speed_ratio=rng.uniform(0.2, 0.95))
-        for _ in range(rng.integers(1, 4))
+        for _ in range(count or rng.integers(1, 4))
     ])  # fmt: skip
 
 
@@ -211,12 +212,7 @@ def test_the_near_zones_give_the_point_gap_within_their_radius(
     be the value over all zones, to the bit; and the list must leave some out (here, where
     zones lie up to 60 m off and the least gap is a few metres: else it saves nothing)."""
     rng = np.random.default_rng(seed)
-    zones = ZoneSet.from_defenders([
-        Defender(north_m=rng.uniform(-30, 30), east_m=rng.uniform(-30, 30),
-                 range_m=rng.uniform(0.5, 2.5), capture_radius_m=rng.uniform(0, 1),
-                 speed_ratio=rng.uniform(0.2, 0.95))
-        for _ in range(count)
-    ])  # fmt: skip
+    zones = random_layout(rng, 30.0, count)
     z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
     cn, ce = rng.uniform(-10, 10, 2)
     near = np.full(count, -1, dtype=np.int64)
@@ -1972,22 +1968,17 @@ def test_the_turns_near_zones_change_no_certificate() -> None:
 
 
 def test_a_flights_near_zones_are_made_again_as_it_goes() -> None:
-    """``_sample_gap`` along a path 15 list radii long through 40 zones, the least gap
+    """``_sample_gap`` along a path 15 list radii long among 40 zones, the least gap
     falling as a flight's does: at every point the value over its list is the value over
     all zones, to the bit, and the list is made again as the path leaves each disc (a list
     kept too long fails: the zones near the later points are not in the first one)."""
     rng = np.random.default_rng(2053)
-    zones = ZoneSet.from_defenders([
-        Defender(north_m=rng.uniform(-5, 35), east_m=rng.uniform(-6, 6),
-                 range_m=rng.uniform(0.3, 1.0), capture_radius_m=rng.uniform(0, 0.3),
-                 speed_ratio=rng.uniform(0.2, 0.95))
-        for _ in range(40)
-    ])  # fmt: skip
+    zones = random_layout(rng, 20.0, 40)
     z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
     near = np.empty(40, dtype=np.int64)
     made, best, remade = (-1, 0.0, 0.0), math.inf, 0
     for k in range(300):
-        n, e, h = 0.1 * k, 0.5 * math.sin(0.3 * k), rng.uniform(-4, 4)
+        n, e, h = 0.1 * k - 15.0, 0.5 * math.sin(0.3 * k), rng.uniform(-4, 4)
         args = (n, e, math.cos(h), math.sin(h), 0.1, 1.0, 1.0, 21.0, 0.04, best)
         got, after = bk._sample_gap(*z, *args, near, made)
         assert got == lk.point_gap_below(*z, *args), k

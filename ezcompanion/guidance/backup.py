@@ -206,10 +206,10 @@ _SCREEN_EVERY = 4
 # sine of the next heading are the last ones rotated by it (``_fly``), not computed afresh
 # (sincos had been a quarter of the shield's time on a lagging track: docs/service.md).
 _ROTATE_RAD = 0.1
-# A flight's samples ask only the zones that can still lower its least gap within this
-# many v^2 / a_max of where that list was made (``near_zones``), and make it again where a
-# sample is farther (within 0.999 of it: the bound's round-off, some 1e-16 of the
-# distances, is far inside that).
+# A hard turn's samples ask only the zones that can still lower its least gap within this
+# many v^2 / a_max of where that list was made (``near_zones``, ``_sample_gap``), and make
+# it again where a sample is farther (within 0.999 of it: the bound's round-off, some 1e-16
+# of the distances, is far inside that).
 _NEAR_RADIUS = 2.0
 # ... with more zones than this (with fewer, a list saves less than it costs)
 _NEAR_FEWEST = 8

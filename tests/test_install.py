@@ -43,7 +43,7 @@ def refused(*args, dir=None, **kwargs):
         raise PermissionError(13, "Permission denied", str(dir))
     return opened(*args, dir=dir, **kwargs)
 tempfile.TemporaryFile = refused
-""" + _FIRST_RUN.replace("{", "{{").replace("}", "}}")
+"""
 
 
 def _compiled_environment() -> dict[str, str]:
@@ -117,9 +117,10 @@ def test_the_wheel_carries_the_kernels_and_its_first_run_loads_them(tmp_path: Pa
     # loads a copy of the shipped cache, made in the user's cache, and still compiles nothing
     users = tmp_path / "user-cache"
     env = {**env, "XDG_CACHE_HOME": str(users)}
-    read_only = subprocess.run([sys.executable, "-c", _READ_ONLY.format(site=str(site))],
-                               env=env, cwd=tmp_path, capture_output=True, text=True,
-                               timeout=600, check=True)  # fmt: skip
+    script = _READ_ONLY.format(site=str(site)) + _FIRST_RUN
+    read_only = subprocess.run([sys.executable, "-c", script], env=env, cwd=tmp_path,
+                               capture_output=True, text=True, timeout=600,
+                               check=True)  # fmt: skip
     seen = json.loads(read_only.stdout.strip().splitlines()[-1])
     assert "already in numba's cache, loaded" in read_only.stdout, read_only.stdout
     assert seen["hits"] >= 1 and seen["misses"] == 0, seen

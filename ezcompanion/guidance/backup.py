@@ -426,12 +426,9 @@ def _sample_gap(
     its length and where; length -1: none yet), else over all zones, then the list made
     afresh here. A flight's least gap (``best``) only falls, and the list holds every
     zone that can come below the least gap it was made with: the same value as over all
-    zones. Returns it and the list's ``made``."""
+    zones. Returns it and the list's ``made`` (with ``_NEAR_FEWEST`` zones or fewer, no list
+    is made: every sample asks all of them)."""
     count, cn, ce = made
-    if zn.shape[1] <= _NEAR_FEWEST:
-        best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, ch, sh, eps, speed, amax, rate,
-                               step, best)  # fmt: skip
-        return best, made
     radius = _NEAR_RADIUS * speed * speed / amax
     dn = n - cn
     de = e - ce
@@ -441,6 +438,8 @@ def _sample_gap(
         return best, made
     best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, ch, sh, eps, speed, amax, rate, step,
                            best)  # fmt: skip
+    if zn.shape[1] <= _NEAR_FEWEST:
+        return best, made
     count = near_zones(zn, ze, zmur, zreach, kz, n, e, radius, eps, speed, amax, step, best,
                        near)  # fmt: skip
     return best, (count, n, e)

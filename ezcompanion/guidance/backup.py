@@ -88,8 +88,10 @@ from ezcompanion.guidance.abandon import abandon_gap
 from ezcompanion.guidance.actuator import advance_one
 from ezcompanion.guidance.lookahead import (
     annulus_gap,
+    bearing_order,
     dip,
     near_zones,
+    near_zones_among,
     point_gap,
     point_gap_among,
     point_gap_below,
@@ -211,6 +213,9 @@ _ROTATE_RAD = 0.1
 # it again where a sample is farther (within 0.999 of it: the bound's round-off, some 1e-16
 # of the distances, is far inside that).
 _NEAR_RADIUS = 2.0
+# ... and, of those, the zones within this many of a later sample, made again each time a
+# sample is farther (as often as every few samples: from the first list, not all zones)
+_CLOSE_RADIUS = 0.25
 # ... with more zones than this (with fewer, a list saves less than it costs)
 _NEAR_FEWEST = 8
 # turn_certificate's bool argument every_step, read from here so that it is a bool at run
@@ -416,33 +421,53 @@ def _or_none(value: float) -> float:
 
 
 @jit_inline
+def _within(n: float, e: float, cn: float, ce: float, radius_m: float) -> bool:
+    """Whether (n, e) is within 0.999 of ``radius_m`` of (cn, ce): in a list's disc
+    (``_sample_gap``)."""
+    dn = n - cn
+    de = e - ce
+    return dn * dn + de * de <= (0.999 * radius_m) ** 2
+
+
+@jit_inline
 def _sample_gap(
     zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
     n: float, e: float, ch: float, sh: float, eps: float, speed: float, amax: float,
-    rate: float, step: float, best: float, near: IntArray, made: tuple[int, float, float],
-) -> tuple[float, tuple[int, float, float]]:
-    """``point_gap_below`` at a sample of a flight, over the zones of ``near`` where the
-    sample is within ``_NEAR_RADIUS`` v^2 / a_max of where that list was made (``made``:
-    its length and where; length -1: none yet), else over all zones, then the list made
-    afresh here. A flight's least gap (``best``) only falls, and the list holds every
-    zone that can come below the least gap it was made with: the same value as over all
-    zones. Returns it and the list's ``made`` (with ``_NEAR_FEWEST`` zones or fewer, no list
-    is made: every sample asks all of them)."""
-    count, cn, ce = made
-    radius = _NEAR_RADIUS * speed * speed / amax
-    dn = n - cn
-    de = e - ce
-    if count >= 0 and dn * dn + de * de <= (0.999 * radius) ** 2:
-        best = point_gap_among(zn, ze, zmur, zreach, kz, near, count, n, e, ch, sh, eps, speed,
+    rate: float, step: float, best: float, room: IntArray,
+    made: tuple[int, float, float, int, float, float],
+) -> tuple[float, tuple[int, float, float, int, float, float]]:
+    """``point_gap_below`` at a sample of a flight, over a list of the zones near it.
+
+    Two lists (``made``: each one's length and where it was made; -1: none yet): the near
+    zones within ``_NEAR_RADIUS`` v^2 / a_max of a point (``near_zones``, over all zones;
+    the room's first part, ``_zone_room``), and those of them within ``_CLOSE_RADIUS`` of a
+    later point (``near_zones_among``; its last part). A sample within both discs asks the
+    second list; within the first alone, the first, then makes the second afresh here;
+    outside it, all zones, then makes both afresh. A flight's least gap (``best``) only
+    falls, and each list holds every zone that can come below the least gap it was made
+    with: the same value as over all zones. Returns it and the lists' ``made`` (with
+    ``_NEAR_FEWEST`` zones or fewer, no list is made: every sample asks all of them)."""
+    count, cn, ce, close, pn, pe = made
+    zones = zn.shape[1]
+    length = speed * speed / amax
+    if count >= 0 and _within(n, e, cn, ce, _NEAR_RADIUS * length):
+        if _within(n, e, pn, pe, _CLOSE_RADIUS * length):
+            best = point_gap_among(zn, ze, zmur, zreach, kz, room[2 * zones:], close, n, e, ch,
+                                   sh, eps, speed, amax, rate, step, best)  # fmt: skip
+            return best, made
+        best = point_gap_among(zn, ze, zmur, zreach, kz, room, count, n, e, ch, sh, eps, speed,
                                amax, rate, step, best)  # fmt: skip
-        return best, made
-    best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, ch, sh, eps, speed, amax, rate, step,
-                           best)  # fmt: skip
-    if zn.shape[1] <= _NEAR_FEWEST:
-        return best, made
-    count = near_zones(zn, ze, zmur, zreach, kz, n, e, radius, eps, speed, amax, step, best,
-                       near)  # fmt: skip
-    return best, (count, n, e)
+    else:
+        best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, ch, sh, eps, speed, amax, rate,
+                               step, best)  # fmt: skip
+        if zones <= _NEAR_FEWEST:
+            return best, made
+        count = near_zones(zn, ze, zmur, zreach, kz, n, e, _NEAR_RADIUS * length, eps, speed,
+                           amax, step, best, room)  # fmt: skip
+        cn, ce = n, e
+    close = near_zones_among(zn, ze, zmur, zreach, kz, room, count, n, e, _CLOSE_RADIUS * length,
+                             eps, speed, amax, step, best, room[2 * zones:])  # fmt: skip
+    return best, (count, cn, ce, close, n, e)
 
 
 @jit_borrow
@@ -547,18 +572,47 @@ def _straight_to_come(
 
 
 @jit_inline
-def _zone_round(first: int, j: int, count: int) -> int:
-    """The j-th of ``count`` zones taken from zone ``first`` round (a screen starts at the
-    zone that stopped it last time)."""
-    i = first + j
-    return i - count if i >= count else i
+def _zone_round(order: IntArray, first: int, j: int, count: int) -> tuple[int, int]:
+    """The j-th of ``count`` zones a screen looks at, from position ``first`` of ``order``
+    (the zones by bearing, ``_zone_room``; empty: by index), alternately after and before it
+    (first, first + 1, first - 1, first + 2, ...): a screen starts at the zone that stopped
+    the last one, and where that no longer blocks, the zones next to it by bearing, which
+    block rays on nearby headings, come next. Returns the position and the zone."""
+    k = (j + 1) // 2
+    p = first + k if j % 2 == 1 else first - k
+    if p >= count:
+        p -= count
+    elif p < 0:
+        p += count
+    return p, (order[p] if order.shape[0] > 0 else p)
+
+
+@jit
+def _zone_room(zn: FloatArray, ze: FloatArray, kz: int, n: float, e: float) -> IntArray:
+    """Room for a step's flights (3 x the zones): the first and last thirds for a turn's
+    lists of near zones (``_sample_gap``), the middle the zones by bearing from (n, e)
+    (``bearing_order``), the order its exit screens look at them in (``_zone_round``; with
+    ``_NEAR_FEWEST`` zones or fewer, by index). Made once a step by the kernels that may
+    allocate: the others cannot (``jit_borrow``)."""
+    count = zn.shape[1]
+    room = np.empty(3 * count, dtype=np.int64)
+    if count <= _NEAR_FEWEST:
+        for i in range(count):
+            room[count + i] = i
+    else:
+        bearing_order(zn, ze, kz, n, e, room[count:2 * count])
+    return room
+
+
+# the screens of STRAIGHT's own flight look at the zones by index (``_zone_round``)
+_BY_INDEX = np.empty(0, dtype=np.int64)
 
 
 @jit_inline
 def _tube_gap(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, ch: float, sh: float, w: float, delta: float, drift: float,
-    upper: bool, first: int, below: float,
+    upper: bool, order: IntArray, first: int, below: float,
 ) -> tuple[float, int]:
     """The look-ahead points of STRAIGHT's flight from here against the ray of look-ahead
     points along the final heading (``_straight_to_come``): each lies within
@@ -569,15 +623,16 @@ def _tube_gap(
     plus rho_i, an upper bound (some look-ahead point of the flight passes that point). Only
     where the headings stay within a right angle of the ray (else -inf, or inf).
 
-    Returns the least value over the zones and the zone that gave it. The zones are taken
-    from zone ``first`` round, and the loop stops at the first value below ``below`` (-inf:
-    all zones): then the least value is known to be below it, which is all a caller that
-    compares it with ``below`` needs (a screen starting at the zone that stopped it last
-    time looks at one zone where the same zone still blocks). For the same caller, the
+    Returns the least value over the zones and the position in ``order`` of the zone that
+    gave it. The zones are taken from position ``first`` of ``order`` (``_zone_round``),
+    and the loop stops at the first value below ``below`` (-inf: all zones): then the least
+    value is known to be below it, which is all a caller that compares it with ``below``
+    needs (a screen starting at the zone that stopped it last time looks at one zone where
+    the same zone still blocks). For the same caller, the
     upper bound skips, before its square roots, every zone whose distance from the ray
     alone keeps its value at or above ``below`` (rho_i >= 0): where no zone is below, the
     value returned is then only known to be at or above ``below`` (the least over the
-    zones not skipped, inf if none), and the zone is one of those (``first`` if none)."""
+    zones not skipped, inf if none), and the position one of theirs (``first`` if none)."""
     if 2.0 * delta + w >= 1.2:
         return (math.inf if upper else -math.inf), first
     if w <= _ROTATE_RAD:  # (w >= 0) the usual case, a few mrad: no libm tan
@@ -589,7 +644,7 @@ def _tube_gap(
     which = first
     count = zn.shape[1]
     for j in range(count):
-        i = _zone_round(first, j, count)
+        p, i = _zone_round(order, first, j, count)
         mur = zmur[kz, i]
         wn = zn[kz, i] - n
         we = ze[kz, i] - e
@@ -605,7 +660,7 @@ def _tube_gap(
         rho += 2.0 * mur * delta
         value = g + rho if upper else g - rho
         if value < best:
-            best, which = value, i
+            best, which = value, p
             if best < below:
                 break
     return best, which
@@ -649,8 +704,8 @@ _LAG_SCREEN_MIN_RAD = 0.2
 @jit_inline
 def _lag_flight_upper(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
-    kz: int, n: float, e: float, h: float, av: float, speed: float, eta: float, first: int,
-    below: float,
+    kz: int, n: float, e: float, h: float, av: float, speed: float, eta: float,
+    order: IntArray, first: int, below: float,
 ) -> tuple[float, int]:
     """An upper bound on the least gap of STRAIGHT's flight from this state with a lag,
     tight where the tube (``_tube_gap``) is not: once the actuator has died out the
@@ -665,8 +720,9 @@ def _lag_flight_upper(
     gives eta), so the look-ahead
     point at time t lies within eta (v t + mu R) of that one. For each zone, at the time
     the asymptote passes nearest it, that point's gap plus eta (v t + mu R) bounds the
-    flight's least gap from above. Returns the least over the zones, from zone ``first``
-    round, stopping at the first below ``below`` (as ``_tube_gap``); inf without a lag."""
+    flight's least gap from above. Returns the least over the zones and its zone's
+    position, from position ``first`` of ``order``, stopping at the first below ``below``
+    (as ``_tube_gap``); inf without a lag."""
     tau = s[S_TAU]
     c = tau * av / speed
     if tau <= 0.0 or not _LAG_SCREEN_MIN_RAD <= abs(c) <= _LAG_SCREEN_RAD:
@@ -678,7 +734,7 @@ def _lag_flight_upper(
     which = first
     count = zn.shape[1]
     for j in range(count):
-        i = _zone_round(first, j, count)
+        p, i = _zone_round(order, first, j, count)
         mur = zmur[kz, i]
         wn = zn[kz, i] - n
         we = ze[kz, i] - e
@@ -692,7 +748,7 @@ def _lag_flight_upper(
         value = (math.sqrt(dn * dn + de * de) - zreach[kz, i] - s[S_EPS]
                  + eta * (speed * t + mur))  # fmt: skip
         if value < best:
-            best, which = value, i
+            best, which = value, p
             if best < below:
                 break
     return best, which
@@ -702,21 +758,23 @@ def _lag_flight_upper(
 def _rest_upper(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, ch: float, sh: float, av: float, speed: float,
-    to_come: tuple[float, float, float, float, float], first: int, below: float,
+    to_come: tuple[float, float, float, float, float], order: IntArray, first: int,
+    below: float,
 ) -> tuple[float, int]:
     """An upper bound on the least gap of STRAIGHT's flight from this state, the exit
     screens' (``ch``, ``sh``: the cosine and sine of ``h``; ``to_come``:
     ``_straight_to_come`` here): the tube's
     (``_tube_gap``), and where that does not reach below ``below``, the lesser of it and the
-    lag's closed form (``_lag_flight_upper``; inf without a lag). From zone ``first`` round,
-    stopping at the first zone below ``below``; returns the bound and that zone."""
+    lag's closed form (``_lag_flight_upper``; inf without a lag). From position ``first``
+    of ``order``, stopping at the first zone below ``below``; returns the bound and that
+    zone's position."""
     delta, mid, w, drift, eta = to_come
     c_final, s_final = _turned(h, ch, sh, mid)
     upper, which = _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, c_final, s_final, w, delta,
-                             drift, True, first, below)  # fmt: skip
+                             drift, True, order, first, below)  # fmt: skip
     if upper >= below:
         lag, lag_zone = _lag_flight_upper(s, zn, ze, zmur, zreach, kz, n, e, h, av, speed, eta,
-                                          which, below)  # fmt: skip
+                                          order, which, below)  # fmt: skip
         if lag < upper:
             upper, which = lag, lag_zone
     return upper, which
@@ -745,7 +803,7 @@ def _straight_tail(
         return cone
     c_final, s_final = _turned(h, ch, sh, mid)
     tube, _ = _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, c_final, s_final, w, delta, drift,
-                        False, 0, -math.inf)  # fmt: skip
+                        False, _BY_INDEX, 0, -math.inf)  # fmt: skip
     return max(cone, tube)
 
 
@@ -820,7 +878,7 @@ def _straight_flight(
             # the rest of the flight from here, from above: where even that is below the
             # level, so is every lower bound of the whole flight (the certificate)
             upper, blocker = _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, av, speed,
-                                         to_come, blocker, screen)  # fmt: skip
+                                         to_come, _BY_INDEX, blocker, screen)  # fmt: skip
             if upper < screen:
                 return -math.inf
         for _ in range(ticks):
@@ -836,30 +894,33 @@ def _straight_flight(
 def _straight_upper_bound(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, ch: float, sh: float, a: float, av: float,
-    speed: float, trapezoid: float, first: int, below: float,
+    speed: float, trapezoid: float, order: IntArray, first: int, below: float,
 ) -> tuple[float, int]:
     """An upper bound on the least gap of STRAIGHT's flight from this state, so on its
     certificate (which is below that gap): cheap, to screen a turn's exits (``_rest_upper``).
-    Stops below ``below``, from zone ``first`` round (``ch``, ``sh``: the cosine and sine of
-    ``h``; ``trapezoid``: ``_trapezoid_excess`` at the control step)."""
+    Stops below ``below``, from position ``first`` of ``order`` (``ch``, ``sh``: the cosine
+    and sine of ``h``; ``trapezoid``: ``_trapezoid_excess`` at the control step)."""
     return _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, av, speed,
-                       _straight_to_come(s, a, av, speed, trapezoid), first, below)  # fmt: skip
+                       _straight_to_come(s, a, av, speed, trapezoid), order, first,
+                       below)  # fmt: skip
 
 
 @jit_borrow  # on its own, not inlined: two inlined copies took most of its callers' compile
 def _exit_here(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, ch: float, sh: float, a: float, av: float,
-    speed: float, dt: float, blocker: int, screen_level: float, exit_level: float,
-    enough: float, constants: tuple[float, tuple[float, float], tuple[float, float]],
+    speed: float, dt: float, order: IntArray, blocker: int, screen_level: float,
+    exit_level: float, enough: float,
+    constants: tuple[float, tuple[float, float], tuple[float, float]],
 ) -> tuple[float, int]:
-    """STRAIGHT's certificate here, as a turn's exit (exact up to ``enough``), and the zone
-    that stopped the screen; -inf where the screen, an upper bound on it, is below
-    ``screen_level`` (any subset of the exits keeps the argument; the screen drops only
-    exits whose certificate is surely below the level). (``ch``, ``sh``: the turn's cosine
-    and sine of ``h``; ``constants``: ``_flight_constants(s, dt)``, the turn's.)"""
+    """STRAIGHT's certificate here, as a turn's exit (exact up to ``enough``), and the
+    position in ``order`` of the zone that stopped the screen (``_rest_upper``); -inf where
+    the screen, an upper bound on it, is below ``screen_level`` (any subset of the exits
+    keeps the argument; the screen drops only exits whose certificate is surely below the
+    level). (``ch``, ``sh``: the turn's cosine and sine of ``h``; ``constants``:
+    ``_flight_constants(s, dt)``, the turn's.)"""
     upper, blocker = _straight_upper_bound(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av,
-                                           speed, constants[0], blocker,
+                                           speed, constants[0], order, blocker,
                                            screen_level)  # fmt: skip
     if upper < screen_level:
         return -math.inf, blocker
@@ -906,17 +967,17 @@ def _turn_step(
     return n, e, h, a1, av, ch, sh
 
 
-@jit  # not borrowing: it makes the list of near zones
+@jit  # not borrowing: it makes its room
 def turn_certificate(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, policy: int, n: float, e: float, h: float, a: float, av: float, speed: float,
     dt: float, exit_now: float, exit_level: float, stop_below: float, enough: float,
     every_step: bool,
 ) -> float:
-    """``_turn_certificate``, with a list of near zones of its own."""
+    """``_turn_certificate``, with a room of its own (``_zone_room``)."""
     return _turn_certificate(s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av, speed, dt,
                              exit_now, exit_level, stop_below, enough, every_step,
-                             np.empty(zn.shape[1], dtype=np.int64))  # fmt: skip
+                             _zone_room(zn, ze, kz, n, e))  # fmt: skip
 
 
 @jit_borrow
@@ -924,7 +985,7 @@ def _turn_certificate(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, policy: int, n: float, e: float, h: float, a: float, av: float, speed: float,
     dt: float, exit_now: float, exit_level: float, stop_below: float, enough: float,
-    every_step: bool, near: IntArray,
+    every_step: bool, room: IntArray,
 ) -> float:
     """Certificate of LEFT or RIGHT: turn hard (a_c = -+C held) until a sample where the
     STRAIGHT certificate is at least ``exit_level``, then STRAIGHT; with no such sample
@@ -934,7 +995,7 @@ def _turn_certificate(
     certificate is exact up to ``enough`` (the caller needs no more). With ``every_step``
     the exit is looked for at every control step, not only at the samples: the first one
     the flown rule can take, wherever the samples fall (each sample's dip covers the steps
-    up to the next). ``near``: room for the zones its samples ask (``_sample_gap``)."""  # fmt: skip
+    up to the next). ``room``: the step's (``_zone_room``)."""  # fmt: skip
     amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
     cmd, ticks, step, rate, limit = _turn_setup(s, policy, speed, dt)
     constants = _flight_constants(s, dt)
@@ -943,14 +1004,15 @@ def _turn_certificate(
     turned = 0.0
     converged = False
     screen_level = exit_level - _SCREEN_SLACK * speed * speed / amax
-    # the zone that stopped the last screen: the first one the next looks at (an int64, not
-    # the literal 0, which numba would compile _exit_here for a second time: 0.5 s)
+    # the position of the zone that stopped the last screen: the first one the next looks at
+    # (an int64, not the literal 0, which numba would compile _exit_here for a second time)
     blocker = int(np.int64(0))
+    order = room[zn.shape[1]:2 * zn.shape[1]]  # the zones by bearing (``_zone_room``)
     ch, sh = math.cos(h), math.sin(h)
-    made = (-1, 0.0, 0.0)  # no list of near zones yet (``_sample_gap``)
+    made = (-1, 0.0, 0.0, -1, 0.0, 0.0)  # no lists of near zones yet (``_sample_gap``)
     for j in range(_MAX_SAMPLES):
         best, made = _sample_gap(zn, ze, zmur, zreach, kz, n, e, ch, sh, eps, speed, amax, rate,
-                                 step, best, near, made)  # fmt: skip
+                                 step, best, room, made)  # fmt: skip
         best = _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, best)
         if best < stop_below:
             return best
@@ -959,8 +1021,8 @@ def _turn_certificate(
             leave = exit_now
         elif j % _EXIT_EVERY == 0:
             leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av,
-                                        speed, dt, blocker, screen_level, exit_level, enough,
-                                        constants)  # fmt: skip
+                                        speed, dt, order, blocker, screen_level, exit_level,
+                                        enough, constants)  # fmt: skip
         if leave >= exit_level:
             return min(best, leave)
         circled, converged = _circled(s, a, av, limit, speed, converged, turned)
@@ -972,7 +1034,7 @@ def _turn_certificate(
                                                 p1, tau, decays)  # fmt: skip
             if every_step and tick < ticks - 1:
                 leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av,
-                                            speed, dt, blocker, screen_level, exit_level,
+                                            speed, dt, order, blocker, screen_level, exit_level,
                                             enough, constants)  # fmt: skip
                 if leave >= exit_level:
                     return min(best, leave)
@@ -1014,22 +1076,22 @@ def _circle_tail(
     return float(tail)
 
 
-@jit  # not borrowing: it makes the list of near zones
+@jit  # not borrowing: it makes its room
 def backup_certificates(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
     enough: float, below: float, out: FloatArray,
 ) -> None:
-    """``_backup_certificates``, with a list of near zones of its own."""
+    """``_backup_certificates``, with a room of its own (``_zone_room``)."""
     _backup_certificates(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, enough, below,
-                         out, np.empty(zn.shape[1], dtype=np.int64))  # fmt: skip
+                         out, _zone_room(zn, ze, kz, n, e))  # fmt: skip
 
 
 @jit_borrow
 def _backup_certificates(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
-    enough: float, below: float, out: FloatArray, near: IntArray,
+    enough: float, below: float, out: FloatArray, room: IntArray,
 ) -> None:
     """The certificates of LEFT, RIGHT and STRAIGHT at this state into ``out[0:3]``,
     exact from ``below`` up to ``enough``.
@@ -1038,8 +1100,7 @@ def _backup_certificates(
     certificate that cannot beat the best so far, or that falls below ``below`` (-inf:
     exact however low), stops early, below it (a value only known to be lower). STRAIGHT's
     is exact from theta up whatever ``below`` is: whether it reaches theta decides where
-    the turns leave (at once where it does). ``near``: room for the zones a turn's samples
-    ask (``_sample_gap``)."""
+    the turns leave (at once where it does). ``room``: the step's (``_zone_room``)."""
     theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
     straight = _or_none(straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
                                              dt, min(below, theta), enough))  # fmt: skip
@@ -1054,7 +1115,7 @@ def _backup_certificates(
             continue
         out[policy] = _or_none(_turn_certificate(
             s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av, speed, dt, straight, theta,
-            max(best, below), enough, _FLAGS[0], near))  # fmt: skip
+            max(best, below), enough, _FLAGS[0], room))  # fmt: skip
         best = max(best, out[policy])
 
 
@@ -1089,7 +1150,7 @@ def _rung_turn(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, policy: int, n: float, e: float, h: float, a: float, av: float, speed: float,
     dt: float, exit_now: float, levels: FloatArray, stop_below: float, floors: FloatArray,
-    exit_at: IntArray, exit_value: FloatArray, near: IntArray,
+    exit_at: IntArray, exit_value: FloatArray, room: IntArray,
 ) -> tuple[int, float]:
     """LEFT or RIGHT flown once for the exits of every rung (``levels``, descending), as
     ``turn_certificate`` with ``every_step`` flies it for each level alone: the turn does
@@ -1103,7 +1164,7 @@ def _rung_turn(
     (half a revolution after converging). Returns the samples recorded and the circle's
     closed form after them where the flight ended so (-inf where it ended on an exit or
     the stop: nothing after it is needed). ``rung_value`` reads a rung's value from this.
-    ``near``: room for the zones its samples ask (``_sample_gap``)."""
+    ``room``: the step's (``_zone_room``)."""
     amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
     cmd, ticks, step, rate, limit = _turn_setup(s, policy, speed, dt)
     constants = _flight_constants(s, dt)
@@ -1116,12 +1177,13 @@ def _rung_turn(
     turned = 0.0
     converged = False
     blocker = int(np.int64(0))
+    order = room[zn.shape[1]:2 * zn.shape[1]]  # the zones by bearing (``_zone_room``)
     ch, sh = math.cos(h), math.sin(h)
-    made = (-1, 0.0, 0.0)  # no list of near zones yet (``_sample_gap``)
+    made = (-1, 0.0, 0.0, -1, 0.0, 0.0)  # no lists of near zones yet (``_sample_gap``)
     j = 0
     for j in range(_MAX_SAMPLES):
         best, made = _sample_gap(zn, ze, zmur, zreach, kz, n, e, ch, sh, eps, speed, amax, rate,
-                                 step, best, near, made)  # fmt: skip
+                                 step, best, room, made)  # fmt: skip
         best = _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, best)
         floors[j] = best
         if best < stop_below:
@@ -1132,7 +1194,7 @@ def _rung_turn(
         elif j % _EXIT_EVERY == 0:
             low = levels[waiting - 1]
             leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av,
-                                        speed, dt, blocker, low - slack, low, math.inf,
+                                        speed, dt, order, blocker, low - slack, low, math.inf,
                                         constants)  # fmt: skip
         while waiting > 0 and leave >= levels[waiting - 1]:
             waiting -= 1
@@ -1149,7 +1211,7 @@ def _rung_turn(
             if tick < ticks - 1:
                 low = levels[waiting - 1]
                 leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av,
-                                            speed, dt, blocker, low - slack, low, math.inf,
+                                            speed, dt, order, blocker, low - slack, low, math.inf,
                                             constants)  # fmt: skip
                 while waiting > 0 and leave >= levels[waiting - 1]:
                     waiting -= 1
@@ -1212,7 +1274,7 @@ def rung_certificates(
     exit_value = np.empty((2, rungs))
     samples = np.zeros(2, dtype=np.int64)
     tails = np.empty(2)
-    near = np.empty(zn.shape[1], dtype=np.int64)
+    room = _zone_room(zn, ze, kz, n, e)
     best = below
     for rung in range(1, rungs + 1):
         level = levels[rung - 1]
@@ -1222,7 +1284,7 @@ def rung_certificates(
             if rung == 1:  # flown as far as the first rung needs: no later rung needs more
                 samples[side], tails[side] = _rung_turn(
                     s, zn, ze, zmur, zreach, kz, side, n, e, h, a, av, speed, dt, straight,
-                    levels, best, floors[side], exit_at[side], exit_value[side], near,
+                    levels, best, floors[side], exit_at[side], exit_value[side], room,
                 )  # fmt: skip
             value = min(level - theta, rung_value(
                 floors[side], samples[side], tails[side], exit_at[side, rung - 1],
@@ -1288,18 +1350,18 @@ def _fly_ramp(
 def _ahead(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, command: float, n: float, e: float, h: float, a: float, av: float, speed: float,
-    dt: float, fly_s: float, accept: float, enough: float, certs: FloatArray, near: IntArray,
+    dt: float, fly_s: float, accept: float, enough: float, certs: FloatArray, room: IntArray,
 ) -> tuple[float, int, float, float]:
     """Fly ``command`` held for ``fly_s``: the best certificate after it (with the flight's
     own least gap; exact from ``accept`` up to ``enough``, below ``accept`` only known to
     be below it: the shield flies nothing that falls short of ``accept``, whatever by),
     which backup holds it, and the actuator and model a_v at the end. ``dt`` is the control
-    step the certificates align with (``near``: room for the zones a turn's samples ask)."""
+    step the certificates align with (``room``: the step's, ``_zone_room``)."""
     held = int(np.int64(-1))  # the command held (not the literal -1: one compile of _fly_step)
     gap, n1, e1, h1, a1, av1 = _fly_step(s, zn, ze, zmur, zreach, kz, held, command, n, e, h, a,
                                          av, speed, fly_s)  # fmt: skip
     value, which = _best_after(s, zn, ze, zmur, zreach, kz, gap, n1, e1, h1, a1, av1, speed, dt,
-                               accept, enough, certs, near)  # fmt: skip
+                               accept, enough, certs, room)  # fmt: skip
     return value, which, a1, av1
 
 
@@ -1307,12 +1369,12 @@ def _ahead(
 def _best_after(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, gap: float, n: float, e: float, h: float, a: float, av: float, speed: float,
-    dt: float, accept: float, enough: float, certs: FloatArray, near: IntArray,
+    dt: float, accept: float, enough: float, certs: FloatArray, room: IntArray,
 ) -> tuple[float, int]:
     """After a flight whose own least gap was ``gap``, ending in this state: the best
     single backup's certificate (as ``_ahead`` says) with that gap, and which backup it is."""
     _backup_certificates(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, enough, accept,
-                         certs, near)  # fmt: skip
+                         certs, room)  # fmt: skip
     which = int(np.argmax(certs[:_N_BACKUPS]))
     # (the certificates are -inf for an overflow already; the flight's own gap, NaN or
     # +inf, would leave min() the certificate)
@@ -1323,7 +1385,7 @@ def _best_after(
 def _ahead_held(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, command: float, n: float, e: float, h: float, a: float, av: float, speed: float,
-    dt: float, accept: float, certs: FloatArray, near: IntArray,
+    dt: float, accept: float, certs: FloatArray, room: IntArray,
 ) -> tuple[float, int, float, float]:
     """``_ahead`` for ``command`` held one step; with no lag, where that reaches ``accept``,
     the least of it and the same step's setpoint held ``LATE_HOLD_STEPS`` steps: the latest
@@ -1340,12 +1402,12 @@ def _ahead_held(
     docs/guidance.md, "Assumption 4 and the measured a_v"), so with a lag it is not
     checked (docs/validation.md, "A jittered stream")."""
     ahead, which, a1, av1 = _ahead(s, zn, ze, zmur, zreach, kz, command, n, e, h, a, av, speed,
-                                   dt, dt, accept, accept, certs, near)  # fmt: skip
+                                   dt, dt, accept, accept, certs, room)  # fmt: skip
     if ahead >= accept and s[S_TAU] == 0.0:
         gap, n2, e2, h2, av2 = _fly_ramp(s, zn, ze, zmur, zreach, kz, n, e, h, a, a1, av, speed,
                                          LATE_HOLD_STEPS * dt)  # fmt: skip
         late, _ = _best_after(s, zn, ze, zmur, zreach, kz, gap, n2, e2, h2, a1, av2, speed, dt,
-                              accept, accept, certs, near)  # fmt: skip
+                              accept, accept, certs, room)  # fmt: skip
         ahead = min(ahead, late)
     return ahead, which, a1, av1
 
@@ -1570,9 +1632,9 @@ def shield_one(
     taken as it is only where ``_floor_certificate`` agrees.)"""
     checked = s[S_AB_HOLD] > 0.0
     kept = plan.copy() if checked else plan
-    near = np.empty(zn.shape[1], dtype=np.int64)  # room for the zones a turn's samples ask
+    room = _zone_room(zn, ze, kz, n, e)  # for the zones its flights ask
     _shield_step(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, nominal, dt, current,
-                 weight_before, plan, out, k, near)  # fmt: skip
+                 weight_before, plan, out, k, room)  # fmt: skip
     if not checked or out[k, 3] > 0.0:
         return  # no profile, or the nominal (or a blend) flown: certified with the path
     theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
@@ -1581,26 +1643,26 @@ def shield_one(
     # above another's value): a single backup is asked again with theta as its floor
     if out[k, 4] >= theta and (not 0 <= flown < _N_BACKUPS or _floor_certificate(
             s, zn, ze, zmur, zreach, kz, flown, n, e, h, a, av, speed, dt, theta,
-            near) >= theta):
+            room) >= theta):
         return
     plain = s.copy()
     plain[S_AB_HOLD] = 0.0
     held = _floor_certificate(plain, zn, ze, zmur, zreach, kz, flown, n, e, h, a, av, speed, dt,
-                              theta, near)  # fmt: skip
+                              theta, room)  # fmt: skip
     if held >= theta:
         out[k, 4] = held  # the backup flown keeps the plain claim: the step stands
         return
     for i in range(PLAN_SIZE):  # (not plan[:] = kept: its shape check's message took
         plan[i] = kept[i]  # numba 1.5 s of the first run's compile)
     _shield_step(plain, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, nominal, dt, current,
-                 weight_before, plan, out, k, near)  # fmt: skip
+                 weight_before, plan, out, k, room)  # fmt: skip
 
 
 @jit_borrow
 def _floor_certificate(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, policy: int, n: float, e: float, h: float, a: float, av: float, speed: float,
-    dt: float, theta: float, near: IntArray,
+    dt: float, theta: float, room: IntArray,
 ) -> float:
     """The certificate with the settings ``s`` (with an abandon profile or, plain, without)
     of single backup ``policy`` (LEFT, RIGHT or STRAIGHT) flown by its rule from this state,
@@ -1609,7 +1671,7 @@ def _floor_certificate(
     certificate, never an early stop's (``backup_certificates`` asks the turns with a
     higher floor: a value it returns above theta may be one). A turn is -inf where STRAIGHT
     reaches theta: there its rule leaves the turn at once, and the turn's own value is not
-    the flight's. (``near``: room for the zones a turn's samples ask.)"""
+    the flight's. (``room``: the step's, ``_zone_room``.)"""
     if not 0 <= policy < _N_BACKUPS:  # a rung or a plan
         return -math.inf
     straight = _or_none(straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
@@ -1620,7 +1682,7 @@ def _floor_certificate(
         return -math.inf
     return _or_none(_turn_certificate(s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av, speed,
                                       dt, straight, theta, theta, theta, _FLAGS[0],
-                                      near))  # fmt: skip
+                                      room))  # fmt: skip
 
 
 @jit
@@ -1628,10 +1690,10 @@ def _shield_step(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float,
     nominal: float, dt: float, current: int, weight_before: float, plan: IntArray,
-    out: FloatArray, k: int, near: IntArray,
+    out: FloatArray, k: int, room: IntArray,
 ) -> None:
     """``shield_one``'s step with the certificates of ``s`` (with its abandon profile, if
-    any; ``near``: room for the zones a turn's samples ask)."""
+    any; ``room``: the step's, ``_zone_room``)."""
     theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
     accept = accept_level_m(s, theta)
     band = s[S_BAND]
@@ -1642,7 +1704,7 @@ def _shield_step(
     if math.isfinite(nominal):
         ahead, which, a_next, av_next = _ahead_held(s, zn, ze, zmur, zreach, kz, nominal, n, e,
                                                     h, a, av, speed, dt, accept, certs,
-                                                    near)  # fmt: skip
+                                                    room)  # fmt: skip
     else:  # refused: a flight of NaN keeps no gap, so it would beat every level (fail closed)
         # (an infinite one the actuator clips, but no law means it)
         ahead, which, a_next, av_next = -math.inf, current, a, av
@@ -1651,7 +1713,7 @@ def _shield_step(
         preview_s = max(dt, _PREVIEW_SAMPLES * sample_ticks(s, speed, dt) * dt)
         preview, _, _, _ = _ahead(s, zn, ze, zmur, zreach, kz, nominal, n, e, h, a, av, speed,
                                   dt, preview_s, accept, accept + band, certs,
-                                  near)  # fmt: skip
+                                  room)  # fmt: skip
         x = min(max((preview - accept) / band, 0.0), 1.0)
         weight = x * x * (3.0 - 2.0 * x)
     fall = s[S_FALL]
@@ -1668,7 +1730,7 @@ def _shield_step(
         # model, it stays within theta and the tail's widening of where it started,
         # >= theta), to any better by 2 theta, certified or not: the least predicted entry
         _backup_certificates(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, math.inf,
-                             -math.inf, certs, near)  # fmt: skip
+                             -math.inf, certs, room)  # fmt: skip
         single = max(certs[BACKUP_LEFT], certs[BACKUP_RIGHT], certs[BACKUP_STRAIGHT])
         planned = False
         if single < theta:
@@ -1685,7 +1747,7 @@ def _shield_step(
             # early stop's, above its own flight's; asked again with theta as its floor
             certs[BACKUP_RIGHT] = _floor_certificate(s, zn, ze, zmur, zreach, kz, BACKUP_RIGHT,
                                                      n, e, h, a, av, speed, dt, theta,
-                                                     near)  # fmt: skip
+                                                     room)  # fmt: skip
         if planned:
             current = BACKUP_PLAN  # found better by 2 theta than every other, at >= floor
         elif not 0 <= current < N_POLICIES or (certs[best] >= theta and (
@@ -1704,7 +1766,7 @@ def _shield_step(
             blended = weight * nominal + (1.0 - weight) * backup_command(s, flies, a)
             check, which_b, a_b, av_b = _ahead_held(s, zn, ze, zmur, zreach, kz, blended, n, e,
                                                     h, a, av, speed, dt, accept, certs,
-                                                    near)  # fmt: skip
+                                                    room)  # fmt: skip
             if check >= accept:
                 accepted = True
                 which, a_next, av_next = which_b, a_b, av_b

@@ -21,8 +21,8 @@ import numpy.typing as npt
 from ezcompanion.guidance._jit import jit_borrow, jit_inline
 
 __all__ = [
-    "annulus_gap", "arc_end", "dip", "lookahead_gap", "near_zones", "point_gap", "point_gap_among",
-    "point_gap_below", "segment_gap",
+    "annulus_gap", "arc_end", "bearing_order", "dip", "lookahead_gap", "near_zones",
+    "near_zones_among", "point_gap", "point_gap_among", "point_gap_below", "segment_gap",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -124,30 +124,86 @@ def point_gap_among(
 
 
 @jit_inline
+def _near_zone(
+    zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int, i: int,
+    n: float, e: float, radius_m: float, eps: float, speed: float, amax: float, step: float,
+    below: float,
+) -> bool:
+    """Whether zone i's term of ``point_gap_below`` (its dip included) can be below
+    ``below`` at some point within ``radius_m`` of (n, e), on any heading. If not, it is at
+    least ``below`` there: its look-ahead point is within radius + mu R of (n, e), so its
+    gap is at least
+    |(n, e) - d| - radius - mu R - reach - eps - (v + mu R a_max / v) step / 2."""
+    mur = zmur[kz, i]
+    dn = zn[kz, i] - n
+    de = ze[kz, i] - e
+    far = below + radius_m + mur + zreach[kz, i] + eps + 0.5 * (
+        speed + mur * amax / speed) * step  # fmt: skip
+    return not (far > 0.0 and dn * dn + de * de >= far * far)
+
+
+@jit_inline
 def near_zones(
     zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
     n: float, e: float, radius_m: float, eps: float, speed: float, amax: float, step: float,
     below: float, near: IntArray,
 ) -> int:
-    """Writes to ``near`` the zones whose term of ``point_gap_below`` (its dip included) can
-    be below ``below`` at some point within ``radius_m`` of (n, e), on any heading, and
-    returns how many. Every other zone's term is at least ``below`` there: its look-ahead
-    point is within radius + mu R of (n, e), so its gap is at least
-    |(n, e) - d| - radius - mu R - reach - eps - (v + mu R a_max / v) step / 2.
-    So, for any ``below'`` <= ``below``, ``point_gap_among`` over these is
-    ``point_gap_below`` over all zones, to the bit (a least of the same values)."""
+    """Writes to ``near`` the zones whose term of ``point_gap_below`` can be below ``below``
+    at some point within ``radius_m`` of (n, e), on any heading (``_near_zone``), and
+    returns how many. Every other zone's term is at least ``below`` there. So, for any
+    ``below'`` <= ``below``, ``point_gap_among`` over these is ``point_gap_below`` over all
+    zones, to the bit (a least of the same values)."""
     count = 0
     for i in range(zn.shape[1]):
-        mur = zmur[kz, i]
+        if _near_zone(zn, ze, zmur, zreach, kz, i, n, e, radius_m, eps, speed, amax, step,
+                      below):  # fmt: skip
+            near[count] = i
+            count += 1
+    return count
+
+
+@jit_inline
+def near_zones_among(
+    zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
+    among: IntArray, among_count: int, n: float, e: float, radius_m: float, eps: float,
+    speed: float, amax: float, step: float, below: float, near: IntArray,
+) -> int:
+    """``near_zones`` over the zones ``among[:among_count]`` alone (a list that
+    ``near_zones`` made with a level at or above ``below``, about a point whose disc holds
+    this one's): within both discs every zone left out is at least ``below``, as with
+    ``near_zones`` over all zones, and a smaller disc leaves out more. Writes to ``near``
+    (not ``among``) and returns how many."""
+    count = 0
+    for j in range(among_count):
+        i = among[j]
+        if _near_zone(zn, ze, zmur, zreach, kz, i, n, e, radius_m, eps, speed, amax, step,
+                      below):  # fmt: skip
+            near[count] = i
+            count += 1
+    return count
+
+
+@jit_inline
+def bearing_order(
+    zn: FloatArray, ze: FloatArray, kz: int, n: float, e: float, order: IntArray
+) -> None:
+    """Writes to ``order`` the zones sorted by their bearing from (n, e), round from north
+    through east (by the pseudo-angle, monotonic in the bearing: no trigonometry). Zones
+    near each other in it are near each other in bearing, so near one ray's blocker are the
+    blockers of rays on nearby headings. Any order of the zones gives the same least gaps:
+    this only decides which comes first. (It sorts into a new array: for kernels that may
+    allocate.)"""
+    count = zn.shape[1]
+    key = np.empty(count)
+    for i in range(count):
         dn = zn[kz, i] - n
         de = ze[kz, i] - e
-        far = below + radius_m + mur + zreach[kz, i] + eps + 0.5 * (
-            speed + mur * amax / speed) * step  # fmt: skip
-        if far > 0.0 and dn * dn + de * de >= far * far:
-            continue
-        near[count] = i
-        count += 1
-    return count
+        size = abs(dn) + abs(de)
+        p = de / size if size > 0.0 else 0.0  # sin-like, in [-1, 1]
+        key[i] = 2.0 - p if dn < 0.0 else (4.0 + p if p < 0.0 else p)  # in [0, 4)
+    by_key = np.argsort(key)
+    for j in range(count):  # (not order[:count] = ...: numba's shape check costs compile)
+        order[j] = by_key[j]
 
 
 @jit_borrow  # on its own: inlined at six places of the service kernel it cost 0.6 s to compile

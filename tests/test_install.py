@@ -9,6 +9,7 @@ import os
 import shutil
 import subprocess
 import sys
+import time
 import zipfile
 from pathlib import Path
 
@@ -174,6 +175,59 @@ def test_a_read_only_install_seeds_the_users_cache_once(tmp_path: Path) -> None:
             0o700 if path.is_dir() else 0o600), (path, oct(path.stat().st_mode))  # fmt: skip
     for path in (shipped, shipped / "guidance"):
         path.chmod(0o755)
+
+
+def test_stale_caches_beside_the_one_in_use_are_removed(tmp_path: Path) -> None:
+    """``prune_caches``: of the other caches beside the one in use, those among the last used
+    (``_CACHES_KEPT`` with it) or used within a day stay, the others go; a half-made copy
+    goes once an hour old; nothing else is touched, and the one in use is marked used."""
+    now = 1_900_000_000.0
+    hour = 3600.0
+
+    def made(name: str, age_s: float) -> Path:
+        path = tmp_path / name
+        (path / "guidance").mkdir(parents=True)
+        os.utime(path, (now - age_s, now - age_s))
+        return path
+
+    current = made("numba-" + "0" * 16, 9 * 24 * hour)
+    ages = {"1": hour, "2": 2 * hour, "3": 3 * hour, "4": 50 * hour, "5": 80 * hour}
+    others = {key: made("numba-" + key * 16, age) for key, age in ages.items()}
+    old_partial, new_partial = made(".numba-0-abc", 2 * hour), made(".numba-0-def", 0.1 * hour)
+    unrelated = [made("numba-elsewhere", 90 * hour), made("other", 90 * hour)]
+    (tmp_path / "law.cpython-311.pyc").write_bytes(b"")
+    os.utime(tmp_path / "law.cpython-311.pyc", (now - 90 * hour, now - 90 * hour))
+    removed = _jit.prune_caches(current, now)
+    assert sorted(removed) == sorted([others["4"], others["5"], old_partial])
+    # kept: the two used last with the one in use, and the third as it was used within a day
+    for path in (current, others["1"], others["2"], others["3"], new_partial, *unrelated):
+        assert path.is_dir(), path
+    assert (tmp_path / "law.cpython-311.pyc").exists()
+    assert current.stat().st_mtime == now
+    assert _jit.prune_caches(tmp_path / "nowhere" / current.name, now) == []
+
+
+def test_importing_the_package_prunes_its_caches(tmp_path: Path) -> None:
+    """The stale cache of an earlier edit under ``NUMBA_CACHE_DIR`` goes when the package is
+    imported, and the one in use is kept (``prune_caches``, called where the cache
+    directory is set)."""
+    stale = tmp_path / ("numba-" + "f" * 16)
+    (stale / "guidance").mkdir(parents=True)
+    os.utime(stale, (1e9, 1e9))
+    for key in "abc":  # used last, but not within a day: the two newest stay
+        (tmp_path / ("numba-" + key * 16)).mkdir()
+        used = time.time() - 3 * 86400.0 + ord(key)
+        os.utime(tmp_path / ("numba-" + key * 16), (used, used))
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path), "EZCOMPANION_JIT": "1"}
+    done = subprocess.run(
+        [sys.executable, "-c", "import ezcompanion.guidance._jit as j, numba; "
+         "print(numba.config.CACHE_DIR)"],
+        env=env, capture_output=True, text=True, check=True, timeout=120,
+    )  # fmt: skip
+    in_use = Path(done.stdout.strip())
+    assert in_use.parent == tmp_path and in_use.name == Path(_jit.cache_dir("")).name
+    kept = sorted(p.name for p in tmp_path.iterdir() if p != in_use)
+    assert kept == ["numba-" + "b" * 16, "numba-" + "c" * 16]
 
 
 def test_with_no_home_a_read_only_install_starts_as_before(

@@ -31,11 +31,14 @@ uncompiled, with numba imported (for a debugger).
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
+import re
 import shutil
 import sys
 import tempfile
+import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, TypeVar, cast
@@ -51,6 +54,7 @@ __all__ = [
     "kernel_fingerprint",
     "kernels_cached",
     "prange",
+    "prune_caches",
     "user_cache_dir",
 ]
 
@@ -131,6 +135,54 @@ def _seeded(target: Path, shipped: Path) -> Path:
             shutil.rmtree(partial, ignore_errors=True)
         return target if target.is_dir() else shipped  # another process's copy, or none
     return target
+
+
+# Beside the cache in use, another's (an earlier edit's or version's, 10 MB each) is removed
+# once it is neither among the last this many used nor used within this long; a copy left
+# half made (a process killed while seeding one) once it is this old.
+_CACHES_KEPT = 3
+_UNUSED_S = 86400.0
+_PARTIAL_S = 3600.0
+_CACHE_NAME = re.compile(r"numba-[0-9a-f]{16}")
+
+
+def prune_caches(current: Path, now: float | None = None) -> list[Path]:
+    """Marks the cache ``current`` used (its modification time) and removes the stale ones
+    beside it: each edit of these sources, or each upgrade, names a new directory
+    (``cache_dir``) and left the last behind, some 10 MB each, for ever. A cache is stale
+    once it is neither among the ``_CACHES_KEPT`` used last (``current`` included: going
+    back and forth between two versions compiles neither again) nor used within
+    ``_UNUSED_S`` (a process still running an earlier version marked it when it started);
+    a half-made copy (``_seeded``'s ``.numba-*``) once older than ``_PARTIAL_S``. Only
+    names of this form are touched (a ``NUMBA_CACHE_DIR`` may hold other caches), and
+    nothing is raised: a cache that cannot be marked or removed stays. Returns the paths
+    removed."""
+    now = time.time() if now is None else now
+    # (not made yet, where numba makes it when it first saves; or not ours to mark)
+    with contextlib.suppress(OSError):
+        os.utime(current, (now, now))
+    try:
+        beside = list(current.parent.iterdir())
+    except OSError:
+        return []
+
+    def used(path: Path) -> float:
+        try:
+            return path.stat().st_mtime
+        except OSError:
+            return now  # gone meanwhile, or unreadable: leave it
+
+    caches = sorted((path for path in beside if _CACHE_NAME.fullmatch(path.name)
+                     and path.name != current.name), key=used, reverse=True)  # fmt: skip
+    stale = [path for path in caches[_CACHES_KEPT - 1:] if now - used(path) > _UNUSED_S]
+    stale += [path for path in beside if path.name.startswith(".numba-")
+              and now - used(path) > _PARTIAL_S]  # fmt: skip
+    removed = []
+    for path in stale:
+        shutil.rmtree(path, ignore_errors=True)
+        if not path.exists():
+            removed.append(path)
+    return removed
 
 
 def kernels_cached(kernel: str = "guidance/single.step_one", directory: str | None = None) -> bool:
@@ -214,6 +266,7 @@ if JIT_ENABLED:
     from numba.core import caching as _caching
 
     _numba_config.CACHE_DIR = cache_dir(os.environ.get("NUMBA_CACHE_DIR", ""))  # type: ignore[attr-defined]
+    prune_caches(Path(_numba_config.CACHE_DIR))  # type: ignore[attr-defined]
 
     class _PackageCacheLocator(_caching._CacheLocator):
         """Where numba caches this package's kernels: ``CACHE_DIR/<subpackage>``, stamped

@@ -572,6 +572,18 @@ def _straight_to_come(
 
 
 @jit_inline
+def _straight_to_come_once(
+    s: FloatArray, a: float, av: float, speed: float, trapezoid: float,
+    to_come: tuple[float, float, float, float, float], fresh: bool,
+) -> tuple[tuple[float, float, float, float, float], bool]:
+    """``to_come`` where it is ``fresh`` (made for this state), else
+    ``_straight_to_come`` made now; and True."""
+    if fresh:
+        return to_come, True
+    return _straight_to_come(s, a, av, speed, trapezoid), True
+
+
+@jit_inline
 def _zone_round(order: IntArray, first: int, j: int, count: int) -> tuple[int, int]:
     """The j-th of ``count`` zones a screen looks at, from position ``first`` of ``order``
     (the zones by bearing, ``_zone_room``; empty: by index), alternately after and before it
@@ -858,9 +870,11 @@ def _straight_flight(
     blocker = 0
     trapezoid, decays, straightening = constants
     nn = int(s[S_N])
-    to_come = _straight_to_come(s, a, av, speed, trapezoid)  # at each sample, for its state
+    to_come = _straight_to_come(s, a, av, speed, trapezoid)  # for the sample's state, where
+    fresh = True  # fresh; made at a sample only where it is asked (its logarithm costs)
     for j in range(_MAX_SAMPLES):
         if early and j % _TAIL_EVERY == 0:
+            to_come, fresh = _straight_to_come_once(s, a, av, speed, trapezoid, to_come, fresh)
             tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed, to_come)
             certified = max(certified, min(best, tail))
             if certified >= enough:
@@ -872,9 +886,15 @@ def _straight_flight(
             return max(best, certified)
         if best <= certified:
             return certified
-        if to_come[0] < _RESIDUAL_RAD:  # delta
-            break
+        # delta < _RESIDUAL_RAD ends the sampling; delta is (tau |a_v| + hi) / v, and
+        # rounding is monotonic, so where tau |a_v| / v alone, as rounded, is at least that,
+        # so is delta: it need not be made (the lag's part, which dies out slowly)
+        if fresh or s[S_TAU] * abs(av) / speed < _RESIDUAL_RAD:
+            to_come, fresh = _straight_to_come_once(s, a, av, speed, trapezoid, to_come, fresh)
+            if to_come[0] < _RESIDUAL_RAD:  # delta
+                break
         if j > 0 and screen > -math.inf and (j <= _SCREEN_EVERY or j % _SCREEN_EVERY == 0):
+            to_come, fresh = _straight_to_come_once(s, a, av, speed, trapezoid, to_come, fresh)
             # the rest of the flight from here, from above: where even that is below the
             # level, so is every lower bound of the whole flight (the certificate)
             upper, blocker = _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, av, speed,
@@ -885,7 +905,8 @@ def _straight_flight(
             a1 = _advance_straighten(a, nn, straightening)
             n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a, a1, av, speed, tau, dt, decays)
             a = a1
-        to_come = _straight_to_come(s, a, av, speed, trapezoid)
+        fresh = False
+    to_come, fresh = _straight_to_come_once(s, a, av, speed, trapezoid, to_come, fresh)
     tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed, to_come)
     return max(certified, min(best, tail))
 

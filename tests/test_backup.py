@@ -1202,21 +1202,25 @@ def test_the_lags_closed_form_bounds_the_flight_from_above_and_tighter_than_the_
 
 @settings(max_examples=300, deadline=None)
 @given(
-    a=st.floats(-0.999, 0.999), av=st.floats(-2.0, 2.0), tau=st.just(0.0) | st.floats(0.01, 2.0),
+    a=st.floats(-0.999, 0.999), av=st.floats(-2.0, 2.0), tau=st.floats(0.01, 2.0),
     speed=st.floats(0.05, 50.0), scale=st.floats(0.9, 1.1),
 )  # fmt: skip
 def test_a_straight_flight_goes_on_without_its_rest_only_where_that_would_not_end_it(
     a: float, av: float, tau: float, speed: float, scale: float
 ) -> None:
-    """STRAIGHT's flight skips making ``_straight_to_come`` at a sample where
-    tau |a_v| / v, as rounded, is already at least ``_RESIDUAL_RAD`` (its sampling ends only
-    below it): there delta, made, must be at least that too, to the bit. Drawn with
-    tau |a_v| / v near the bound (``scale``), where rounding decides."""
+    """STRAIGHT's flight skips making ``_straight_to_come`` for its ending test where
+    ``_straight_goes_on`` says that delta, made, would not end it: there delta must be at
+    least ``_RESIDUAL_RAD``, to the bit (and without a lag it never skips). Drawn with
+    tau |a_v| / v near the bound (``scale``), where rounding decides, and a_v's sign and
+    size as drawn, far from it."""
     s = settings_for(dataclasses.replace(PARAMS, response_lag_s=tau))
-    av = math.copysign(scale * bk._RESIDUAL_RAD * speed / tau, av) if tau > 0.0 else av
-    if s[bk.S_TAU] * abs(av) / speed >= bk._RESIDUAL_RAD:
-        delta = bk._straight_to_come(s, a, av, speed, bk._trapezoid_excess(s, 0.02))[0]
-        assert delta >= bk._RESIDUAL_RAD, (delta, a, av, tau, speed)
+    trapezoid = bk._trapezoid_excess(s, 0.02)
+    near = math.copysign(scale * bk._RESIDUAL_RAD * speed / tau, av)
+    for rate in (near, av):
+        delta = bk._straight_to_come(s, a, rate, speed, trapezoid)[0]
+        if bk._straight_goes_on(s, rate, speed):
+            assert delta >= bk._RESIDUAL_RAD, (delta, a, rate, tau, speed)
+    assert not bk._straight_goes_on(settings_for(PARAMS), av, speed)
 
 
 def test_the_running_screen_refuses_only_exits_whose_certificate_is_below_the_level() -> None:

@@ -179,8 +179,10 @@ def test_a_read_only_install_seeds_the_users_cache_once(tmp_path: Path) -> None:
 
 def test_stale_caches_beside_the_one_in_use_are_removed(tmp_path: Path) -> None:
     """``prune_caches``: of the other caches beside the one in use, those among the last used
-    (``_CACHES_KEPT`` with it) or used within a day stay, the others go; a half-made copy
-    goes once an hour old; nothing else is touched, and the one in use is marked used."""
+    (``_CACHES_KEPT`` with it) or used within a week stay, the others go; a half-made copy
+    goes once an hour old; nothing else is touched, and the one in use is marked used.
+    Where the directory cannot be written nothing is tried; a copy just seeded from an
+    old shipped cache is not taken for a stale one."""
     now = 1_900_000_000.0
     hour = 3600.0
 
@@ -191,20 +193,34 @@ def test_stale_caches_beside_the_one_in_use_are_removed(tmp_path: Path) -> None:
         return path
 
     current = made("numba-" + "0" * 16, 9 * 24 * hour)
-    ages = {"1": hour, "2": 2 * hour, "3": 3 * hour, "4": 50 * hour, "5": 80 * hour}
+    ages = {"1": hour, "2": 2 * hour, "3": 150 * hour, "4": 170 * hour, "5": 200 * hour}
     others = {key: made("numba-" + key * 16, age) for key, age in ages.items()}
-    old_partial, new_partial = made(".numba-0-abc", 2 * hour), made(".numba-0-def", 0.1 * hour)
-    unrelated = [made("numba-elsewhere", 90 * hour), made("other", 90 * hour)]
+    old_partial = made(".numba-" + "0" * 16 + "-abc", 2 * hour)
+    new_partial = made(".numba-" + "0" * 16 + "-def", 0.1 * hour)
+    unrelated = [made("numba-elsewhere", 900 * hour), made(".numba-elsewhere", 900 * hour),
+                 made("other", 900 * hour)]  # fmt: skip
     (tmp_path / "law.cpython-311.pyc").write_bytes(b"")
     os.utime(tmp_path / "law.cpython-311.pyc", (now - 90 * hour, now - 90 * hour))
     removed = _jit.prune_caches(current, now)
     assert sorted(removed) == sorted([others["4"], others["5"], old_partial])
-    # kept: the two used last with the one in use, and the third as it was used within a day
+    # kept: the two used last with the one in use, and the third as it was used within a week
     for path in (current, others["1"], others["2"], others["3"], new_partial, *unrelated):
         assert path.is_dir(), path
     assert (tmp_path / "law.cpython-311.pyc").exists()
     assert current.stat().st_mtime == now
     assert _jit.prune_caches(tmp_path / "nowhere" / current.name, now) == []
+    # a directory this user cannot write to: nothing is tried (the test runs as root, to
+    # whom every mode is writable: the check is made as the code makes it)
+    stale = made("numba-" + "6" * 16, 900 * hour)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(_jit.os, "access", lambda path, mode: False)
+        assert _jit.prune_caches(current, now) == [] and stale.is_dir()
+    # a copy seeded from a shipped cache months old is new, not stale
+    shipped = made("shipped", 0.0)
+    months_ago = time.time() - 90 * 24 * hour
+    os.utime(shipped, (months_ago, months_ago))
+    seeded = _jit._seeded(tmp_path / "users" / ("numba-" + "7" * 16), shipped)
+    assert seeded.parent.name == "users" and time.time() - seeded.stat().st_mtime < 600
 
 
 def test_importing_the_package_prunes_its_caches(tmp_path: Path) -> None:
@@ -214,9 +230,9 @@ def test_importing_the_package_prunes_its_caches(tmp_path: Path) -> None:
     stale = tmp_path / ("numba-" + "f" * 16)
     (stale / "guidance").mkdir(parents=True)
     os.utime(stale, (1e9, 1e9))
-    for key in "abc":  # used last, but not within a day: the two newest stay
+    for key in "abc":  # used last, but not within a week: the two newest stay
         (tmp_path / ("numba-" + key * 16)).mkdir()
-        used = time.time() - 3 * 86400.0 + ord(key)
+        used = time.time() - 9 * 86400.0 + ord(key)
         os.utime(tmp_path / ("numba-" + key * 16), (used, used))
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path), "EZCOMPANION_JIT": "1"}
     done = subprocess.run(

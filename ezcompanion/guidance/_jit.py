@@ -127,6 +127,9 @@ def _seeded(target: Path, shipped: Path) -> Path:
         partial = Path(tempfile.mkdtemp(prefix=f".{target.name}-", dir=target.parent))
         if shipped.is_dir():
             shutil.copytree(shipped, partial, copy_function=shutil.copyfile, dirs_exist_ok=True)
+        # new, whatever the shipped cache's age (copytree copies it): else a process pruning
+        # now (``prune_caches``) would take it for a stale copy
+        os.utime(partial)
         for path in (partial, *partial.rglob("*")):  # (copytree gives directories their modes)
             path.chmod(path.stat().st_mode | (0o700 if path.is_dir() else 0o600))
         partial.rename(target)
@@ -139,11 +142,12 @@ def _seeded(target: Path, shipped: Path) -> Path:
 
 # Beside the cache in use, another's (an earlier edit's or version's, 10 MB each) is removed
 # once it is neither among the last this many used nor used within this long; a copy left
-# half made (a process killed while seeding one) once it is this old.
+# half made (a process killed while seeding one, ``_seeded``) once it is this old.
 _CACHES_KEPT = 3
-_UNUSED_S = 86400.0
+_UNUSED_S = 7 * 86400.0
 _PARTIAL_S = 3600.0
 _CACHE_NAME = re.compile(r"numba-[0-9a-f]{16}")
+_PARTIAL_NAME = re.compile(r"\.numba-[0-9a-f]{16}-.+")
 
 
 def prune_caches(current: Path, now: float | None = None) -> list[Path]:
@@ -152,15 +156,19 @@ def prune_caches(current: Path, now: float | None = None) -> list[Path]:
     (``cache_dir``) and left the last behind, some 10 MB each, for ever. A cache is stale
     once it is neither among the ``_CACHES_KEPT`` used last (``current`` included: going
     back and forth between two versions compiles neither again) nor used within
-    ``_UNUSED_S`` (a process still running an earlier version marked it when it started);
-    a half-made copy (``_seeded``'s ``.numba-*``) once older than ``_PARTIAL_S``. Only
-    names of this form are touched (a ``NUMBA_CACHE_DIR`` may hold other caches), and
-    nothing is raised: a cache that cannot be marked or removed stays. Returns the paths
-    removed."""
+    ``_UNUSED_S`` (a process still running an earlier version marked it when it started:
+    one running for longer than that, its sources replaced under it, may lose it, and a
+    kernel it loads after that compiles again); a half-made copy (``_seeded``'s
+    ``.numba-<digest>-*``) once older than ``_PARTIAL_S``. Only names of these forms are
+    touched (a ``NUMBA_CACHE_DIR`` may hold other caches), only where this user may write
+    the directory, and nothing is raised: a cache that cannot be marked or removed stays.
+    Returns the paths removed."""
     now = time.time() if now is None else now
     # (not made yet, where numba makes it when it first saves; or not ours to mark)
     with contextlib.suppress(OSError):
         os.utime(current, (now, now))
+    if not os.access(current.parent, os.W_OK):
+        return []  # (a system-wide install's own __pycache__: nothing could be removed)
     try:
         beside = list(current.parent.iterdir())
     except OSError:
@@ -175,7 +183,7 @@ def prune_caches(current: Path, now: float | None = None) -> list[Path]:
     caches = sorted((path for path in beside if _CACHE_NAME.fullmatch(path.name)
                      and path.name != current.name), key=used, reverse=True)  # fmt: skip
     stale = [path for path in caches[_CACHES_KEPT - 1:] if now - used(path) > _UNUSED_S]
-    stale += [path for path in beside if path.name.startswith(".numba-")
+    stale += [path for path in beside if _PARTIAL_NAME.fullmatch(path.name)
               and now - used(path) > _PARTIAL_S]  # fmt: skip
     removed = []
     for path in stale:

@@ -213,10 +213,12 @@ _ROTATE_RAD = 0.1
 # it again where a sample is farther (within 0.999 of it: the bound's round-off, some 1e-16
 # of the distances, is far inside that).
 _NEAR_RADIUS = 2.0
-# ... and, of those, the zones within this many of a later sample, made again each time a
-# sample is farther (as often as every few samples: from the first list, not all zones)
+# ... and, most samples, a closer list: of those, the zones that can still lower it within
+# this many v^2 / a_max of a later sample, made again (from the first list, not all zones)
+# where a sample is farther than 0.999 of that; as often as every few samples
 _CLOSE_RADIUS = 0.25
-# ... with more zones than this (with fewer, a list saves less than it costs)
+# ... with more zones than this (with fewer, a list saves less than it costs; and the exit
+# screens take the zones by index, not by bearing: ``_zone_room``)
 _NEAR_FEWEST = 8
 # turn_certificate's bool argument every_step, read from here so that it is a bool at run
 # time: numba compiles a kernel once more for each literal value of a bool or int
@@ -572,6 +574,15 @@ def _straight_to_come(
 
 
 @jit_inline
+def _straight_goes_on(s: FloatArray, av: float, speed: float) -> bool:
+    """Whether delta (``_straight_to_come``) is surely at least ``_RESIDUAL_RAD`` without
+    making it: delta = (tau |a_v| + hi) / v with hi >= 0 (the integral of |a| to come,
+    while |a| < a_max), and rounding is monotonic, so where tau |a_v| / v alone, as
+    rounded, is at least that, so is delta. (The lag's part, which dies out slowly.)"""
+    return bool(s[S_TAU] * abs(av) / speed >= _RESIDUAL_RAD)
+
+
+@jit_inline
 def _straight_to_come_once(
     s: FloatArray, a: float, av: float, speed: float, trapezoid: float,
     to_come: tuple[float, float, float, float, float], fresh: bool,
@@ -870,8 +881,10 @@ def _straight_flight(
     blocker = 0
     trapezoid, decays, straightening = constants
     nn = int(s[S_N])
-    to_come = _straight_to_come(s, a, av, speed, trapezoid)  # for the sample's state, where
-    fresh = True  # fresh; made at a sample only where it is asked (its logarithm costs)
+    # what is left of the turn, made for a sample's state only where it is asked (its
+    # logarithm costs): ``fresh`` where made for this sample's
+    to_come = _straight_to_come(s, a, av, speed, trapezoid)
+    fresh = True
     for j in range(_MAX_SAMPLES):
         if early and j % _TAIL_EVERY == 0:
             to_come, fresh = _straight_to_come_once(s, a, av, speed, trapezoid, to_come, fresh)
@@ -886,10 +899,9 @@ def _straight_flight(
             return max(best, certified)
         if best <= certified:
             return certified
-        # delta < _RESIDUAL_RAD ends the sampling; delta is (tau |a_v| + hi) / v, and
-        # rounding is monotonic, so where tau |a_v| / v alone, as rounded, is at least that,
-        # so is delta: it need not be made (the lag's part, which dies out slowly)
-        if fresh or s[S_TAU] * abs(av) / speed < _RESIDUAL_RAD:
+        # delta < _RESIDUAL_RAD ends the sampling: made only where the lag's part alone
+        # does not already keep it at or above that (``_straight_goes_on``)
+        if fresh or not _straight_goes_on(s, av, speed):
             to_come, fresh = _straight_to_come_once(s, a, av, speed, trapezoid, to_come, fresh)
             if to_come[0] < _RESIDUAL_RAD:  # delta
                 break
@@ -1016,7 +1028,8 @@ def _turn_certificate(
     certificate is exact up to ``enough`` (the caller needs no more). With ``every_step``
     the exit is looked for at every control step, not only at the samples: the first one
     the flown rule can take, wherever the samples fall (each sample's dip covers the steps
-    up to the next). ``room``: the step's (``_zone_room``)."""  # fmt: skip
+    up to the next). ``room``: the step's (``_zone_room``; its lists are this flight's
+    scratch: no other flight may use the same room while it runs)."""  # fmt: skip
     amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
     cmd, ticks, step, rate, limit = _turn_setup(s, policy, speed, dt)
     constants = _flight_constants(s, dt)
@@ -1185,7 +1198,8 @@ def _rung_turn(
     (half a revolution after converging). Returns the samples recorded and the circle's
     closed form after them where the flight ended so (-inf where it ended on an exit or
     the stop: nothing after it is needed). ``rung_value`` reads a rung's value from this.
-    ``room``: the step's (``_zone_room``)."""
+    ``room``: the step's (``_zone_room``; its lists are this flight's scratch: no other
+    flight may use the same room while it runs)."""
     amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
     cmd, ticks, step, rate, limit = _turn_setup(s, policy, speed, dt)
     constants = _flight_constants(s, dt)

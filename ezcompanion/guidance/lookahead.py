@@ -170,9 +170,10 @@ def near_zones_among(
 ) -> int:
     """``near_zones`` over the zones ``among[:among_count]`` alone (a list that
     ``near_zones`` made with a level at or above ``below``, about a point whose disc holds
-    this one's): within both discs every zone left out is at least ``below``, as with
-    ``near_zones`` over all zones, and a smaller disc leaves out more. Writes to ``near``
-    (not ``among``) and returns how many."""
+    (n, e)): at the points within both discs every zone left out is at least ``below``, as
+    with ``near_zones`` over all zones (the caller asks the list only there), and a
+    smaller disc leaves out more. Writes to ``near`` (not ``among``) and returns how
+    many."""
     count = 0
     for j in range(among_count):
         i = among[j]

@@ -153,13 +153,12 @@ def near_zones(
     returns how many. Every other zone's term is at least ``below`` there. So, for any
     ``below'`` <= ``below``, ``point_gap_among`` over these is ``point_gap_below`` over all
     zones, to the bit (a least of the same values)."""
-    count = 0
-    for i in range(zn.shape[1]):
-        if _near_zone(zn, ze, zmur, zreach, kz, i, n, e, radius_m, eps, speed, amax, step,
-                      below):  # fmt: skip
-            near[count] = i
-            count += 1
-    return count
+    return near_zones_among(zn, ze, zmur, zreach, kz, _ALL, zn.shape[1], n, e, radius_m, eps,
+                            speed, amax, step, below, near)  # fmt: skip
+
+
+# ``near_zones_among``'s ``among`` for every zone, by index
+_ALL = np.empty(0, dtype=np.int64)
 
 
 @jit_inline
@@ -168,15 +167,15 @@ def near_zones_among(
     among: IntArray, among_count: int, n: float, e: float, radius_m: float, eps: float,
     speed: float, amax: float, step: float, below: float, near: IntArray,
 ) -> int:
-    """``near_zones`` over the zones ``among[:among_count]`` alone (a list that
-    ``near_zones`` made with a level at or above ``below``, about a point whose disc holds
-    (n, e)): at the points within both discs every zone left out is at least ``below``, as
-    with ``near_zones`` over all zones (the caller asks the list only there), and a
-    smaller disc leaves out more. Writes to ``near`` (not ``among``) and returns how
-    many."""
+    """``near_zones`` over the zones ``among[:among_count]`` alone (empty ``among``: the
+    first ``among_count`` by index), a list that ``near_zones`` made with a level at or
+    above ``below``, about a point whose disc holds (n, e): at the points within both
+    discs every zone left out is at least ``below``, as with ``near_zones`` over all zones
+    (the caller asks the list only there), and a smaller disc leaves out more. Writes to
+    ``near`` (not ``among``) and returns how many."""
     count = 0
     for j in range(among_count):
-        i = among[j]
+        i = among[j] if among.shape[0] > 0 else j
         if _near_zone(zn, ze, zmur, zreach, kz, i, n, e, radius_m, eps, speed, amax, step,
                       below):  # fmt: skip
             near[count] = i

@@ -180,6 +180,8 @@ def test_settings_default_to_a_loopback_peer_without_multicast() -> None:
     conf = session_config(s)
     assert json.loads(conf.get_json("scouting/multicast/enabled")) is False
     assert json.loads(conf.get_json("listen/endpoints")) == ["tcp/127.0.0.1:7447"]
+    # shared memory off (its watchdog woke a thread every 50 ms once a peer connected)
+    assert json.loads(conf.get_json("transport/shared_memory/enabled")) is False
     client = telemetry_settings({"mode": "client", "connect": "tcp/10.0.0.2:7447"})
     assert client.listen == () and client.connect == ("tcp/10.0.0.2:7447",)
 

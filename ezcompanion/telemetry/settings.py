@@ -153,8 +153,9 @@ def telemetry_settings(raw: Mapping[str, Any], **overrides: Any) -> TelemetrySet
 
 
 def session_config(settings: TelemetrySettings) -> zenoh.Config:
-    """The zenoh configuration for ``settings``: its file, or mode, endpoints and scouting;
-    then its TLS, logins and (scenario updates on) access-control list."""
+    """The zenoh configuration for ``settings``: its file, or mode, endpoints, scouting and
+    shared memory off; then its TLS, logins and (scenario updates on) access-control
+    list."""
     if settings.config_file is not None:
         try:
             conf = zenoh.Config.from_file(settings.config_file)
@@ -166,6 +167,11 @@ def session_config(settings: TelemetrySettings) -> zenoh.Config:
         conf.insert_json5("listen/endpoints", json.dumps(list(settings.listen)))
         conf.insert_json5("connect/endpoints", json.dumps(list(settings.connect)))
         conf.insert_json5("scouting/multicast/enabled", json.dumps(settings.multicast_scouting))
+        # Shared memory off: the payloads (a few hundred bytes, put as bytes) never use
+        # it, while with it on, once a peer is connected, zenoh's shared-memory watchdog
+        # wakes a thread every 50 ms: 1.2 to 1.5 ms of CPU a second, some 25 us a 50 Hz
+        # tick (zenoh 1.10; docs/service.md, Cost, "Telemetry's cost is its wake-ups").
+        conf.insert_json5("transport/shared_memory/enabled", "false")
     apply_access(
         conf,
         vehicle_id=settings.vehicle_id,

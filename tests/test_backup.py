@@ -285,7 +285,7 @@ def test_a_screen_looks_at_every_zone_once_from_any_position() -> None:
             if count >= 3:
                 assert {positions[1], positions[2]} == {(first + 1) % count, (first - 1) % count}
             assert [i for _, i in seen] == [int(order[p]) for p in positions]
-            assert [bk._zone_round(bk._BY_INDEX, first, j, count)[1]
+            assert [bk._zone_round(lk.BY_INDEX, first, j, count)[1]
                     for j in range(count)] == positions  # fmt: skip
 
 
@@ -1064,7 +1064,7 @@ def test_straights_closed_form_bounds_hold_along_its_flight(
     assert abs(h - (h0 + mid)) <= w + 1e-6
     assert lateral <= drift + 1e-6
     final = (math.cos(h0 + mid), math.sin(h0 + mid))
-    by_index = bk._BY_INDEX
+    by_index = lk.BY_INDEX
     lower, _ = bk._tube_gap(s, *z, n0, e0, *final, w, delta, drift, False, by_index, 0, -math.inf)
     upper, _ = bk._tube_gap(s, *z, n0, e0, *final, w, delta, drift, True, by_index, 0, -math.inf)
     lag_upper, _ = bk._lag_flight_upper(s, *z, n0, e0, h0, av0, 1.0, eta, by_index, 0, -math.inf)
@@ -1187,9 +1187,9 @@ def test_the_lags_closed_form_bounds_the_flight_from_above_and_tighter_than_the_
         lagged += 1
         trapezoid = bk._trapezoid_excess(s, 0.02)
         delta, mid, w, drift, eta = bk._straight_to_come(s, a, av, 1.0, trapezoid)
-        upper, _ = bk._lag_flight_upper(s, *z, n, e, h, av, 1.0, eta, bk._BY_INDEX, 0, -math.inf)
+        upper, _ = bk._lag_flight_upper(s, *z, n, e, h, av, 1.0, eta, lk.BY_INDEX, 0, -math.inf)
         tube, _ = bk._tube_gap(s, *z, n, e, math.cos(h + mid), math.sin(h + mid), w, delta, drift,
-                               True, bk._BY_INDEX, 0, -math.inf)  # fmt: skip
+                               True, lk.BY_INDEX, 0, -math.inf)  # fmt: skip
         least = lk.lookahead_gap(*z[:4], n, e, h, PARAMS.shield_margin_m)
         for _ in range(int((12.0 * s[bk.S_TAU] + 30.0) / 0.02)):
             _, n, e, h, a, av = bk._fly_step(s, *z, bk.BACKUP_STRAIGHT, 0.0, n, e, h, a, av,
@@ -1247,7 +1247,7 @@ def test_the_running_screen_refuses_only_exits_whose_certificate_is_below_the_le
             # lag's closed form)
             upper, _ = bk._straight_upper_bound(s, *z, n, e, h, math.cos(h), math.sin(h), a, av,
                                                 1.0, bk._trapezoid_excess(s, dt),
-                                                bk._BY_INDEX, 0, level)  # fmt: skip
+                                                lk.BY_INDEX, 0, level)  # fmt: skip
             if upper < level:
                 screened += 1
                 assert full < level, (full, level, upper)
@@ -1524,11 +1524,11 @@ def test_a_screen_that_stops_at_the_first_zone_below_its_level_decides_as_the_fu
     z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
     final = (math.cos(h0 + mid), math.sin(h0 + mid))
     args = (s, *z, n0, e0, *final, w, delta, drift, upper)
-    full, _ = bk._tube_gap(*args, bk._BY_INDEX, 0, -math.inf)
+    full, _ = bk._tube_gap(*args, lk.BY_INDEX, 0, -math.inf)
 
     def alone(i: int) -> float:
         value, _ = bk._tube_gap(s, *(x[:, i : i + 1] for x in z[:4]), 0, n0, e0, *final, w,
-                                delta, drift, upper, bk._BY_INDEX, 0, -math.inf)  # fmt: skip
+                                delta, drift, upper, lk.BY_INDEX, 0, -math.inf)  # fmt: skip
         return float(value)
 
     values = sorted(alone(i) for i in range(len(zones)))
@@ -1536,7 +1536,7 @@ def test_a_screen_that_stops_at_the_first_zone_below_its_level_decides_as_the_fu
     low, high = values[0], values[-1]
     level = low - 0.1 + rank * (high - low + 0.2) if math.isfinite(high - low) else low
     drawn = np.random.default_rng(shuffle).permutation(len(zones)).astype(np.int64)
-    for order in (bk._BY_INDEX, drawn):
+    for order in (lk.BY_INDEX, drawn):
         for first in range(len(zones)):
             value, which = bk._tube_gap(*args, order, first, level)
             assert (value < level) == (full < level)

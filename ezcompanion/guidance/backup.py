@@ -87,6 +87,7 @@ from ezcompanion.guidance._jit import jit, jit_borrow, jit_inline
 from ezcompanion.guidance.abandon import abandon_gap
 from ezcompanion.guidance.actuator import advance_one
 from ezcompanion.guidance.lookahead import (
+    BY_INDEX,
     annulus_gap,
     bearing_order,
     dip,
@@ -597,7 +598,7 @@ def _straight_to_come_once(
 @jit_inline
 def _zone_round(order: IntArray, first: int, j: int, count: int) -> tuple[int, int]:
     """The j-th of ``count`` zones a screen looks at, from position ``first`` of ``order``
-    (the zones by bearing, ``_zone_room``; empty: by index), alternately after and before it
+    (the zones by bearing, ``_zone_room``; ``BY_INDEX``: by index), alternately after and before it
     (first, first + 1, first - 1, first + 2, ...): a screen starts at the zone that stopped
     the last one, and where that no longer blocks, the zones next to it by bearing, which
     block rays on nearby headings, come next. Returns the position and the zone."""
@@ -625,10 +626,6 @@ def _zone_room(zn: FloatArray, ze: FloatArray, kz: int, n: float, e: float) -> I
     else:
         bearing_order(zn, ze, kz, n, e, room[count:2 * count])
     return room
-
-
-# the screens of STRAIGHT's own flight look at the zones by index (``_zone_round``)
-_BY_INDEX = np.empty(0, dtype=np.int64)
 
 
 @jit_inline
@@ -826,7 +823,7 @@ def _straight_tail(
         return cone
     c_final, s_final = _turned(h, ch, sh, mid)
     tube, _ = _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, c_final, s_final, w, delta, drift,
-                        False, _BY_INDEX, 0, -math.inf)  # fmt: skip
+                        False, BY_INDEX, 0, -math.inf)  # fmt: skip
     return max(cone, tube)
 
 
@@ -910,7 +907,7 @@ def _straight_flight(
             # the rest of the flight from here, from above: where even that is below the
             # level, so is every lower bound of the whole flight (the certificate)
             upper, blocker = _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, av, speed,
-                                         to_come, _BY_INDEX, blocker, screen)  # fmt: skip
+                                         to_come, BY_INDEX, blocker, screen)  # fmt: skip
             if upper < screen:
                 return -math.inf
         for _ in range(ticks):

@@ -21,12 +21,16 @@ import numpy.typing as npt
 from ezcompanion.guidance._jit import jit_borrow, jit_inline
 
 __all__ = [
-    "annulus_gap", "arc_end", "bearing_order", "dip", "lookahead_gap", "near_zones",
+    "BY_INDEX", "annulus_gap", "arc_end", "bearing_order", "dip", "lookahead_gap", "near_zones",
     "near_zones_among", "point_gap", "point_gap_among", "point_gap_below", "segment_gap",
 ]
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
+
+# An empty list of zones where a kernel takes one (``near_zones_among``'s ``among``, the
+# backup's screens' ``order``): every zone, by index
+BY_INDEX = np.empty(0, dtype=np.int64)
 
 
 @jit_inline
@@ -153,12 +157,8 @@ def near_zones(
     returns how many. Every other zone's term is at least ``below`` there. So, for any
     ``below'`` <= ``below``, ``point_gap_among`` over these is ``point_gap_below`` over all
     zones, to the bit (a least of the same values)."""
-    return near_zones_among(zn, ze, zmur, zreach, kz, _ALL, zn.shape[1], n, e, radius_m, eps,
-                            speed, amax, step, below, near)  # fmt: skip
-
-
-# ``near_zones_among``'s ``among`` for every zone, by index
-_ALL = np.empty(0, dtype=np.int64)
+    return near_zones_among(zn, ze, zmur, zreach, kz, BY_INDEX, zn.shape[1], n, e, radius_m,
+                            eps, speed, amax, step, below, near)  # fmt: skip
 
 
 @jit_inline
@@ -167,7 +167,7 @@ def near_zones_among(
     among: IntArray, among_count: int, n: float, e: float, radius_m: float, eps: float,
     speed: float, amax: float, step: float, below: float, near: IntArray,
 ) -> int:
-    """``near_zones`` over the zones ``among[:among_count]`` alone (empty ``among``: the
+    """``near_zones`` over the zones ``among[:among_count]`` alone (``BY_INDEX``: the
     first ``among_count`` by index), a list that ``near_zones`` made with a level at or
     above ``below``, about a point whose disc holds (n, e): at the points within both
     discs every zone left out is at least ``below``, as with ``near_zones`` over all zones

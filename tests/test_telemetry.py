@@ -265,6 +265,43 @@ def test_a_subscriber_sees_every_tick_as_the_loop_computed_it(endpoint: str) -> 
     assert {g["mode"] for g in guidance} <= {"intercept", "blend", "safety", "captured"}
 
 
+def test_each_sample_is_sent_only_while_someone_subscribes_to_it(endpoint: str) -> None:
+    """A leaf's sample is built and put only while zenoh says someone subscribes to it:
+    followed through a subscriber to the guidance that comes, a second one to the state,
+    and both going, a tick sent each time, and the samples put counted."""
+    commands = engagement(4)
+    got = Collector()
+
+    def sent(ticks: int) -> bool:
+        return pub.ticks_published == ticks
+
+    with (
+        publisher(endpoint, publish_rate_hz=1000.0, patient=True) as pub,
+        zenoh.open(peer(endpoint)) as s,
+    ):
+        pub.publish_tick(next(commands))
+        assert wait_for(lambda: sent(1))
+        assert pub.samples_published == 0  # no one asked: nothing built, nothing put
+        guidance = s.declare_subscriber(key("vehicle1", "guidance"), got)
+        assert wait_for(lambda: pub.has_subscribers("guidance"))
+        assert not pub.has_subscribers("state") and not pub.has_subscribers("event")
+        pub.publish_tick(next(commands))
+        assert wait_for(lambda: sent(2)) and pub.samples_published == 1
+        state = s.declare_subscriber(key("vehicle1", "state"), got)
+        assert wait_for(lambda: pub.has_subscribers("state"))
+        pub.publish_tick(next(commands))
+        assert wait_for(lambda: sent(3)) and pub.samples_published == 3
+        assert wait_for(lambda: len(got.samples) == 3)
+        release(guidance, state)
+        assert wait_for(lambda: not (pub.has_subscribers("guidance")
+                                     or pub.has_subscribers("state")))  # fmt: skip
+        pub.publish_tick(next(commands))
+        assert wait_for(lambda: sent(4)) and pub.samples_published == 3
+    # (two subscribers: their callbacks may run in either order)
+    assert sorted(k.rsplit("/", 1)[1] for k, _, _ in got.samples) == ["guidance", "guidance",
+                                                                       "state"]  # fmt: skip
+
+
 def test_events_are_published_in_order_with_their_data(endpoint: str) -> None:
     got = Collector()
     with publisher(endpoint) as pub, zenoh.open(peer(endpoint)) as session:

@@ -164,6 +164,8 @@ CHECKS: dict[str, Check] = {
     "--chatter-runs 0 --no-figures --out validation-out-backup-100k": Check.PARSE,
     "ezcompanion validate --runs 10000 --seed 2031 --law backup --map-runs 0 --chatter-runs 0 "
     "--no-figures --out validation-out-backup-2031": Check.PARSE,
+    "ezcompanion validate --runs 10000 --seed 2033 --law backup --map-runs 0 --chatter-runs 0 "
+    "--no-figures --out validation-out-backup-2033": Check.PARSE,
     "ezcompanion validate --runs 100 --seed 2027 --law backup --map-runs 0 --chatter-runs 100 "
     "--no-figures --workers 1 --out validation-out-chatter-reserve": Check.PARSE,
     "ezcompanion validate --runs 100 --seed 2027 --law backup --set shield_robust_m=0 "

@@ -120,4 +120,10 @@ if [ -n "${FULL:-}" ]; then
         --chatter-runs 0 --no-figures --no-progress --out "$OUT-backup-2031" $WHERE
     mkdir -p docs/validation/backup_10k_2031
     cp "$OUT-backup-2031/tables.md" "$OUT-backup-2031/summary.txt" docs/validation/backup_10k_2031/
+    # and a third seed, flown on 2026-12-07 (~2 min)
+    # shellcheck disable=SC2086
+    "$BIN/ezcompanion" validate --runs 10000 --seed 2033 --law backup --map-runs 0 \
+        --chatter-runs 0 --no-figures --no-progress --out "$OUT-backup-2033" $WHERE
+    mkdir -p docs/validation/backup_10k_2033
+    cp "$OUT-backup-2033/tables.md" "$OUT-backup-2033/summary.txt" docs/validation/backup_10k_2033/
 fi

@@ -1200,6 +1200,45 @@ def test_the_lags_closed_form_bounds_the_flight_from_above_and_tighter_than_the_
     assert lagged > 40 and tighter > 0.8 * lagged
 
 
+def test_the_lags_screen_skips_only_zones_that_cannot_come_below_its_level() -> None:
+    """Given a finite level, the lag's closed-form screen skips a zone where a bound from
+    below on its value (from the asymptote's point, which the flight's lies within
+    reach_v (Cin(c) + |c|) + mu R (|c| + c^2 / 2) of) keeps it at or above the level.
+    Against each zone's value alone (no level: nothing skipped), on states drawn among 1-3
+    zones and levels drawn about the least value, down to 1e-12 from it: the first zone
+    below the level, in order, is found with its value to the bit; where none is below, the
+    value returned is at or above the level. And zones are skipped: where none is below, the
+    value returned is often above the least of them all."""
+    rng = np.random.default_rng(11)
+    checked = none_below = skipped = 0
+    for s, z, n, e, h, a, av in _random_states(400, 13):
+        if s[bk.S_TAU] <= 0.0 or not (bk._LAG_SCREEN_MIN_RAD <= abs(s[bk.S_TAU] * av)
+                                      <= bk._LAG_SCREEN_RAD):  # fmt: skip
+            continue
+        eta = bk._straight_to_come(s, a, av, 1.0, bk._trapezoid_excess(s, 0.02))[4]
+        zn, ze, zmur, zreach, kz = z
+        alone = [
+            bk._lag_flight_upper(s, zn[:, i:i + 1], ze[:, i:i + 1], zmur[:, i:i + 1],
+                                 zreach[:, i:i + 1], kz, n, e, h, av, 1.0, eta, lk.BY_INDEX,
+                                 0, -math.inf)[0]
+            for i in range(zn.shape[1])
+        ]  # fmt: skip
+        least = min(alone)
+        for delta in (-1.0, -1e-3, -1e-12, 0.0, 1e-12, 1e-3, 1.0, rng.uniform(-5.0, 5.0)):
+            below = least + delta
+            value, position = bk._lag_flight_upper(s, *z, n, e, h, av, 1.0, eta, lk.BY_INDEX,
+                                                   0, below)  # fmt: skip
+            first = next((i for i, v in enumerate(alone) if v < below), None)
+            if first is None:
+                assert value >= below, (value, below)
+                none_below += 1
+                skipped += value > least
+            else:
+                assert (value, position) == (alone[first], first)
+            checked += 1
+    assert checked > 1000 and skipped > 0.1 * none_below, (checked, none_below, skipped)
+
+
 @settings(max_examples=300, deadline=None)
 @given(
     a=st.floats(-0.999, 0.999), av=st.floats(-2.0, 2.0), tau=st.floats(0.01, 2.0),

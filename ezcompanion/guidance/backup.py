@@ -742,7 +742,17 @@ def _lag_flight_upper(
     the asymptote passes nearest it, that point's gap plus eta (v t + mu R) bounds the
     flight's least gap from above. Returns the least over the zones and its zone's
     position, from position ``first`` of ``order``, stopping at the first below ``below``
-    (as ``_tube_gap``); inf without a lag."""
+    (as ``_tube_gap``); inf without a lag.
+
+    For a caller that compares it with ``below`` (finite), a zone is skipped, before its
+    exponential and its series, where a bound from below on its value already keeps it at
+    or above ``below``: the flight's point lies within reach_v (Cin(c) + |c|) +
+    mu R (|c| + c^2 / 2) of the asymptote's point v t + mu R along u(h_f) (|Cin(c) -
+    Cin(x)| <= Cin(c), |Si(c) - Si(x)| <= |x - c| <= |c|, 1 - cos x <= c^2 / 2 and
+    |sin x| <= |c|, x between 0 and c), with a relative slack of 1e-9 for the rounding of
+    both. The verdict (below or not) is unchanged; where none is below, the value is then
+    only known to be at or above ``below`` and the position is one of the zones not
+    skipped (``first`` if none)."""
     tau = s[S_TAU]
     c = tau * av / speed
     if tau <= 0.0 or not _LAG_SCREEN_MIN_RAD <= abs(c) <= _LAG_SCREEN_RAD:
@@ -750,6 +760,10 @@ def _lag_flight_upper(
     ch, sh = math.cos(h + c), math.sin(h + c)
     si_c, cin_c, _, _ = _si_cin(c)
     reach_v = speed * tau
+    # (the skip) how far the flight's point can lie from the asymptote's: drift_v + mu R bend
+    drift_v = reach_v * (cin_c + abs(c))
+    bend = abs(c) + 0.5 * c * c
+    skip = below > -math.inf
     best = math.inf
     which = first
     count = zn.shape[1]
@@ -759,6 +773,15 @@ def _lag_flight_upper(
         wn = zn[kz, i] - n
         we = ze[kz, i] - e
         t = max(0.0, (wn * ch + we * sh - mur + reach_v * cin_c) / speed)
+        if skip:
+            along = speed * t + mur
+            clear = below + zreach[kz, i] + s[S_EPS] + drift_v + mur * bend - eta * along
+            dn = wn - along * ch
+            de = we - along * sh
+            slack = 1e-9 * (abs(wn) + abs(we) + along + zreach[kz, i] + drift_v + mur * bend
+                            + eta * along + abs(below))  # fmt: skip
+            if clear + slack <= 0.0 or dn * dn + de * de >= (clear + slack) ** 2:
+                continue  # its value is at or above ``below``: not below (not needed)
         x = c * math.exp(-t / tau)
         si_x, cin_x, sin_x, versed_x = _si_cin(x)
         ahead = speed * t - reach_v * (cin_c - cin_x) + mur * (1.0 - versed_x)

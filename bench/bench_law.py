@@ -219,7 +219,8 @@ def service_tick(repeat: int) -> None:
                 f"{np.median(tick) / np.median(parts):9.2f}x{vs}"
             )
     own_flights(passes=max(2, repeat))
-    profiles(scenario, ticks[(3, LawName.ROBUST)], passes=max(2, repeat))
+    profiles(scenario, ticks[(3, LawName.ROBUST)], ticks[(300, LawName.ROBUST)],
+             passes=max(2, repeat))  # fmt: skip
 
 
 def own_flights(passes: int) -> None:
@@ -243,11 +244,13 @@ def own_flights(passes: int) -> None:
                   f"{max(tick) * 1e6:7.1f}us{vs}")  # fmt: skip
 
 
-def profiles(scenario: Scenario, robust_s: float, passes: int) -> None:
+def profiles(scenario: Scenario, robust_s: float, robust_300_s: float, passes: int) -> None:
     """The backup law's tick at 3 zones as the service runs it beside each copter
     autopilot: with the profile's response lag (which the service gives the law where the
     scenario states none), and with the abandon check on too (``companion.abandon_check``:
-    the profile's hold and braking), beside the robust tick measured above."""
+    the profile's hold and braking), beside the robust tick measured above; and with the
+    lag among the 300 zones of the ring above (where the lag's screen meets every zone),
+    beside the robust tick there."""
     print("beside an autopilot (3 zones, backup): the profile's lag, then the abandon check too")
     zones, target = scenario.zones(), Target(north_m=-5000.0, east_m=3000.0)
     states = _straight_track(250)
@@ -275,6 +278,15 @@ def profiles(scenario: Scenario, robust_s: float, passes: int) -> None:
             (tick,) = _timed_ticks((loop,), _own_track(own, LawName.BACKUP), passes)
             print(f"  {f'{profile.name}, lag, own flight {number}':32s} {_us(tick)}  max "
                   f"{max(tick) * 1e6:7.1f}us")  # fmt: skip
+        params = dataclasses.replace(scenario.guidance, **lagged)
+        loop = GuidanceLoop(dataclasses.replace(scenario, guidance=params), law=LawName.BACKUP,
+                            loop_rate_hz=50.0, stale_after_s=1.0)  # fmt: skip
+        loop.controller = GuidanceController(
+            zones=zones_ring(300), target=target, params=params, law=LawName.BACKUP
+        )
+        (tick,) = _timed_ticks((loop,), _straight_track(40), max(2, passes // 3))
+        print(f"  {f'{profile.name}, lag, 300 zones':32s} {_us(tick)}   backup / robust "
+              f"{np.median(tick) / robust_300_s:.1f}x")  # fmt: skip
 
 
 def _own_track(scenario: Scenario, law: LawName) -> list[VehicleState]:

@@ -773,14 +773,14 @@ def _lag_flight_upper(
         wn = zn[kz, i] - n
         we = ze[kz, i] - e
         t = max(0.0, (wn * ch + we * sh - mur + reach_v * cin_c) / speed)
+        along = speed * t + mur  # the asymptote's point, this far along u(h_f)
         if skip:
-            along = speed * t + mur
             clear = below + zreach[kz, i] + s[S_EPS] + drift_v + mur * bend - eta * along
-            dn = wn - along * ch
-            de = we - along * sh
+            an = wn - along * ch
+            ae = we - along * sh
             slack = 1e-9 * (abs(wn) + abs(we) + along + zreach[kz, i] + drift_v + mur * bend
                             + eta * along + abs(below))  # fmt: skip
-            if clear + slack <= 0.0 or dn * dn + de * de >= (clear + slack) ** 2:
+            if clear + slack <= 0.0 or an * an + ae * ae >= (clear + slack) ** 2:
                 continue  # its value is at or above ``below``: not below (not needed)
         x = c * math.exp(-t / tau)
         si_x, cin_x, sin_x, versed_x = _si_cin(x)
@@ -789,7 +789,7 @@ def _lag_flight_upper(
         dn = wn - (ahead * ch - left * sh)
         de = we - (ahead * sh + left * ch)
         value = (math.sqrt(dn * dn + de * de) - zreach[kz, i] - s[S_EPS]
-                 + eta * (speed * t + mur))  # fmt: skip
+                 + eta * along)  # fmt: skip
         if value < best:
             best, which = value, p
             if best < below:

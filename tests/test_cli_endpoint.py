@@ -173,3 +173,34 @@ def test_a_udpout_link_to_the_loopback_listens_on_the_loopback_only(host: str) -
             assert data and sender[0] == "127.0.0.1"
         finally:
             link.close()
+
+
+@pytest.mark.parametrize("host", ["127.0.0.1", "localhost"])
+def test_a_udpout_link_hears_only_the_address_it_sends_to(host: str) -> None:
+    """An autopilot or a router answers from the port it listens on; a valid heartbeat from
+    any other address is dropped unread and counted. (A loopback stub of another test,
+    still streaming to a dead link's port, reached a new link that had taken that port: it
+    was taken for a second autopilot, CI.)"""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as peer, \
+            socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as stranger:  # fmt: skip
+        peer.bind(("127.0.0.1", 0))
+        stranger.bind(("127.0.0.1", 0))
+        link = open_link(f"udpout:{host}:{peer.getsockname()[1]}", system_id=1,
+                         component_id=191)  # fmt: skip
+        try:
+            assert link.send(link.mav.heartbeat_encode(18, 8, 0, 0, 0))
+            _, link_address = peer.recvfrom(1024)
+            vehicle = open_link("udpout:127.0.0.1:1", system_id=1, component_id=1)
+            beat = vehicle.pack(vehicle.mav.heartbeat_encode(2, 3, 0, 0, 0))
+            vehicle.close()
+            stranger.sendto(beat, link_address)
+            peer.sendto(beat, link_address)
+            frames = []
+            deadline = time.monotonic() + 5.0
+            while not frames and time.monotonic() < deadline:
+                link.wait_readable(0.1)
+                frames += link.recv()
+            assert [frame.source for frame in frames] == [peer.getsockname()]
+            assert link.stats.foreign_datagrams == 1 and link.stats.bad_frames == 0
+        finally:
+            link.close()

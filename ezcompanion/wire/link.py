@@ -5,6 +5,7 @@ like MAVProxy (:mod:`ezcompanion.wire.streams`)."""
 from __future__ import annotations
 
 import select
+import socket
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -40,6 +41,7 @@ class LinkStats:
     bad_frames: int  # bad CRC, length, id or signature; a datagram's frames beyond its bound
     rejected_unsigned: int
     bad_signatures: int = 0  # signed, but not with our key, or a replay
+    foreign_datagrams: int = 0  # on udpout:, datagrams from any other address than its own
 
 
 @dataclass(frozen=True)
@@ -82,6 +84,7 @@ class Link:
                 raise ConfigError(name, value, "must be within [1, 255]")
         self.url = url
         scheme = url.split(":", 1)[0]
+        self._only_from: Address = None  # the one sender heard (udpout:)
         self._tcpin = scheme == "tcpin"
         device, baud_rate = "", 0
         if is_serial_device(url):
@@ -127,6 +130,14 @@ class Link:
                     # every interface at its first send: anyone who finds the port could
                     # send to it (a reviewer). To a loopback address, it listens there only.
                     self._conn.port.bind(("127.0.0.1", 0))
+                if scheme == "udpout":
+                    # it hears only the address it sends to (an autopilot or a router
+                    # answers from the port it listens on): a datagram from anywhere else
+                    # is dropped unread and counted, so no other sender can pose as the
+                    # vehicle (one that had taken a dead process's port on this machine
+                    # reached a new link there, CI)
+                    host, port = self._conn.destination_addr
+                    self._only_from = _ipv4_address(str(host), int(port))
         except (ValueError, ImportError) as exc:
             raise ConfigError("connect", self.url, f"cannot be opened: {exc}") from exc
         except OSError as exc:  # the port is taken, the device is missing or not ours
@@ -135,6 +146,7 @@ class Link:
         self._udp = isinstance(self._conn, mavutil.mavudp)
         self._connections = self._stream.connections if self._stream is not None else 0
         self._peer: tuple[str, int] | None = None
+        self._foreign = 0
         self._messages = 0
         self._bad = 0
 
@@ -171,9 +183,8 @@ class Link:
     def stats(self) -> LinkStats:
         """Receive counters so far."""
         signing = self._conn.mav.signing
-        return LinkStats(
-            self._messages, self._bad, int(signing.reject_count), int(signing.badsig_count)
-        )
+        return LinkStats(self._messages, self._bad, int(signing.reject_count),
+                         int(signing.badsig_count), self._foreign)  # fmt: skip
 
     @property
     def local_address(self) -> tuple[str, int] | None:
@@ -270,7 +281,8 @@ class Link:
                 break
             data, source = chunk
             taken = len(out)
-            self._parse(data, source, out)
+            if data:  # (empty: a datagram from a sender not heard, dropped)
+                self._parse(data, source, out)
             if source is not None and len(out) > taken:
                 self._heard(source)
         return out
@@ -305,6 +317,9 @@ class Link:
             if not data:
                 return None
             address = (str(source[0]), int(source[1]))
+            if self._only_from is not None and address != self._only_from:
+                self._foreign += 1
+                return b"", address
             # never mix bytes of two datagrams in the parser
             self._reset_parser()
             return bytes(data), address
@@ -407,6 +422,14 @@ class Link:
     def send(self, msg: Message) -> bool:
         """Pack and send ``msg`` now; False if it did not leave (see :meth:`write`)."""
         return self.write(self.pack(msg))
+
+
+def _ipv4_address(host: str, port: int) -> tuple[str, int]:
+    """``host`` and ``port`` as recvfrom gives a sender's (a name resolved as the socket's
+    sendto resolves it)."""
+    info = socket.getaddrinfo(host, port, socket.AF_INET, socket.SOCK_DGRAM)
+    address = info[0][4]
+    return str(address[0]), int(address[1])
 
 
 def open_link(url: str, *, system_id: int, component_id: int) -> Link:

@@ -32,6 +32,17 @@ ANSWER_WAIT_S = 10.0
 Msg = Any
 
 
+def udp_client(endpoint: str, *, system_id: int = 255, component_id: int = 190) -> Any:
+    """A plain pymavlink ``udpout:`` connection that hears only the address it sends to:
+    its socket is connected, so the kernel drops every other sender's datagram (under
+    the full suite another test's vehicle, still sending to a closed socket's port, reached
+    a new socket given that port)."""
+    conn: Any = mavutil.mavlink_connection(endpoint, source_system=system_id,
+                                           source_component=component_id)  # fmt: skip
+    conn.port.connect(conn.destination_addr)
+    return conn
+
+
 class Gcs:
     """A ground station speaking plain pymavlink over UDP on 127.0.0.1."""
 

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest_sitl import ANSWER_WAIT_S, make_config
+from conftest_sitl import ANSWER_WAIT_S, make_config, udp_client
 
 from ezcompanion import wire
 from ezcompanion.cli import main
@@ -56,7 +56,7 @@ def _acked(endpoint: str, key_hex: str | None, *, wait_s: float = ANSWER_WAIT_S)
     it is sent again every 0.3 s until answered or ``wait_s`` has passed (an answer that
     should come is waited for as long as a loaded machine may take; one that should not,
     ``REFUSED_WAIT_S``)."""
-    conn: Any = wire.mavutil.mavlink_connection(endpoint, source_system=255, source_component=190)
+    conn = udp_client(endpoint)
     try:
         if key_hex is not None:
             conn.setup_signing(bytes.fromhex(key_hex), sign_outgoing=True)
@@ -159,8 +159,7 @@ def test_the_loopback_autopilot_refuses_a_key_while_armed_in_its_own_words(
     """The stub's side (a request sent anyway, as by another tool): the words and the
     refusal of the autopilot it imitates, read in its sources and seen on its SITL."""
     with _autopilot(profile, start_armed=True) as endpoint:
-        conn: Any = wire.mavutil.mavlink_connection(endpoint, source_system=255,
-                                                    source_component=190)  # fmt: skip
+        conn = udp_client(endpoint)
         try:
             conn.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
             conn.mav.setup_signing_send(1, 1, list(bytes.fromhex(KEY_A)), 1)
@@ -433,8 +432,7 @@ def test_the_loopback_autopilot_signs_from_where_its_autopilot_does(
     as the C library's signing, and the stub's, follow the newest they take)."""
     stamp_10us = int((time.time() - 1420070400) * 1e5)
     with _autopilot(profile) as endpoint:
-        conn: Any = wire.mavutil.mavlink_connection(endpoint, source_system=255,
-                                                    source_component=190)  # fmt: skip
+        conn = udp_client(endpoint)
         try:
             conn.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
             conn.mav.setup_signing_send(1, 1, list(bytes.fromhex(KEY_A)), stamp_10us)
@@ -482,8 +480,7 @@ def test_an_autopilot_signing_far_ahead_of_the_clock_is_proven_all_the_same(
     key = _key_file(tmp_path, "a.hex", KEY_A)
     ahead_10us = int((time.time() - 1420070400 + 300.0) * 1e5)
     with _autopilot() as endpoint:
-        conn: Any = wire.mavutil.mavlink_connection(endpoint, source_system=255,
-                                                    source_component=190)  # fmt: skip
+        conn = udp_client(endpoint)
         try:
             conn.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
             conn.mav.setup_signing_send(1, 1, list(bytes.fromhex(KEY_A)), ahead_10us)

@@ -209,7 +209,7 @@ def test_signing_off_accepts_signed_and_unsigned(gcs: Gcs) -> None:
 
 
 def test_stub_listening_with_udpin() -> None:
-    from conftest_sitl import make_config
+    from conftest_sitl import make_config, udp_client
 
     from sitl_stub import SitlStub
 
@@ -217,8 +217,7 @@ def test_stub_listening_with_udpin() -> None:
     with SitlStub(config) as stub:
         address = stub.local_address
         assert address is not None
-        gcs_conn = wire.mavutil.mavlink_connection(f"udpout:127.0.0.1:{address[1]}",
-                                                   source_system=255, source_component=190)
+        gcs_conn = udp_client(f"udpout:127.0.0.1:{address[1]}")
         try:
             gcs_conn.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
             beat = gcs_conn.recv_match(type="HEARTBEAT", blocking=True, timeout=3.0)

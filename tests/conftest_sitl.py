@@ -36,7 +36,8 @@ def udp_client(endpoint: str, *, system_id: int = 255, component_id: int = 190) 
     """A plain pymavlink ``udpout:`` connection that hears only the address it sends to:
     its socket is connected, so the kernel drops every other sender's datagram (under
     the full suite another test's vehicle, still sending to a closed socket's port, reached
-    a new socket given that port)."""
+    a new socket given that port). Linux: pymavlink sends with sendto, which a connected
+    socket takes there (BSD's refuse it)."""
     conn: Any = mavutil.mavlink_connection(endpoint, source_system=system_id,
                                            source_component=component_id)  # fmt: skip
     conn.port.connect(conn.destination_addr)

@@ -3,8 +3,10 @@ and a bad one is refused naming the setting, before any socket is opened."""
 
 from __future__ import annotations
 
+import contextlib
 import socket
 import time
+from typing import Any
 
 import pytest
 from hypothesis import given
@@ -176,31 +178,40 @@ def test_a_udpout_link_to_the_loopback_listens_on_the_loopback_only(host: str) -
 
 
 @pytest.mark.parametrize("host", ["127.0.0.1", "localhost"])
-def test_a_udpout_link_hears_only_the_address_it_sends_to(host: str) -> None:
-    """An autopilot or a router answers from the port it listens on; a valid heartbeat from
-    any other address is dropped unread and counted. (A loopback stub of another test,
-    still streaming to a dead link's port, reached a new link that had taken that port: it
-    was taken for a second autopilot, CI.)"""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as peer, \
-            socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as stranger:  # fmt: skip
+def test_a_udpout_link_hears_only_the_port_it_sends_to(host: str, caplog: Any) -> None:
+    """A UDP server answers from the port it listens on, from whichever of its machine's
+    addresses (one listening on every interface answers from the address of the route
+    back): a valid heartbeat from that port is taken whatever the address, one from any
+    other port is dropped unread, counted and said. (A loopback vehicle of another test,
+    still sending to a closed socket's port, reached a new link given that port and was
+    taken for a second autopilot, CI.)"""
+    with contextlib.ExitStack() as stack:
+        peer, other_address, stranger = (
+            stack.enter_context(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
+            for _ in range(3))  # fmt: skip
         peer.bind(("127.0.0.1", 0))
+        port = peer.getsockname()[1]
+        other_address.bind(("127.0.0.3", port))  # the server's port on another address
         stranger.bind(("127.0.0.1", 0))
-        link = open_link(f"udpout:{host}:{peer.getsockname()[1]}", system_id=1,
-                         component_id=191)  # fmt: skip
-        try:
-            assert link.send(link.mav.heartbeat_encode(18, 8, 0, 0, 0))
-            _, link_address = peer.recvfrom(1024)
-            vehicle = open_link("udpout:127.0.0.1:1", system_id=1, component_id=1)
-            beat = vehicle.pack(vehicle.mav.heartbeat_encode(2, 3, 0, 0, 0))
-            vehicle.close()
-            stranger.sendto(beat, link_address)
-            peer.sendto(beat, link_address)
-            frames = []
-            deadline = time.monotonic() + 5.0
-            while not frames and time.monotonic() < deadline:
-                link.wait_readable(0.1)
-                frames += link.recv()
-            assert [frame.source for frame in frames] == [peer.getsockname()]
-            assert link.stats.foreign_datagrams == 1 and link.stats.bad_frames == 0
-        finally:
-            link.close()
+        peer.settimeout(5.0)
+        link = stack.enter_context(open_link(f"udpout:{host}:{port}", system_id=1,
+                                             component_id=191))  # fmt: skip
+        assert link.send(link.mav.heartbeat_encode(18, 8, 0, 0, 0))
+        _, link_address = peer.recvfrom(1024)
+        vehicle = stack.enter_context(open_link("udpout:127.0.0.1:1", system_id=1,
+                                                component_id=1))  # fmt: skip
+        beat = vehicle.pack(vehicle.mav.heartbeat_encode(2, 3, 0, 0, 0))
+        stranger.sendto(beat, link_address)
+        other_address.sendto(beat, link_address)
+        peer.sendto(beat, link_address)
+        frames: list[Any] = []
+        deadline = time.monotonic() + 5.0
+        while len(frames) < 2 and time.monotonic() < deadline:
+            link.wait_readable(0.1)
+            frames += link.recv()
+        assert [frame.source for frame in frames] == [("127.0.0.3", port), ("127.0.0.1", port)]
+        assert link.stats.foreign_datagrams == 1 and link.stats.bad_frames == 0
+        said = [r.getMessage() for r in caplog.records if "ignored" in r.getMessage()]
+        assert said == [f"udpout:{host}:{port}: datagrams from 127.0.0.1:"
+                        f"{stranger.getsockname()[1]} ignored: this link hears port {port} "
+                        "only (1 so far)"]  # fmt: skip

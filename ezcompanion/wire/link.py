@@ -4,8 +4,9 @@ like MAVProxy (:mod:`ezcompanion.wire.streams`)."""
 
 from __future__ import annotations
 
+import logging
+import math
 import select
-import socket
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -26,6 +27,10 @@ DATAGRAM_FRAMES_MAX = 256
 # senders of valid frames answered on udpin: before a peer is locked (the vehicle, a
 # router, a ground station sharing the port: a handful), the least recently heard given up
 UDP_CLIENTS_MAX = 8
+# a udpout: link's datagrams from other ports: said on the log at most this often
+_FOREIGN_SAY_EVERY_S = 5.0
+
+_log = logging.getLogger(__name__)
 
 
 def is_serial_device(url: str) -> bool:
@@ -41,7 +46,7 @@ class LinkStats:
     bad_frames: int  # bad CRC, length, id or signature; a datagram's frames beyond its bound
     rejected_unsigned: int
     bad_signatures: int = 0  # signed, but not with our key, or a replay
-    foreign_datagrams: int = 0  # on udpout:, datagrams from any other address than its own
+    foreign_datagrams: int = 0  # on udpout:, datagrams from any other port than its peer's
 
 
 @dataclass(frozen=True)
@@ -84,7 +89,8 @@ class Link:
                 raise ConfigError(name, value, "must be within [1, 255]")
         self.url = url
         scheme = url.split(":", 1)[0]
-        self._only_from: Address = None  # the one sender heard (udpout:)
+        self._only_port: int | None = None  # the one port heard from (udpout:)
+        self._foreign_said_s = -math.inf
         self._tcpin = scheme == "tcpin"
         device, baud_rate = "", 0
         if is_serial_device(url):
@@ -131,13 +137,14 @@ class Link:
                     # send to it (a reviewer). To a loopback address, it listens there only.
                     self._conn.port.bind(("127.0.0.1", 0))
                 if scheme == "udpout":
-                    # it hears only the address it sends to (an autopilot or a router
-                    # answers from the port it listens on): a datagram from anywhere else
-                    # is dropped unread and counted, so no other sender can pose as the
-                    # vehicle (one that had taken a dead process's port on this machine
-                    # reached a new link there, CI)
-                    host, port = self._conn.destination_addr
-                    self._only_from = _ipv4_address(str(host), int(port))
+                    # it hears only the port it sends to: a UDP server answers from the
+                    # port it listens on (from another of its machine's addresses, where
+                    # it listens on every interface). A datagram from any other port is
+                    # dropped unread and counted (a loopback vehicle of another test, still
+                    # sending to a closed socket's port, reached a new link given that port
+                    # and was taken for a second autopilot, CI). No authentication: anyone
+                    # may send from that port, and only signing tells the vehicle apart.
+                    self._only_port = int(self._conn.destination_addr[1])
         except (ValueError, ImportError) as exc:
             raise ConfigError("connect", self.url, f"cannot be opened: {exc}") from exc
         except OSError as exc:  # the port is taken, the device is missing or not ours
@@ -317,8 +324,8 @@ class Link:
             if not data:
                 return None
             address = (str(source[0]), int(source[1]))
-            if self._only_from is not None and address != self._only_from:
-                self._foreign += 1
+            if self._only_port is not None and address[1] != self._only_port:
+                self._foreign_datagram(address)
                 return b"", address
             # never mix bytes of two datagrams in the parser
             self._reset_parser()
@@ -337,6 +344,16 @@ class Link:
         if not data:
             return None
         return bytes(data), None
+
+    def _foreign_datagram(self, address: tuple[str, int]) -> None:
+        """Counted, and said on the log the first time and then at most every 5 s."""
+        self._foreign += 1
+        now = time.monotonic()
+        if now - self._foreign_said_s >= _FOREIGN_SAY_EVERY_S:
+            self._foreign_said_s = now
+            _log.warning("%s: datagrams from %s:%d ignored: this link hears port %d only "
+                         "(%d so far)", self.url, address[0], address[1], self._only_port,
+                         self._foreign)  # fmt: skip
 
     def _heard(self, address: tuple[str, int]) -> None:
         """pymavlink's own bookkeeping of whom to answer, before a peer is locked: only a
@@ -422,14 +439,6 @@ class Link:
     def send(self, msg: Message) -> bool:
         """Pack and send ``msg`` now; False if it did not leave (see :meth:`write`)."""
         return self.write(self.pack(msg))
-
-
-def _ipv4_address(host: str, port: int) -> tuple[str, int]:
-    """``host`` and ``port`` as recvfrom gives a sender's (a name resolved as the socket's
-    sendto resolves it)."""
-    info = socket.getaddrinfo(host, port, socket.AF_INET, socket.SOCK_DGRAM)
-    address = info[0][4]
-    return str(address[0]), int(address[1])
 
 
 def open_link(url: str, *, system_id: int, component_id: int) -> Link:

@@ -42,8 +42,10 @@ def _key_file(tmp_path: Path, name: str, key_hex: str) -> Path:
 def _autopilot(profile: str = "copter", **settings: Any) -> Iterator[str]:
     """A disarmed loopback autopilot listening on 127.0.0.1: the endpoint to reach it."""
     settings.setdefault("start_armed", False)
-    config = make_config(0, connect="udpin:127.0.0.1:0", speedup=5.0, profile=profile,
-                         **settings)  # fmt: skip
+    # (a port outside the ephemeral range: one the kernel gives a new socket may be a
+    # closed one's, that another test's vehicle still sends to)
+    config = make_config(0, connect=f"udpin:127.0.0.1:{free_udp_port()}", speedup=5.0,
+                         profile=profile, **settings)  # fmt: skip
     with SitlStub(config) as stub:
         address = stub.local_address
         assert address is not None

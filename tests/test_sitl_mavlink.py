@@ -211,9 +211,10 @@ def test_signing_off_accepts_signed_and_unsigned(gcs: Gcs) -> None:
 def test_stub_listening_with_udpin() -> None:
     from conftest_sitl import make_config, udp_client
 
+    from ezcompanion.service.demo import free_udp_port
     from sitl_stub import SitlStub
 
-    config = make_config(0, connect="udpin:127.0.0.1:0", speedup=5.0)
+    config = make_config(0, connect=f"udpin:127.0.0.1:{free_udp_port()}", speedup=5.0)
     with SitlStub(config) as stub:
         address = stub.local_address
         assert address is not None

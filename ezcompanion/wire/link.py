@@ -288,7 +288,7 @@ class Link:
                 break
             data, source = chunk
             taken = len(out)
-            if data:  # (empty: a datagram from a sender not heard, dropped)
+            if data:  # (empty: a datagram from another port, dropped)
                 self._parse(data, source, out)
             if source is not None and len(out) > taken:
                 self._heard(source)

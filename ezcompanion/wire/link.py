@@ -90,6 +90,7 @@ class Link:
         self.url = url
         scheme = url.split(":", 1)[0]
         self._only_port: int | None = None  # the one port heard from (udpout:)
+        self._foreign = 0  # datagrams from other ports, dropped
         self._foreign_said_s = -math.inf
         self._tcpin = scheme == "tcpin"
         device, baud_rate = "", 0
@@ -153,7 +154,6 @@ class Link:
         self._udp = isinstance(self._conn, mavutil.mavudp)
         self._connections = self._stream.connections if self._stream is not None else 0
         self._peer: tuple[str, int] | None = None
-        self._foreign = 0
         self._messages = 0
         self._bad = 0
 

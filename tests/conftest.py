@@ -4,7 +4,7 @@ Hypothesis runs derandomized by default: each property test draws the same examp
 every run (seeded from the test itself), so `make test` passes or fails the same way on
 every machine and every time. Explore new examples with another profile:
 
-    HYPOTHESIS_PROFILE=explore .venv/bin/pytest -q -n 2 tests
+    HYPOTHESIS_PROFILE=explore .venv/bin/pytest -q -n 3 tests
 
 and keep any counterexample it finds as an ``@example`` beside the test.
 """

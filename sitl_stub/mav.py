@@ -17,6 +17,7 @@ import hmac
 import math
 import os
 import select
+import socket
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -217,6 +218,7 @@ class StubLinkStats:
     bad_frames: int  # bad CRC, length, unknown id, partial frames
     rejected_unsigned: int
     bad_signatures: int
+    foreign_datagrams: int  # ``udpout:`` hearing only its peer: datagrams from any other
 
 
 class StubLink:
@@ -227,7 +229,8 @@ class StubLink:
     the pseudo-terminal's device for the companion to open.
     """
 
-    def __init__(self, url: str, *, system_id: int, component_id: int) -> None:
+    def __init__(self, url: str, *, system_id: int, component_id: int,
+                 hear_only_peer: bool = False) -> None:
         options: dict[str, Any] = {}
         self._stream: TcpClientStream | PtyStream | None = None
         given = url
@@ -253,6 +256,16 @@ class StubLink:
             raise LinkError("connect", given, f"cannot be opened: {exc}") from exc
         self._conn.mav.robust_parsing = True
         self._udp = isinstance(self._conn, mavutil.mavudp)
+        # ``udpout:`` with ``hear_only_peer`` (ArduPilot's UDP client, ``ProfileSpec``): the
+        # datagrams of any other address or port are dropped unread and counted
+        self._peer: tuple[str, int] | None = None
+        if hear_only_peer and self._udp and not (self._conn.udp_server or self._conn.broadcast):
+            host, port = self._conn.destination_addr
+            try:
+                self._peer = (socket.gethostbyname(host), int(port))
+            except OSError as exc:
+                raise LinkError("connect", given, f"cannot be resolved: {exc}") from exc
+        self._foreign = 0
         self._connections = getattr(self._stream, "connections", 0)
         self._messages = 0
         self._bad = 0
@@ -266,7 +279,7 @@ class StubLink:
     def stats(self) -> StubLinkStats:
         signing = self._conn.mav.signing
         return StubLinkStats(self._messages, self._bad, int(signing.reject_count),
-                             int(signing.badsig_count))
+                             int(signing.badsig_count), self._foreign)
 
     @property
     def serial_device(self) -> str | None:
@@ -323,12 +336,15 @@ class StubLink:
         out: list[Message] = []
         for _ in range(max_reads):
             data = self._read()
-            if not data:
+            if data is None:
                 break
-            out.extend(self._parse(data))
+            if data:  # (b"": a datagram dropped unread, or empty)
+                out.extend(self._parse(data))
         return out
 
     def _read(self) -> bytes | None:
+        """Bytes read now: b"" for a datagram dropped unread (another sender's, where only
+        the peer is heard) or empty, None where nothing waits."""
         conn = self._conn
         if self._stream is not None:
             data = self._stream.read()
@@ -340,6 +356,9 @@ class StubLink:
         try:
             if self._udp:
                 data, source = conn.port.recvfrom(65535)
+                if self._peer is not None and tuple(source[:2]) != self._peer:
+                    self._foreign += 1
+                    return b""
                 if conn.udp_server:  # answer whoever talked last, as ArduPilot SITL
                     conn.clients.add(source)
                     conn.clients_last_alive[source] = time.time()

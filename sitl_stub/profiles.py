@@ -66,6 +66,11 @@ class ProfileSpec:
     ardupilot_attitude_mask: bool  # SET_ATTITUDE_TARGET type_mask read as ArduPlane does
     supports_data_streams: bool  # REQUEST_DATA_STREAM
     can_hover: bool
+    # as a UDP client (the stub's ``udpout:``), whether it hears its peer alone: ArduPilot
+    # SITL's ``udpclient:`` connects its socket (AP_HAL_SITL/UARTDriver.cpp,
+    # ``_udp_start_client``), so the kernel drops every other sender's datagram; PX4's
+    # receiver (mavlink_receiver.cpp) parses whatever reaches its port
+    udp_client_hears_only_peer: bool
     # the measured response (docs/sitl_stub.md, "Measured response models")
     velocity_lag_s: float  # flown velocity direction behind the setpoint's (first order)
     shaping_accel_m_s2: float | None  # velocity shaped as ArduCopter's (WPNAV_ACCEL), or None
@@ -121,7 +126,7 @@ _COPTER = ProfileSpec(
     guided_mode="GUIDED", initial_mode="AUTO", failsafe_mode=None,
     max_stream_rate_hz=200.0, setpoint_timeout_s=3.0, attitude_timeout_s=3.0, course_timeout_s=0.0,
     accepts_velocity=True, accepts_course_command=False, ardupilot_attitude_mask=False,
-    supports_data_streams=True, can_hover=True,
+    supports_data_streams=True, can_hover=True, udp_client_hears_only_peer=True,
     # WPNAV_ACCEL 2.5 m/s^2 and PSC_JERK_XY 5 m/s^3 (shaping 0.5 s) + 0.1 s tracking: the
     # course flies 0.54 to 0.59 s behind (docs/sitl_stub.md), taken as 0.6
     velocity_lag_s=0.6, shaping_accel_m_s2=2.5, tracking_lag_s=0.1,
@@ -141,7 +146,7 @@ _PLANE = ProfileSpec(
     guided_mode="GUIDED", initial_mode="AUTO", failsafe_mode=None,
     max_stream_rate_hz=40.0, setpoint_timeout_s=0.0, attitude_timeout_s=3.0, course_timeout_s=0.0,
     accepts_velocity=False, accepts_course_command=True, ardupilot_attitude_mask=True,
-    supports_data_streams=True, can_hover=False,
+    supports_data_streams=True, can_hover=False, udp_client_hears_only_peer=True,
     velocity_lag_s=0.0, shaping_accel_m_s2=None, tracking_lag_s=0.0,
     speed_ratio=23.4 / 22.0, heading_accel_ratio=0.73, vz_hold_drift_m_s=0.0,
     failsafe_descent_m_s=0.0, acks_twice=False, firmware=(4, 7, 0, 0),
@@ -163,7 +168,7 @@ _PX4 = ProfileSpec(
     guided_mode="OFFBOARD", initial_mode="MISSION", failsafe_mode="POSCTL",
     max_stream_rate_hz=200.0, setpoint_timeout_s=1.0, attitude_timeout_s=1.0, course_timeout_s=0.0,
     accepts_velocity=True, accepts_course_command=False, ardupilot_attitude_mask=False,
-    supports_data_streams=False, can_hover=True,
+    supports_data_streams=False, can_hover=True, udp_client_hears_only_peer=False,
     velocity_lag_s=1.2, shaping_accel_m_s2=None, tracking_lag_s=0.0,
     speed_ratio=0.8, heading_accel_ratio=1.0, vz_hold_drift_m_s=0.1,
     failsafe_descent_m_s=0.8, acks_twice=True, firmware=(1, 16, 0, 255),

@@ -37,7 +37,7 @@ from sitl_stub.autopilot import Autopilot
 from sitl_stub.config import StreamRates, StubConfig
 from sitl_stub.faults import FaultInjector
 from sitl_stub.lockstep import LockstepGate
-from sitl_stub.mav import Message, StubLink
+from sitl_stub.mav import Message, StubLink, StubLinkStats
 from sitl_stub.signing import signing_rules
 from sitl_stub.telemetry import StreamScheduler, TelemetryEncoder
 from sitl_stub.truth import TruthWriter
@@ -117,7 +117,8 @@ class SitlStub:
     def start(self) -> SitlStub:
         """Open the link and start the simulation thread."""
         s = self.config.settings
-        self._link = StubLink(s.connect, system_id=s.system_id, component_id=s.component_id)
+        self._link = StubLink(s.connect, system_id=s.system_id, component_id=s.component_id,
+                              hear_only_peer=self.config.spec.udp_client_hears_only_peer)
         self._scheduler = StreamScheduler(s.streams, self.config.max_stream_rate_hz)
         self.autopilot = Autopilot(self.config, self._scheduler, self._link.mav)
         self._signing = signing_rules(self.autopilot.spec.autopilot)
@@ -184,6 +185,11 @@ class SitlStub:
     def serial_device(self) -> str | None:
         """The pseudo-terminal the stub serves (``connect: pty``), for the companion."""
         return self._link.serial_device if self._link is not None else None
+
+    @property
+    def link_stats(self) -> StubLinkStats | None:
+        """The link's receive counters (None before it opens and after it closes)."""
+        return self._link.stats if self._link is not None else None
 
     @property
     def mode_name(self) -> str:

@@ -218,7 +218,8 @@ class StubLinkStats:
     bad_frames: int  # bad CRC, length, unknown id, partial frames
     rejected_unsigned: int
     bad_signatures: int
-    foreign_datagrams: int  # ``udpout:`` hearing only its peer: datagrams from any other
+    foreign_datagrams: int  # ``udpout:`` hearing only its peer: datagrams from any
+    # address or port but its peer's, dropped unread
 
 
 class StubLink:
@@ -256,15 +257,17 @@ class StubLink:
             raise LinkError("connect", given, f"cannot be opened: {exc}") from exc
         self._conn.mav.robust_parsing = True
         self._udp = isinstance(self._conn, mavutil.mavudp)
-        # ``udpout:`` with ``hear_only_peer`` (ArduPilot's UDP client, ``ProfileSpec``): the
+        # ``udpout:``: its host resolved now (pymavlink would drop every frame unsent, without
+        # a word); with ``hear_only_peer`` (ArduPilot's UDP client, ``ProfileSpec``) the
         # datagrams of any other address or port are dropped unread and counted
         self._peer: tuple[str, int] | None = None
-        if hear_only_peer and self._udp and not (self._conn.udp_server or self._conn.broadcast):
+        if self._udp and not (self._conn.udp_server or self._conn.broadcast):
             host, port = self._conn.destination_addr
             try:
-                self._peer = (socket.gethostbyname(host), int(port))
+                peer = (socket.gethostbyname(host), port)
             except OSError as exc:
                 raise LinkError("connect", given, f"cannot be resolved: {exc}") from exc
+            self._peer = peer if hear_only_peer else None
         self._foreign = 0
         self._connections = getattr(self._stream, "connections", 0)
         self._messages = 0
@@ -332,7 +335,9 @@ class StubLink:
         return list(readable)
 
     def recv_messages(self, max_reads: int = 64) -> list[Message]:
-        """Every valid message available now (bad frames dropped and counted)."""
+        """Every valid message available now (bad frames dropped and counted). A datagram
+        dropped unread takes one of ``max_reads`` (a flood of them delays the peer's, where
+        the kernel's filter would not: harmless for a test vehicle)."""
         out: list[Message] = []
         for _ in range(max_reads):
             data = self._read()
@@ -344,7 +349,8 @@ class StubLink:
 
     def _read(self) -> bytes | None:
         """Bytes read now: b"" for a datagram dropped unread (another sender's, where only
-        the peer is heard) or empty, None where nothing waits."""
+        the peer is heard) or empty; None where nothing is read (nothing waits, an error,
+        a ``tcpin`` peer gone)."""
         conn = self._conn
         if self._stream is not None:
             data = self._stream.read()

@@ -188,7 +188,8 @@ class SitlStub:
 
     @property
     def link_stats(self) -> StubLinkStats | None:
-        """The link's receive counters (None before it opens and after it closes)."""
+        """The link's receive counters (None before it opens and after it closes). Read
+        from another thread than the link's: plain counters, each read whole."""
         return self._link.stats if self._link is not None else None
 
     @property

@@ -15,6 +15,7 @@ from conftest_sitl import (
     measured_rate_hz,
     running_stub,
     stamps_s,
+    stranger_socket,
 )
 
 from ezcompanion import wire
@@ -243,8 +244,7 @@ def test_a_stub_sending_udpout_hears_whom_its_autopilot_hears(
                                              M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, *loiter,
                                              0, 0, 0, 0)  # fmt: skip
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as elsewhere, \
-                socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as stranger:
-            stranger.bind(("127.0.0.1", 0))
+                stranger_socket() as stranger:
             elsewhere.bind(("127.0.0.3", gcs.port))  # the peer's port, another address
             stranger.sendto(frame(mav, ask), address)
             elsewhere.sendto(frame(mav, ask), address)

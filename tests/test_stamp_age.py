@@ -170,8 +170,9 @@ def test_frames_a_queue_held_and_let_go_at_once_drive_no_setpoint(tmp_path: Path
     assert release_wall, "the queue never let go"
     # the first failsafe from the hold on is the silence's (one before it, where the
     # machine was loaded, was the start's: at 5x a few ms of wall-time jitter in the first
-    # samples' delays is 5 times as far on the companion's clock, and a sample may come
-    # ahead of the least offset by more than its budget; not what this test is about)
+    # samples' delays is 5 times as far on the companion's clock; the start's catch-up,
+    # tests/test_trust_gate.py, now takes 0.5 s of it, but that is not what this test is
+    # about)
     failsafes = [event for event in flight.events.of_kind(EventKind.FAILSAFE)
                  if event.time_s >= hold_from[0]]  # fmt: skip
     assert failsafes and failsafes[0].data["reason"] == "stale"  # the silence, then the queue

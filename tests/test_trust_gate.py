@@ -206,6 +206,102 @@ def test_a_vehicle_clock_a_little_fast_or_a_first_sample_that_waited_is_not_ahea
     assert state is not None and state.age_s(3.005 + DT_S * 99) < 0.01
 
 
+def attitude(boot_ms: int, yaw: float = 0.0) -> Any:
+    return mavlink.MAVLink_attitude_message(boot_ms, 0.0, 0.0, yaw, 0.0, 0.0, 0.0)
+
+
+def starved_start(t: Any, backlog_s: float, *, read_from_s: float = 105.0
+                  ) -> tuple[int, list[str], int]:
+    """The vehicle sends LOCAL_POSITION_NED and ATTITUDE at 50 Hz, its clock 100 s behind
+    ours; the companion reads nothing until ``read_from_s``, then the ``backlog_s`` that
+    waited in its socket at once (0.1 ms apart), then each sample 2 ms after it was sent,
+    for 2 s. How many positions it took, the refusals it named, and how many positions it
+    took before the first."""
+    taken, whys, before = 0, [], -1
+    now = read_from_s
+    first = round((read_from_s - 100.0 - backlog_s) * 1000)
+    for boot_ms in range(first, first + 2000 + round(backlog_s * 1000), 20):
+        now = max(now + 1e-4, 100.0 + boot_ms / 1000 + 0.002)
+        taken += t.update(local(boot_ms, boot_ms / 1000, 0.0), now) is not None
+        for _ in range(2):
+            refusal = t.take_refusal()
+            if refusal is not None:
+                before = taken - 1 if before < 0 else before
+                whys.append(refusal[1])
+            t.update(attitude(boot_ms), now)
+    return taken, whys, before
+
+
+@pytest.mark.parametrize("backlog_s", [0.15, 0.3, 0.5])
+def test_a_companion_starved_as_it_starts_takes_its_backlog_without_a_failsafe(
+    backlog_s: float,
+) -> None:
+    """A reviewer's run beside two busy loops: the companion, starved as it started, took a
+    gate failsafe before guidance began ("attitude sample stamped 0.03 s ahead of the
+    vehicle's clock ... at most 0.00 s"). Its first sample had waited, and each after it,
+    read in the same burst, claimed a lower offset than the one before, past the 0.1 s
+    budget. In the first 0.5 s of the companion's clock the offset may go down by 0.5 s
+    more: a backlog of that much is taken whole, nothing named, and the newest sample's
+    age is its delay."""
+    t = known_origin()
+    taken, whys, _ = starved_start(t, backlog_s)
+    assert not whys, whys[:2]
+    assert taken == round((2.0 + backlog_s) / DT_S)
+    now = 100.0 + 105.0 - 100.0 + 2.0 + 0.002 - DT_S
+    state = t.snapshot(0.25, now)
+    assert state is not None and state.age_s(now) < 0.003
+
+
+def test_the_starts_catch_up_is_the_starts_alone() -> None:
+    """What the start's catch-up does not allow, as before it: a backlog of more than 0.6 s
+    at the start (0.5 s and the budget's 0.1 s) or of 0.3 s after a lost link is refused
+    as ahead, named, until a run of the vehicle's samples takes the clock afresh; a sample
+    0.9 s ahead at the start, or 0.3 s ahead once the start's 0.5 s are over, is refused."""
+    t = known_origin()
+    taken, whys, before = starved_start(t, 0.9)
+    assert whys and "ahead of the vehicle's clock" in whys[0]
+    assert before == round(0.6 / DT_S)  # (the first sample, then 0.6 s caught up)
+    assert any(why.startswith("the vehicle's clock taken afresh") for why in whys)
+    assert taken > round(2.0 / DT_S) - 20  # (taken again after the retake)
+
+    t = known_origin()
+    fly_track(t, [0.0] * 10)
+    t.forget_motion()  # a lost link: its first sample after may have waited as well
+    taken, whys, before = starved_start(t, 0.3)
+    assert whys and "ahead of the vehicle's clock" in whys[0]
+    assert before == round(0.1 / DT_S)  # (the budget's alone)
+
+    for at_s, ahead_ms, most in ((0.1, 900, "0.60"), (0.6, 300, "0.10")):
+        t = known_origin()
+        used, (north, east, _) = fly_track(t, [0.0] * (round(at_s / DT_S) + 1))
+        assert all(used)
+        boot_ms = 1000 + round(at_s * 1000) + 20
+        forged = local(boot_ms + ahead_ms, north + ahead_ms / 1000, east)  # on the path
+        assert t.update(forged, 1.0 + at_s + DT_S) is None
+        cause, why = t.take_refusal() or (None, "")
+        assert cause is Hold.GATE and f"at most {most} s" in why, why
+
+
+def test_a_forger_that_uses_the_starts_catch_up_is_named_within_a_quarter_second() -> None:
+    """What the start's catch-up gives a forger: a sample stamped up to 0.6 s ahead in the
+    first 0.5 s, on the vehicle's path (where it will be that much later), is taken; the
+    vehicle's own samples, behind it, are dropped as reordered while within 0.22 s of a
+    taken one, and from then on each is named, a second source."""
+    t = known_origin()
+    used, (north, east, _) = fly_track(t, [0.0] * 10)
+    assert all(used)
+    forged_ms = 1000 + 20 * 10 + 550
+    assert t.update(local(forged_ms, north + 0.55, east), 1.0 + DT_S * 10 - 0.001) is not None
+    named_from = None
+    for k in range(10, 60):
+        t.update(local(1000 + 20 * k, DT_S * k, 0.0), 1.0 + DT_S * k)
+        refusal = t.take_refusal()
+        if refusal is not None and named_from is None:
+            assert refusal[0] is Hold.GATE and "second source" in refusal[1], refusal
+            named_from = DT_S * (k - 10)
+    assert named_from is not None and named_from <= 0.25 + 1e-9, named_from
+
+
 def test_a_run_of_samples_ahead_does_not_take_the_clock_while_the_vehicle_is_heard() -> None:
     """A reviewer's attack on the first re-base rule (five in a row): five copies of the
     vehicle's last sample in a burst, stamped 3 s ahead, re-based the clock; the next

@@ -33,7 +33,9 @@ What the law uses, and why:
   lower only by less than the least delay seen (milliseconds), or by a vehicle clock a
   little faster than ours: the offset may go down by at most ``_AHEAD_S`` in all, a budget
   that refills at ``_AHEAD_RATE`` a second. A sample beyond it is refused with
-  ``Hold.GATE``, naming the message and how far ahead. (One LOCAL_POSITION_NED at the
+  ``Hold.GATE``, naming the message and how far ahead. At the companion's start it may go
+  down by ``_START_CATCH_UP_S`` more within ``_START_WINDOW_S`` (a starved start reads a
+  backlog: its first sample waited). (One LOCAL_POSITION_NED at the
   target stamped 3 s ahead had widened the gate by what 3 s allow and been taken:
   "intercepted" 5.5 m from the target; a burst of 22, each 99 ms past the one before, did
   the same where each was judged against the one before; one ATTITUDE stamped 9 s ahead
@@ -181,6 +183,17 @@ _CLOCK_SLEW = 0.2
 # 0.01%; a SITL runs at real time or behind it); a forger gets no more
 _AHEAD_S = 0.1
 _AHEAD_RATE = 0.05
+# ... and, for _START_WINDOW_S of our clock from the first sample the companion takes, by
+# this much more: that sample may have waited (a companion starved as it starts reads a
+# backlog, and each sample after the first claims a lower offset). A reviewer's companion,
+# starved at start-up beside two busy loops, had taken a gate failsafe before guidance
+# began: its first samples' delays, 20 ms apart in wall time, were 0.1 s on its 5x clock.
+# A forger gets as much in that window only (a sample that far ahead shows the vehicle
+# where it will be that much later, on its path: the vehicle's own samples, behind it, are
+# then dropped as reordered for _REORDER_S and named after); none after a lost link or a
+# reboot, mid-engagement (a first sample that waited is then retaken by a run, named)
+_START_CATCH_UP_S = 0.5
+_START_WINDOW_S = 0.5
 # after a lost link, a position source is used only once its samples have come for this
 # long (our clock): its first was taken with no gate, and a forger's first, at the target,
 # would otherwise be flown (and judged an intercept) before the vehicle's own samples,
@@ -308,6 +321,11 @@ class _VehicleClock:
     least_s: float = math.nan  # the least offset seen in this time base (no slew)
     budget_s: float = _AHEAD_S  # how far it may still go down (refilling)
     budget_at_s: float = 0.0  # our clock when the budget was last counted
+    # how far it may go down besides, within _START_WINDOW_S of our clock from base_at_s:
+    # the first time base's first sample (the companion's start)
+    catch_up_s: float = 0.0
+    base_at_s: float = -math.inf
+    first_base: bool = True  # False in a clock started afresh after a lost link
     # (our clock, offset) of each sample refused as ahead since one was last taken
     ahead_run: list[tuple[float, float]] = field(default_factory=list)
     rebasing: bool = False  # a run let one through: if taken, it sets the least afresh
@@ -326,7 +344,7 @@ class _VehicleClock:
         sample is refused where the first is larger. (0, 0) in a new time base."""
         if self._new_base(boot_s):
             return 0.0, 0.0
-        return self.least_s - (now_s - boot_s), self._budget(now_s)
+        return self.least_s - (now_s - boot_s), self._budget(now_s) + self._catch_up(now_s)
 
     def refused_ahead(self, boot_s: float, now_s: float) -> bool:
         """Count a sample refused as ahead; True where it ends a run of them that may start
@@ -364,15 +382,24 @@ class _VehicleClock:
         if restarted or self.rebasing:  # a new time base, or a run's (``refused_ahead``)
             self.least_s = seen if restarted else min(self.least_s, seen)
             self.budget_s, self.budget_at_s = _AHEAD_S, now_s
+            if restarted and self.first_base:
+                self.base_at_s, self.catch_up_s = now_s, _START_CATCH_UP_S
+            self.first_base = False
             self.rebasing = False
         elif seen < self.least_s:
-            self.budget_s = max(0.0, self._budget(now_s) - (self.least_s - seen))
+            down = self.least_s - seen
+            caught = min(down, self._catch_up(now_s))  # (spent first, while it lasts)
+            self.catch_up_s -= caught
+            self.budget_s = max(0.0, self._budget(now_s) - (down - caught))
             self.budget_at_s = now_s
             self.least_s = seen
         return boot_s + self.offset_s
 
     def _budget(self, now_s: float) -> float:
         return min(_AHEAD_S, self.budget_s + _AHEAD_RATE * max(0.0, now_s - self.budget_at_s))
+
+    def _catch_up(self, now_s: float) -> float:
+        return self.catch_up_s if now_s - self.base_at_s < _START_WINDOW_S else 0.0
 
     def _new_base(self, boot_s: float) -> bool:
         """No sample yet, or one from a rebooted vehicle (its time well back)."""
@@ -467,7 +494,7 @@ class TelemetryState:
         stay: a vehicle that comes back in another frame is still refused."""
         self._tracks.clear()
         self._skipped_seen.clear()
-        self._clock = _VehicleClock()
+        self._clock = _VehicleClock(first_base=False)
         self._attitude_s = self._attitude_boot_s = -math.inf
         self._yaw_run.clear()
         self._yaw_taken.clear()

@@ -111,6 +111,31 @@ class Gcs:
                 out.append(msg)
         return out
 
+    def read_until(self, types: str | tuple[str, ...], done: Callable[[Msg], bool],
+                   clock: Callable[[], float] = time.monotonic, wall_s: float = 30.0
+                   ) -> list[tuple[float, Msg]]:
+        """(``clock()`` as each was read, message) of ``types`` in the order they came, up to
+        the first for which ``done`` holds (kept), or ``wall_s`` of wall time. Ended by a
+        message (by its stamp), not by a clock: at 10-40x a test descheduled for 0.1 s of
+        wall time would otherwise see seconds of the stub's time go by unread, and leave in
+        its socket what came meanwhile."""
+        wanted = (types,) if isinstance(types, str) else types
+        out: list[tuple[float, Msg]] = []
+        deadline = time.monotonic() + wall_s
+        while time.monotonic() < deadline:
+            msg = self.recv(wanted, 1.0)
+            if msg is None:
+                continue
+            out.append((clock(), msg))
+            if done(msg):
+                break
+        return out
+
+    def collect_until(self, types: str | tuple[str, ...], done: Callable[[Msg], bool]
+                      ) -> list[Msg]:
+        """The messages of :meth:`read_until`, without their times."""
+        return [msg for _, msg in self.read_until(types, done)]
+
     def drain(self) -> None:
         """Forget everything received so far."""
         while self.conn.recv_match(blocking=False) is not None:
@@ -211,6 +236,11 @@ def angle_diff_deg(a: float, b: float) -> float:
 def between(stub: SitlStub, t0_s: float, t1_s: float) -> list[Any]:
     """Truth states with t0 <= t <= t1."""
     return [s for s in list(stub.history) if t0_s - 1e-9 <= s.t_s <= t1_s + 1e-9]
+
+
+def stamped_after(kind: str, after_ms: float) -> Callable[[Msg], bool]:
+    """A message of ``kind`` stamped later than ``after_ms`` (for :meth:`Gcs.read_until`)."""
+    return lambda msg: msg.get_type() == kind and msg.time_boot_ms > after_ms
 
 
 def stamps_s(msgs: list[Msg]) -> list[float]:

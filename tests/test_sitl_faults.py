@@ -8,11 +8,10 @@ import collections
 import itertools
 import math
 import time
-from collections.abc import Callable
 from typing import Any
 
 import pytest
-from conftest_sitl import Gcs, gcs_link, make_config, running_stub, stamps_s
+from conftest_sitl import Gcs, gcs_link, make_config, running_stub, stamped_after, stamps_s
 from pymavlink import mavutil
 
 from ezcompanion.errors import ConfigError
@@ -27,36 +26,13 @@ def gcs() -> Gcs:
         yield link  # type: ignore[misc]
 
 
-def _read_until(gcs: Gcs, stub: SitlStub, types: tuple[str, ...],
-                done: Callable[[Any], bool]) -> list[tuple[float, Any]]:
-    """(the stub's clock as each was read, message) of ``types``, in the order they came,
-    up to the first for which ``done`` holds (kept), or 30 s of wall time. Ended by a
-    message, not by the stub's clock: at 20-40x a test descheduled for 0.1 s of wall time
-    would otherwise see 2-4 s of the stub's time go by unread, and leave in its socket what
-    came meanwhile."""
-    out: list[tuple[float, Any]] = []
-    deadline = time.monotonic() + 30.0
-    while time.monotonic() < deadline:
-        msg = gcs.recv(types, 1.0)
-        if msg is None:
-            continue
-        out.append((stub.sim_time_s, msg))
-        if done(msg):
-            break
-    return out
-
-
-def _stamped_after(kind: str, after_ms: int) -> Callable[[Any], bool]:
-    """A message of ``kind`` stamped later than ``after_ms``."""
-    return lambda msg: msg.get_type() == kind and msg.time_boot_ms > after_ms
-
-
 def _run(gcs: Gcs, faults: Faults, through_ms: int, speedup: float = 40.0, seed: int = 1,
          types: tuple[str, ...] = ("GLOBAL_POSITION_INT",)) -> list[tuple[float, object]]:
     """(simulated arrival time, message) of ``types`` until one of ``types[0]`` stamped
-    after ``through_ms`` arrives (``_read_until``)."""
+    after ``through_ms`` arrives (``Gcs.read_until``)."""
     with running_stub(gcs, speedup=speedup, faults=faults, seed=seed) as stub:
-        out = _read_until(gcs, stub, types, _stamped_after(types[0], through_ms))
+        out = gcs.read_until(types, stamped_after(types[0], through_ms),
+                             clock=lambda: stub.sim_time_s)
         gcs.history = list(stub.history)  # type: ignore[attr-defined]
     return out
 
@@ -146,8 +122,8 @@ def test_a_reboot_is_silent_then_boots_disarmed_on_a_new_clock(gcs: Gcs) -> None
                                   0, 0, 0, 0, 0)  # fmt: skip
         # until 1.5 s of the new clock after the request (where a clock from 0 at 3.5 s
         # puts it), by the stamps, not by this test's reading
-        out += _read_until(gcs, stub, types, _stamped_after("LOCAL_POSITION_NED",
-                                                            round((asked - 3.5 + 1.5) * 1000)))
+        out += gcs.read_until(types, stamped_after("LOCAL_POSITION_NED", (asked - 2.0) * 1000),
+                              clock=lambda: stub.sim_time_s)
     # judged by the messages themselves, in the order sent, not by when this test read them
     beats = [m for _, m in out if m.get_type() == "HEARTBEAT"]
     armed = [bool(m.base_mode & 128) for m in beats]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import socket
+from typing import Any
 
 import pytest
 from conftest_sitl import (
@@ -14,6 +15,7 @@ from conftest_sitl import (
     gcs_link,
     measured_rate_hz,
     running_stub,
+    stamped_after,
     stamps_s,
     stranger_socket,
 )
@@ -43,9 +45,11 @@ def gcs() -> Gcs:
 def test_heartbeat_identifies_the_profile_at_1_hz(
     gcs: Gcs, profile: str, mav_type: int, autopilot: int, custom_mode: int
 ) -> None:
-    with running_stub(gcs, profile=profile, system_id=7, component_id=3, speedup=10.0) as stub:
-        beats = gcs.collect("HEARTBEAT", 0.45)  # 4.5 s simulated
-        elapsed = stub.sim_time_s
+    with running_stub(gcs, profile=profile, system_id=7, component_id=3, speedup=10.0):
+        # 4.5 s simulated, by the stamps of a stream sent from the same socket
+        got = gcs.collect_until(("HEARTBEAT", "ATTITUDE"), stamped_after("ATTITUDE", 4500))
+    beats = [m for m in got if m.get_type() == "HEARTBEAT"]
+    elapsed = got[-1].time_boot_ms / 1000.0
     assert all(b.get_srcSystem() == 7 and b.get_srcComponent() == 3 for b in beats)
     kinds = {(b.type, b.autopilot, b.custom_mode) for b in beats}
     assert kinds == {(mav_type, autopilot, custom_mode)}
@@ -57,7 +61,7 @@ def test_heartbeat_identifies_the_profile_at_1_hz(
 
 def test_default_streams_and_consistent_units(gcs: Gcs) -> None:
     with running_stub(gcs, speedup=10.0):
-        msgs = gcs.collect(STREAMS, 0.3)
+        msgs = gcs.collect_until(STREAMS, stamped_after("GLOBAL_POSITION_INT", 3000))
     by = {k: [m for m in msgs if m.get_type() == k] for k in STREAMS}
     assert measured_rate_hz(by["GLOBAL_POSITION_INT"]) == pytest.approx(10.0, rel=0.02)
     assert measured_rate_hz(by["ATTITUDE"]) == pytest.approx(10.0, rel=0.02)
@@ -90,6 +94,16 @@ def test_default_streams_and_consistent_units(gcs: Gcs) -> None:
     assert 0 <= hud.heading < 360 and hud.alt == pytest.approx(604.0)
 
 
+def attitudes_over(gcs: Gcs, span_s: float) -> list[Any]:
+    """The ATTITUDEs of ``span_s`` of the stub's time, from the next one on, by their stamps
+    (a window of wall time, read by a test descheduled in it, held fewer, and their rate's
+    error from a stamp's jitter grew with it)."""
+    first = gcs.recv("ATTITUDE", 3.0)
+    assert first is not None
+    last_ms = first.time_boot_ms + span_s * 1000.0
+    return [first, *gcs.collect_until("ATTITUDE", stamped_after("ATTITUDE", last_ms))]
+
+
 @pytest.mark.parametrize(("profile", "limit_hz"), [("copter", 200.0), ("plane", 40.0)])
 def test_set_message_interval_limits(gcs: Gcs, profile: str, limit_hz: float) -> None:
     attitude = M.MAVLINK_MSG_ID_ATTITUDE
@@ -100,17 +114,17 @@ def test_set_message_interval_limits(gcs: Gcs, profile: str, limit_hz: float) ->
         ack = gcs.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, attitude, 1e6 / 25.0)
         assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
         gcs.drain()
-        assert measured_rate_hz(gcs.collect("ATTITUDE", 0.4)) == pytest.approx(25.0, rel=0.03)
+        assert measured_rate_hz(attitudes_over(gcs, 0.8)) == pytest.approx(25.0, rel=0.03)
         # faster than the autopilot streams: DENIED, and the previous rate stays
         ack = gcs.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, attitude, 1e6 / (limit_hz * 1.25))
         assert ack is not None and ack.result == M.MAV_RESULT_DENIED
         gcs.drain()
-        assert measured_rate_hz(gcs.collect("ATTITUDE", 0.4)) == pytest.approx(25.0, rel=0.03)
+        assert measured_rate_hz(attitudes_over(gcs, 0.8)) == pytest.approx(25.0, rel=0.03)
         # exactly the limit is allowed
         ack = gcs.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, attitude, 1e6 / limit_hz)
         assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
         gcs.drain()
-        assert measured_rate_hz(gcs.collect("ATTITUDE", 0.3)) == pytest.approx(limit_hz, rel=0.03)
+        assert measured_rate_hz(attitudes_over(gcs, 0.6)) == pytest.approx(limit_hz, rel=0.03)
         gcs.mav.command_long_send(1, 1, M.MAV_CMD_GET_MESSAGE_INTERVAL, 0, attitude,
                                   0, 0, 0, 0, 0, 0)
         interval = gcs.recv("MESSAGE_INTERVAL", 2.0)
@@ -123,7 +137,7 @@ def test_set_message_interval_limits(gcs: Gcs, profile: str, limit_hz: float) ->
         ack = gcs.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, attitude, 0)
         assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
         gcs.drain()
-        assert measured_rate_hz(gcs.collect("ATTITUDE", 0.6)) == pytest.approx(10.0, rel=0.05)
+        assert measured_rate_hz(attitudes_over(gcs, 1.2)) == pytest.approx(10.0, rel=0.05)
 
 
 def test_request_data_stream_overrides_message_interval(gcs: Gcs) -> None:
@@ -132,7 +146,7 @@ def test_request_data_stream_overrides_message_interval(gcs: Gcs) -> None:
         assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
         gcs.mav.request_data_stream_send(1, 1, M.MAV_DATA_STREAM_EXTRA1, 4, 1)
         gcs.barrier()  # the request handled (a loaded machine may take a while)
-        assert measured_rate_hz(gcs.collect("ATTITUDE", 0.8)) == pytest.approx(4.0, rel=0.05)
+        assert measured_rate_hz(attitudes_over(gcs, 4.0)) == pytest.approx(4.0, rel=0.05)
         gcs.mav.request_data_stream_send(1, 1, M.MAV_DATA_STREAM_POSITION, 0, 0)  # stop
         gcs.barrier()
         kinds = {m.get_type() for m in gcs.collect(
@@ -141,9 +155,9 @@ def test_request_data_stream_overrides_message_interval(gcs: Gcs) -> None:
 
 
 def test_local_position_only_once_origin_exists(gcs: Gcs) -> None:
-    with running_stub(gcs, speedup=10.0, local_origin_after_s=2.0, record_truth=False) as stub:
-        msgs = gcs.collect(("LOCAL_POSITION_NED", "GLOBAL_POSITION_INT"), 0.4)
-        assert stub.sim_time_s > 2.5
+    with running_stub(gcs, speedup=10.0, local_origin_after_s=2.0, record_truth=False):
+        msgs = gcs.collect_until(("LOCAL_POSITION_NED", "GLOBAL_POSITION_INT"),
+                                 stamped_after("GLOBAL_POSITION_INT", 2500))
     local = stamps_s([m for m in msgs if m.get_type() == "LOCAL_POSITION_NED"])
     global_ = stamps_s([m for m in msgs if m.get_type() == "GLOBAL_POSITION_INT"])
     assert local and min(local) >= 2.0

@@ -130,7 +130,7 @@ def _parser() -> argparse.ArgumentParser:
         type=SECONDS,
         metavar="SECONDS",
         help="give up this many seconds after the engagement started (or, with none, after "
-        "the start)",
+        "the start; with --lockstep, wall seconds until the vehicle is first heard)",
     )
     run.add_argument(
         "--lockstep",

@@ -324,7 +324,10 @@ def run_service(
         return ExitCode.INTERRUPTED
     if not events.of_kind(EventKind.VEHICLE_FOUND):
         down = service.session.link_down_reason  # a tcp: client that never reached a server
-        why = f"no vehicle heard in {outcome.time_s:.1f} s" + (f": {down}" if down else "")
+        waited = f"{outcome.time_s:.1f} s"
+        if not service.clock.running and max_time_s is not None:  # lockstep, never started
+            waited = f"{max_time_s:g} s of wall time (--lockstep: the clock is the vehicle's)"
+        why = f"no vehicle heard in {waited}" + (f": {down}" if down else "")
         raise LinkError("connect", settings.connect, why)
     if service.session.rebooted:  # a vehicle failure: ended by _end_disarmed
         raise LinkError("connect", settings.connect, "the vehicle rebooted during the "

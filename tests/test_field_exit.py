@@ -130,6 +130,17 @@ def test_every_other_end_has_its_own_code(
     assert main(["run", "--config", config, "--connect", f"udpin:127.0.0.1:{port}",
                  "--speedup", "10", "--max-time", "3", "--no-telemetry"]) == 3  # fmt: skip
     assert "no vehicle heard" in capsys.readouterr().err
+    # ... in lockstep too: the clock is the vehicle's and stands at 0 until it is heard, so
+    # the limit counts wall time until then (a reviewer's run with no vehicle had waited
+    # for ever, its --max-time 2 never come)
+    ended = subprocess.run(
+        [sys.executable, "-m", "ezcompanion", "run", "--config", config, "--connect",
+         f"udpin:127.0.0.1:{port}", "--lockstep", "--max-time", "0.5", "--no-telemetry"],
+        capture_output=True, text=True, timeout=120.0,  # (a hang fails here)
+    )  # fmt: skip
+    assert ended.returncode == 3, ended.stderr
+    assert ("no vehicle heard in 0.5 s of wall time (--lockstep: the clock is the vehicle's)"
+            in ended.stderr)
 
 
 @pytest.mark.parametrize(

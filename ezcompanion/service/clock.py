@@ -10,9 +10,10 @@ rate checks, link loss, the engagement's time limit) is measured on one of these
 - :class:`LockstepClock`: the vehicle's own time (``time_boot_ms`` of its messages, and the
   lockstep requests of :mod:`ezcompanion.service.lockstep`), for the loopback vehicle in
   lockstep only. It stands at 0 until the vehicle is first heard (however long it takes to
-  start), then follows the vehicle; so that a vehicle that stops altogether is still
-  noticed, it runs on wall time once nothing has moved it for ``stall_wall_s`` (then link
-  loss and stale budgets count as usual).
+  start: the engagement's time limit counts wall time until then), then follows the
+  vehicle; so that a vehicle that stops altogether is still noticed, it runs on wall time
+  once nothing has moved it for ``stall_wall_s`` (then link loss and stale budgets count
+  as usual).
 """
 
 from __future__ import annotations
@@ -35,6 +36,11 @@ class Clock(Protocol):
 
     lockstep: bool
 
+    @property
+    def running(self) -> bool:
+        """The clock has started (a lockstep clock only once the vehicle is heard)."""
+        ...
+
     def now_s(self) -> float:
         """Clock time (s)."""
         ...
@@ -48,6 +54,7 @@ class ScaledClock:
     """Seconds since creation on ``time.monotonic``, times ``speedup``."""
 
     lockstep = False
+    running = True
 
     def __init__(self, speedup: float = 1.0) -> None:
         if not speedup > 0.0:
@@ -85,6 +92,11 @@ class LockstepClock:
         self._base_s = 0.0  # clock time at the last advance of the vehicle's time
         self._vehicle_s: float | None = None  # the vehicle's time at that advance
         self._moved_wall_s = time.monotonic()
+
+    @property
+    def running(self) -> bool:
+        """The vehicle has been heard: before, this clock stands at 0."""
+        return self._vehicle_s is not None
 
     @property
     def vehicle_time_s(self) -> float | None:

@@ -181,6 +181,7 @@ class CompanionService:
         self._beacon_wall_s = 0.0  # lockstep, no vehicle heard: next heartbeat (wall time)
         self.schedule = TickSchedule(self.loop.period_s)
         self._engaged_at_s: float | None = None  # clock time the engagement first started
+        self._started_wall_s = 0.0  # time.monotonic() as run() began serving
         self._abandon_said = False
         # the plane's heading loop judged (GUIDED_P read or given up on): only then is the
         # guided mode asked for, or guidance started
@@ -326,7 +327,8 @@ class CompanionService:
 
     def run(self, *, max_time_s: float | None = None) -> EngagementOutcome:
         """Guide until interception, ``stop()`` or ``max_time_s`` of clock time after the
-        engagement started (or, with no engagement yet, after ``run`` started)."""
+        engagement started (or, with no engagement yet, after ``run`` started; of wall time
+        while a lockstep clock has not started: no vehicle heard)."""
         s = self.settings
         key = signing_key(s)
         if key is None:
@@ -371,6 +373,7 @@ class CompanionService:
         clock, link = self.clock, self._link
         assert link is not None
         started_s = clock.now_s()
+        self._started_wall_s = time.monotonic()
         while not self._stop.is_set() and self.phase is not Phase.DONE:
             now = clock.now_s()
             if self._time_up(now, started_s, max_time_s):
@@ -473,6 +476,9 @@ class CompanionService:
     def _time_up(self, now: float, started_s: float, max_time_s: float | None) -> bool:
         if max_time_s is None:
             return False
+        if not self.clock.running:  # lockstep, no vehicle heard: its clock stands at 0, so
+            # the limit counts wall time (a run with no vehicle had waited for ever)
+            return time.monotonic() - self._started_wall_s >= max_time_s - EPSILON_S
         since = self._engaged_at_s if self._engaged_at_s is not None else started_s
         return now - since >= max_time_s - EPSILON_S
 

@@ -28,6 +28,7 @@ from ezcompanion.cli_args import (
     endpoint,
     guarded,
     number_within,
+    zenoh_endpoint,
 )
 from ezcompanion.commands import (
     PAPER_SCENARIOS,
@@ -139,9 +140,11 @@ def _parser() -> argparse.ArgumentParser:
         "with a real autopilot): every budget in the vehicle's simulated time",
     )
     run.add_argument(
-        "--zenoh-listen", action="append", help="telemetry endpoint (default tcp/127.0.0.1:7447)"
+        "--zenoh-listen", action="append", type=zenoh_endpoint,
+        help="telemetry endpoint (default tcp/127.0.0.1:7447)",
     )
-    run.add_argument("--zenoh-connect", action="append", help="zenoh router or peer to join")
+    run.add_argument("--zenoh-connect", action="append", type=zenoh_endpoint,
+                     help="zenoh router or peer to join")  # fmt: skip
     run.add_argument("--vehicle-id", help="the <vehicle> of the telemetry keys")
     run.add_argument(
         "--no-telemetry",
@@ -257,6 +260,7 @@ def _parser() -> argparse.ArgumentParser:
     demo.add_argument(
         "--zenoh-listen",
         metavar="ENDPOINT",
+        type=zenoh_endpoint,
         help="the companion's telemetry endpoint (default tcp/127.0.0.1:7447, or a free port "
         "if that is taken)",
     )

@@ -37,6 +37,7 @@ __all__ = [
     "guarded",
     "number_within",
     "stop_on_signals",
+    "zenoh_endpoint",
 ]
 
 _log = logging.getLogger("ezcompanion.cli")
@@ -81,6 +82,16 @@ def endpoint(text: str) -> str:
         return pymavlink_url(text, field="--connect")
     except ConfigError as exc:
         raise argparse.ArgumentTypeError(f"{exc.reason} (got {shown(text)})") from None
+
+
+def zenoh_endpoint(text: str) -> str:
+    """A flag reader for a zenoh endpoint, protocol/address (``tcp/127.0.0.1:7447``)."""
+    from ezcompanion.telemetry.settings import is_zenoh_endpoint  # (zenoh: only if given)
+
+    if not is_zenoh_endpoint(text):
+        raise argparse.ArgumentTypeError(
+            f"must be a zenoh endpoint such as tcp/127.0.0.1:7447 (got {shown(text)})")
+    return text
 
 
 def add_common_flags(parser: argparse.ArgumentParser, *, prog: str) -> None:

@@ -64,6 +64,14 @@ def test_version(tool: object, capsys: pytest.CaptureFixture[str]) -> None:
         (["run"], "--config", "required"),
         (["demo", "--speedup", "nan"], "--speedup", "'nan'"),
         (["demo", "--profile", "rover"], "--profile", "'rover'"),
+        # a zenoh endpoint without its protocol (a reviewer's demo had started its children
+        # with it, then stopped with an internal error, exit 70)
+        (["demo", "--zenoh-listen", "127.0.0.1:7447"], "--zenoh-listen", "'127.0.0.1:7447'"),
+        (["run", "--config", str(SCENARIO), "--zenoh-listen", "7447"], "--zenoh-listen",
+         "tcp/127.0.0.1:7447"),
+        (["run", "--config", str(SCENARIO), "--zenoh-connect", "x"], "--zenoh-connect", "'x'"),
+        (["monitor", "--connect", "127.0.0.1:7447"], "--connect", "'127.0.0.1:7447'"),
+        (["router", "--listen", "0.0.0.0:7447"], "--listen", "'0.0.0.0:7447'"),
         (["--log-level", "LOUD", "simulate", str(SCENARIO)], "--log-level", "'LOUD'"),
         (["fly"], "COMMAND", "'fly'"),
     ],
@@ -75,6 +83,27 @@ def test_a_bad_flag_is_one_line_and_exit_2(
     line = one_line(capsys)
     assert line.startswith("ezcompanion") and ": error: " in line
     assert flag in line and said in line
+
+
+def test_a_demo_whose_companion_cannot_start_ends_in_one_line_of_its_own(tmp_path: Path) -> None:
+    """A reviewer's demo whose companion ended at start (its telemetry endpoint refused) had
+    ended in "internal error: RuntimeError: the process ended before printing
+    'listening:'", exit 70. Now the companion's own error, then the demo's line, exit 2."""
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        ended = subprocess.run(
+            [sys.executable, "-m", "ezcompanion", "demo", "--scenario", "1", "--out",
+             str(tmp_path / "out"), "--zenoh-listen", f"tcp/127.0.0.1:{port}"],
+            capture_output=True, text=True, timeout=300.0,
+        )  # fmt: skip
+    lines = ended.stderr.strip().splitlines()
+    assert ended.returncode == ExitCode.BAD_INPUT, ended.stderr
+    assert "Traceback" not in ended.stderr and "internal error" not in ended.stderr
+    assert any("Address already in use" in line and "--no-telemetry" in line for line in lines)
+    assert lines[-1] == ("ezcompanion: error: the companion ended before its link opened "
+                         "(exit 2): its error is above")
 
 
 def test_an_unsigned_network_endpoint_is_refused_in_one_line_before_any_socket(

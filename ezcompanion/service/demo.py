@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import IO
 
 from ezcompanion.config import Scenario, load_scenario
+from ezcompanion.errors import EzCompanionError
 from ezcompanion.field import place_fixed
 from ezcompanion.guidance import LawName
 from ezcompanion.sim.engine import SimResult
@@ -270,7 +271,11 @@ def run_loopback(
     # started first would fly on in AUTO while the companion loads.
     companion = subprocess.Popen(companion_cmd, stdout=subprocess.PIPE, text=True, bufsize=1)
     assert companion.stdout is not None
-    wait_for_line(companion.stdout, "listening:", quiet)
+    try:
+        wait_for_line(companion.stdout, "listening:", quiet)
+    except RuntimeError:  # it said why on its stderr, which is ours
+        raise EzCompanionError(f"the companion ended before its link opened (exit "
+                               f"{companion.wait()}): its error is above") from None
     forward = threading.Thread(target=_forward, args=(companion.stdout, quiet), daemon=True)
     forward.start()
     stub = subprocess.Popen(stub_cmd, stdout=subprocess.DEVNULL if quiet else None)

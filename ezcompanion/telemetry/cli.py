@@ -18,7 +18,7 @@ from pathlib import Path
 
 import zenoh
 
-from ezcompanion.cli_args import number_within, stop_on_signals
+from ezcompanion.cli_args import number_within, stop_on_signals, zenoh_endpoint
 from ezcompanion.config import load_scenario
 from ezcompanion.telemetry.monitor import MonitorView, run_monitor
 from ezcompanion.telemetry.recording import iter_recording, plot_recording, read_recording
@@ -114,6 +114,7 @@ def _add_watch_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--connect",
         action="append",
+        type=zenoh_endpoint,
         help=f"zenoh endpoint of a vehicle or router (repeatable; default {DEFAULT_ENDPOINT})",
     )
     parser.add_argument("--vehicle", default="*", help="only this vehicle id (default: all)")
@@ -168,10 +169,12 @@ def add_telemetry_parsers(subparsers: argparse._SubParsersAction) -> None:  # ty
     rtr.add_argument(
         "--listen",
         action="append",
+        type=zenoh_endpoint,
         help=f"endpoint to listen on (repeatable; default {DEFAULT_ENDPOINT}, "
         "e.g. tcp/0.0.0.0:7447 for the network)",
     )
-    rtr.add_argument("--connect", action="append", default=[], help="other routers to join")
+    rtr.add_argument("--connect", action="append", default=[], type=zenoh_endpoint,
+                     help="other routers to join")  # fmt: skip
     rtr.add_argument("--zenoh-config", help="a zenoh json5 config file instead of the flags")
     rtr.add_argument("--multicast-scouting", action="store_true", help="find peers on the LAN")
     rtr.add_argument("--duration", type=float, help="stop after this many seconds")

@@ -63,6 +63,11 @@ _CHUNK = re.compile(r"^[A-Za-z0-9_.\-]+$")
 _ENDPOINT = re.compile(r"^[a-z][a-z0-9\-]*/\S+$")
 
 
+def is_zenoh_endpoint(text: object) -> bool:
+    """``text`` is a zenoh locator, protocol/address (``tcp/127.0.0.1:7447``)."""
+    return isinstance(text, str) and _ENDPOINT.match(text) is not None
+
+
 @dataclass(frozen=True, kw_only=True)
 class TelemetrySettings:
     """Validated telemetry settings; see the module docstring for each key."""
@@ -91,7 +96,7 @@ class TelemetrySettings:
             if not isinstance(endpoints, tuple):
                 raise ConfigError(name, endpoints, "must be a list of endpoints")
             for endpoint in endpoints:
-                if not isinstance(endpoint, str) or not _ENDPOINT.match(endpoint):
+                if not is_zenoh_endpoint(endpoint):
                     raise ConfigError(
                         name, endpoint, "must be zenoh endpoints such as tcp/127.0.0.1:7447"
                     )
@@ -187,7 +192,14 @@ def open_session(conf: zenoh.Config, *, what: str = "telemetry") -> zenoh.Sessio
     try:
         return zenoh.open(conf)
     except zenoh.ZError as exc:
-        raise ConfigError(what, _endpoints(conf), f"cannot open a zenoh session: {exc}") from None
+        # (without the Rust source paths zenoh appends: "... at /root/.cargo/.../tcp.rs:61.")
+        why = _RUST_WHERE.sub("", str(exc)).rstrip(". ")
+        if what == "telemetry":  # the service's
+            why += " (another endpoint with --zenoh-listen, or none with --no-telemetry)"
+        raise ConfigError(what, _endpoints(conf), f"cannot open a zenoh session: {why}") from None
+
+
+_RUST_WHERE = re.compile(r"\s+at /\S+?\.rs:\d+\.?")
 
 
 def _endpoints(conf: zenoh.Config) -> str:

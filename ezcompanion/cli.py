@@ -194,6 +194,17 @@ def _parser() -> argparse.ArgumentParser:
         "--gate-position-m", type=number_within(0.0, 25.0, unit=" m"), default=0.5,
         help="the gate's position allowance (companion.gate_position_m; default 0.5)",
     )  # fmt: skip
+    gate_clock = gate.add_mutually_exclusive_group()
+    gate_clock.add_argument(
+        "--lockstep", action="store_true",
+        help="the log is of a run with --lockstep (a demo's): judge on the vehicle's clock, "
+        "as that run did, not on the log's wall-clock times",
+    )  # fmt: skip
+    gate_clock.add_argument(
+        "--speedup", type=SPEEDUP, default=1.0,
+        help="the log is of a run with --speedup N: the companion's clock ran N times the "
+        "log's times",
+    )  # fmt: skip
     key = commands.add_parser(
         "signing-key", help="write a new random MAVLink 2 signing key to a file (mode 600)"
     )
@@ -318,7 +329,8 @@ def _dispatch(args: argparse.Namespace) -> int:
         return run_gate_check(args.tlog, accel_bound_m_s2=args.gate_accel_m_s2,
                               accel_max_m_s2=args.accel_max_m_s2,
                               gate_position_m=args.gate_position_m,
-                              system_id=args.system_id)  # fmt: skip
+                              system_id=args.system_id, speedup=args.speedup,
+                              lockstep=args.lockstep)  # fmt: skip
     if args.command == "simulate":
         return run_simulate(
             args.config,

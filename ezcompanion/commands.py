@@ -116,7 +116,8 @@ _COMPILE_SCENARIO = {
 
 def run_gate_check(tlog: Path, *, accel_bound_m_s2: float | None,
                    accel_max_m_s2: float | None, gate_position_m: float,
-                   system_id: int | None = None) -> int:  # fmt: skip
+                   system_id: int | None = None, speedup: float = 1.0,
+                   lockstep: bool = False) -> int:  # fmt: skip
     """Print what the estimate gate makes of the positions in ``tlog``; OK if it refused
     none by name, FAILED if it did, BAD_INPUT if the log holds no autopilot or position."""
     from ezcompanion.service.gate_check import check_tlog
@@ -124,7 +125,8 @@ def run_gate_check(tlog: Path, *, accel_bound_m_s2: float | None,
     if not tlog.is_file():
         raise FileNotFoundError(f"{tlog}: no such telemetry log")
     report = check_tlog(tlog, accel_bound_m_s2=accel_bound_m_s2, accel_max_m_s2=accel_max_m_s2,
-                        gate_position_m=gate_position_m, system_id=system_id)  # fmt: skip
+                        gate_position_m=gate_position_m, system_id=system_id, speedup=speedup,
+                        lockstep=lockstep)  # fmt: skip
     print("\n".join(report.lines()))
     if not report.used:
         print(f"{tlog}: no position of the autopilot's with its origin (GPS_GLOBAL_ORIGIN) in "

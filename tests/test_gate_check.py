@@ -25,11 +25,12 @@ _START_S = 1.7e9  # a log's wall clock
 def _log(path: Path, *, jump_at: int | None = None, autopilot: bool = True,
          step_back_at: int | None = None, reboot_at: int | None = None,
          attitude_ahead_ms: int | None = None, own: bool = False,
-         stall_at: int | None = None, other: bool = False) -> Path:
+         stall_at: int | None = None, other: bool = False, speedup: float = 1.0) -> Path:
     """``own``: the logger's own heartbeat too, once a second whatever the vehicle does
     (a companion's tlog); ``stall_at``: the logger stopped for 8 s there (nothing logged,
     the vehicle flying on); ``other``: a second autopilot's heartbeat beside each of the
-    vehicle's frames (on the same link: silent with it)."""
+    vehicle's frames (on the same link: silent with it); ``speedup``: the vehicle's time
+    runs that many times the log's (a loopback run at 10x)."""
     vehicle, station = forger(1, 1), forger(255, 190)
     companion = forger(1, 191)
     own_beat = M.MAVLink_heartbeat_message(M.MAV_TYPE_ONBOARD_CONTROLLER,
@@ -68,7 +69,7 @@ def _log(path: Path, *, jump_at: int | None = None, autopilot: bool = True,
                 attitude = M.MAVLink_attitude_message(boot_ms + 20 * k + attitude_ahead_ms,
                                                       0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # fmt: skip
                 log.write(frame(vehicle, attitude), clock_s + 0.001)
-            clock_s += 0.02
+            clock_s += 0.02 / speedup
     return path
 
 
@@ -92,6 +93,30 @@ def test_a_jump_is_named_and_fails(tmp_path: Path, capsys: pytest.CaptureFixture
     out = capsys.readouterr().out
     assert "150 x local position # m from the prediction (gate # m): refused" in out
     assert "at 2.01 s: local position 3.00 m from the prediction" in out
+
+
+def test_a_run_at_10x_is_judged_on_its_own_clock(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A reviewer: the demo's own tlog (its companion in lockstep, the vehicle's time 10x
+    the wall clock the log is stamped with) had 608 samples refused "ahead of the vehicle's
+    clock" and exited 1, where the run it recorded took them all. Judged as that run was,
+    on the vehicle's clock (``--lockstep``) or the log's times 10x (``--speedup 10``), it
+    is clean; judged by the log's times it fails as before, and says why it may have."""
+    log = _log(tmp_path / "fast.tlog", speedup=10.0)
+    for how in ({"lockstep": True}, {"speedup": 10.0}):
+        report = check_tlog(log, **how)  # type: ignore[arg-type]
+        assert report.clean and report.used["LOCAL_POSITION_NED"] == 250, how
+    assert main(["gate-check", str(log), "--lockstep"]) == ExitCode.OK
+    assert "the companion's clock: the vehicle's clock" in capsys.readouterr().out
+    report = check_tlog(log)
+    assert not report.clean and report.clock_ratio == pytest.approx(10.0, rel=0.01)
+    assert main(["gate-check", str(log)]) == ExitCode.FAILED
+    assert ("the vehicle's clock ran 10.0 times the log's (a run with --lockstep or "
+            "--speedup?)") in capsys.readouterr().out
+    report = check_tlog(_log(tmp_path / "clean.tlog"))  # (at the log's pace: nothing said)
+    assert report.clock_ratio == pytest.approx(1.0, rel=0.01)
+    assert not any("times the log's" in line for line in report.lines())
 
 
 def test_a_log_with_no_autopilot_or_no_file_says_so(

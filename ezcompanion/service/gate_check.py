@@ -38,6 +38,9 @@ _EXAMPLES = 3
 # the service's default: no heartbeat of the vehicle's for this long is a lost link, after
 # which its positions are judged afresh (TelemetryState.forget_motion)
 _LINK_LOST_S = CompanionSettings.link_lost_after_s
+# a vehicle clock this much faster than the log's is named (a vehicle's crystal, or a SITL
+# at real time, is within a few percent)
+_FAST_CLOCK = 1.5
 
 
 @dataclass
@@ -54,6 +57,18 @@ class GateReport:
     # each reason (numbers masked), how often, and its first few in full with their times
     reasons: Counter[str] = field(default_factory=Counter)
     examples: dict[str, list[str]] = field(default_factory=dict)
+    # (log time, the vehicle's time) from its first stamped sample to its last
+    clock_span: tuple[float, float] = (0.0, 0.0)
+    judged_by: str = "the log's times"
+
+    @property
+    def clock_ratio(self) -> float | None:
+        """How much faster the vehicle's stamps ran than the log's times (None: too short
+        a log to say, under a second of either)."""
+        logged, vehicle = self.clock_span
+        if logged < 1.0 and vehicle < 1.0:
+            return None
+        return vehicle / logged if logged > 0.0 else math.inf
 
     @property
     def clean(self) -> bool:
@@ -75,15 +90,23 @@ class GateReport:
                "none is named below: out of range, before a fix, frozen or repeated)",
                f"named: {self.reasons.total()} (each holds guidance 0.5 s; for 3 s without a "
                "break, they end it)"]  # fmt: skip
+        if self.judged_by != "the log's times":
+            out.insert(1, f"the companion's clock: {self.judged_by}")
         for reason, count in self.reasons.most_common():
             out.append(f"  {count} x {reason}")
             out += [f"      {example}" for example in self.examples[reason]]
+        ratio = self.clock_ratio
+        if self.judged_by == "the log's times" and ratio is not None and ratio > _FAST_CLOCK:
+            out.append(f"the vehicle's clock ran {ratio:.1f} times the log's (a run with "
+                       "--lockstep or --speedup?): judged by the log's times; judge it as "
+                       "that run did with --lockstep or --speedup N")  # fmt: skip
         return out
 
 
 def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
                accel_max_m_s2: float | None = None, gate_position_m: float = 0.5,
-               system_id: int | None = None) -> GateReport:  # fmt: skip
+               system_id: int | None = None, speedup: float = 1.0,
+               lockstep: bool = False) -> GateReport:  # fmt: skip
     """The gate's verdict on the positions in the tlog at ``path``, of the first autopilot
     heard (of ``system_id``, if given). The bound: the one given, else what the service
     would take for that autopilot (its tilt limit's, and at least twice ``accel_max_m_s2``
@@ -95,8 +118,18 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
     The service tells the two apart by its own clock; a log cannot (a link that drops
     leaves the same gap where the logger logs only what it sent, as the companion does
     over a tcp: link that is down), so such a stall counts a lost link here and the
-    positions after it are judged afresh."""
-    report = GateReport()
+    positions after it are judged afresh.
+
+    The service's clock: the log's times ``speedup`` times as fast (a run with
+    ``--speedup``), or with ``lockstep`` the vehicle's own time as far as its stamps have
+    told it (``--lockstep``: the companion follows the vehicle's clock, which ran up to 10x
+    the wall clock the logger stamped, and by the log's times the vehicle's samples were
+    all ahead). Judged by the log's times, the report says how much faster the vehicle's
+    clock ran where that is more than 1.5 times (``clock_ratio``)."""
+    report = GateReport(judged_by="the vehicle's clock" if lockstep else
+                        "the log's times" if speedup == 1.0 else f"the log's times x {speedup:g}")
+    vehicle_s = 0.0  # the vehicle's time as far as its stamps have told it
+    vehicle_first: tuple[float, float] | None = None  # (log time, vehicle time) first heard
     state: TelemetryState | None = None
     first_s: float | None = None
     shift_s = 0.0  # what the logger's clock stepped back by, in all
@@ -119,18 +152,24 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
             report.accel_bound_m_s2 = gate_bound_m_s2(accel_bound_m_s2 or 0.0,
                                                       accel_max_m_s2 or 0.0, profile)  # fmt: skip
             projection = Projection.of_autopilot(int(msg.autopilot))
-            heartbeat_s = last_s
+            heartbeat_s = vehicle_s if lockstep else last_s * speedup
             continue
         if source != report.vehicle:
             continue
-        if last_s - heartbeat_s > _LINK_LOST_S and not lost:
+        boot_ms = getattr(msg, "time_boot_ms", None) if kind in _FED else None
+        if boot_ms is not None:
+            vehicle_s = max(vehicle_s, boot_ms / 1000.0)
+            vehicle_first = vehicle_first or (last_s, vehicle_s)
+            report.clock_span = (last_s - vehicle_first[0], vehicle_s - vehicle_first[1])
+        clock_s = vehicle_s if lockstep else last_s * speedup
+        if clock_s - heartbeat_s > _LINK_LOST_S and not lost:
             lost = True  # as the service: the link lost, what the vehicle did meanwhile
             report.lost += 1  # unknown; nothing taken until it is found again
             if state is not None:
                 state.forget_motion()
         if kind == "HEARTBEAT":
             if is_autopilot_heartbeat(msg):
-                lost, heartbeat_s = False, last_s
+                lost, heartbeat_s = False, clock_s
             continue
         if kind not in _FED or lost:
             continue
@@ -143,9 +182,9 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
                 origin=origin, accel_bound_m_s2=report.accel_bound_m_s2,
                 projection=projection, gate_position_m=gate_position_m,
             )  # fmt: skip
-            first_s = last_s
+            first_s = clock_s
         assert first_s is not None
-        now_s = last_s - first_s
+        now_s = clock_s - first_s
         used = state.update(msg, now_s, kind)
         if used is not None:
             report.used[used] += 1

@@ -27,6 +27,9 @@ _log = logging.getLogger(__name__)
 _NS = 1_000_000_000
 _EPS_S = 1e-9
 _WARN_WALL_S = 10.0  # say so when the companion has not answered for this long
+# ... and once it has answered before, end the run (it ended: its clock is the only one this
+# run follows, so --duration would never come; a reviewer's hand-run stub waited for ever)
+_GIVE_UP_WALL_S = _WARN_WALL_S
 
 
 def _ns(t_s: float) -> int:
@@ -46,6 +49,7 @@ class LockstepGate:
         self._asked_wall_s = -math.inf
         self._waiting_since_wall_s: float | None = None
         self._warned = False
+        self.answers = 0  # answers taken
 
     def hold(self, t_s: float) -> None:
         """Something the companion must answer left at ``t_s`` (a position sample, a reply):
@@ -105,4 +109,16 @@ class LockstepGate:
         ):
             self._hold_ns = None
         self._waiting_since_wall_s = None
+        self.answers += 1
+        return True
+
+    def given_up(self, t_s: float) -> bool:
+        """The companion answered before and not for ``_GIVE_UP_WALL_S`` since, stopped at
+        ``t_s``: the run ends (said once). Before any answer it waits for ever (a companion
+        may be started after the stub)."""
+        waiting = self._waiting_since_wall_s
+        if self.answers == 0 or waiting is None or time.monotonic() - waiting < _GIVE_UP_WALL_S:
+            return False
+        _log.warning("lockstep: no answer for %.0f s since the companion's last (it ended?): the "
+                     "run ends at t = %.3f s", _GIVE_UP_WALL_S, t_s)  # fmt: skip
         return True

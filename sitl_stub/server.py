@@ -252,6 +252,8 @@ class SitlStub:
                 request = gate.request(link.mav, self._state.t_s)
                 if request is not None:
                     link.send(request)
+                if gate.given_up(self._state.t_s):
+                    return
                 wait_s = gate.wait_wall_s()
             if gate is not None and not gate.stopped(self._state.t_s):
                 # lockstep, running: the link is read at the next stop, so that whatever the

@@ -20,6 +20,7 @@ from conftest_sitl import gcs_link, make_config
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import sitl_stub.lockstep as stub_lockstep
 from ezcompanion.config import load_scenario
 from ezcompanion.errors import ConfigError
 from ezcompanion.guidance.single import law_step_s
@@ -192,6 +193,32 @@ def test_the_stub_waits_for_answers_and_stops_at_each_position_sample() -> None:
             assert stub.sim_time_s == pytest.approx(again.ts1 / NS, abs=1e-6)
             gcs.mav.timesync_send(NS, again.ts1 - 1)  # an answer to another request
             time.sleep(0.2)
+            assert stub.sim_time_s == pytest.approx(again.ts1 / NS, abs=1e-6)
+        assert stub.error is None
+
+
+def test_a_lockstep_stub_ends_when_its_companion_no_longer_answers(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A reviewer's hand-run `sitl-stub --lockstep --duration 40` never ended once its
+    companion had: its clock follows the companion's answers alone. Once it has had one, it
+    ends after 10 s of wall time with none (0.3 s here); before any it waits on (a companion
+    may start after it)."""
+    monkeypatch.setattr(stub_lockstep, "_GIVE_UP_WALL_S", 0.3)
+    with gcs_link() as gcs:
+        stub = SitlStub(make_config(gcs.port, speedup=1000.0), lockstep=True)
+        with stub:
+            request = gcs.recv("TIMESYNC", 5.0, where=lambda m: m.tc1 == 0)
+            assert request is not None
+            time.sleep(1.0)  # no answer yet: it waits
+            assert stub.running and stub.sim_time_s == 0.0
+            gcs.mav.timesync_send(NS // 2, request.ts1)  # one answer, then none
+            again = gcs.recv("TIMESYNC", 5.0, where=lambda m: m.tc1 == 0 and m.ts1 > NS // 20)
+            assert again is not None
+            deadline = time.monotonic() + 30.0
+            while stub.running and time.monotonic() < deadline:
+                time.sleep(0.05)
+            assert not stub.running  # ended, where it stopped
             assert stub.sim_time_s == pytest.approx(again.ts1 / NS, abs=1e-6)
         assert stub.error is None
 

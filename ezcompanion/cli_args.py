@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import math
 import os
@@ -136,6 +137,12 @@ def guarded(prog: str, job: Callable[[], int]) -> int:
     except EzCompanionError as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return ExitCode.BAD_INPUT
+    except BrokenPipeError:  # the reader went away (`| head`): nothing to tell it, and what
+        # is still buffered for it goes nowhere (a reviewer's `simulate | head -3` had ended
+        # in "error: Broken pipe", exit 4, or 1 where the flush at exit raised it again)
+        with contextlib.suppress(OSError, ValueError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return ExitCode.BROKEN_PIPE
     except OSError as exc:
         where = f"{exc.filename}: " if exc.filename else ""
         print(f"{prog}: error: {where}{exc.strerror or exc}", file=sys.stderr)

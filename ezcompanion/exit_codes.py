@@ -12,16 +12,20 @@ name                code   meaning
 ``OK``              0      done; for ``run`` and ``demo``: intercepted outside every zone
 ``FAILED``          1      the job ran but its outcome failed: not intercepted (in
                            ``--max-time``, aborted on untrusted input), or a zone entered
-``BAD_INPUT``       2      a scenario file, a section of it or a flag is invalid (argparse's
-                           usage errors use 2 as well)
+``BAD_INPUT``       2      a scenario file (missing or unreadable too), a section of it or a
+                           flag is invalid (argparse's usage errors use 2 as well)
 ``LINK_FAILURE``    3      the MAVLink link or the vehicle failed: the endpoint cannot be
                            opened, no vehicle was heard, the link was lost at the end, or
                            the vehicle rebooted during the engagement
-``IO_ERROR``        4      a file cannot be read or written (an output directory that is not
-                           writable, a missing recording)
+``IO_ERROR``        4      another file cannot be read or written (an output directory that
+                           is not writable, a missing log or recording)
 ``INTERNAL_ERROR``  70     a bug: an unexpected exception (``EX_SOFTWARE`` of sysexits.h);
                            the traceback is logged at ``--log-level DEBUG``
-``INTERRUPTED``     130    stopped by SIGINT or SIGTERM before the job was done (128 + SIGINT)
+``INTERRUPTED``     130    stopped by SIGINT or SIGTERM before the job was done (128 + SIGINT);
+                           a command that runs until stopped (``monitor``, ``foxglove``,
+                           ``router``, ``sitl-stub``) ends 0 so
+``BROKEN_PIPE``     141    the reader of its output went away (``| head``): nothing said, as
+                           a process that SIGPIPE ended (128 + SIGPIPE)
 ==================  =====  ==================================================================
 """
 
@@ -42,3 +46,4 @@ class ExitCode(IntEnum):
     IO_ERROR = 4
     INTERNAL_ERROR = 70
     INTERRUPTED = 130
+    BROKEN_PIPE = 141

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from test_gate_check import _log as flight_log
 
 from ezcompanion import __version__
 from ezcompanion.cli import _parser, main
@@ -83,6 +84,22 @@ def test_a_bad_flag_is_one_line_and_exit_2(
     line = one_line(capsys)
     assert line.startswith("ezcompanion") and ": error: " in line
     assert flag in line and said in line
+
+
+def test_a_reader_that_goes_away_ends_a_command_silently(tmp_path: Path) -> None:
+    """A reviewer's `ezcompanion simulate ... | head -3` had ended in "error: Broken pipe",
+    exit 4 (or 1). The reader gone, nothing is said and the exit is 141, as for a process
+    SIGPIPE ended (here `gate-check`, whose report is all it writes)."""
+    log = flight_log(tmp_path / "flight.tlog")
+    command = subprocess.Popen(
+        [sys.executable, "-m", "ezcompanion", "gate-check", str(log)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    assert command.stdout is not None and command.stderr is not None
+    command.stdout.close()  # before it writes its summary
+    err = command.stderr.read()
+    assert command.wait(timeout=120.0) == ExitCode.BROKEN_PIPE == 141
+    assert err == ""
 
 
 def test_a_demo_whose_companion_cannot_start_ends_in_one_line_of_its_own(tmp_path: Path) -> None:

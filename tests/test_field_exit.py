@@ -108,8 +108,11 @@ def test_a_refused_end_mode_is_reported_and_a_miss_exits_1(
     captured = capsys.readouterr()
     assert code == 1  # ran, not intercepted in 15 s
     # the loopback copter has no RTL: it answers MAV_RESULT_FAILED, which is said, not hidden
-    assert "on_exit: rtl: NOT APPLIED: RTL refused (result 4)" in captured.out
-    assert "ezcompanion: warning: on_exit rtl: RTL refused (result 4)" in captured.err
+    assert "on_exit: rtl: NOT APPLIED: RTL refused: MAV_RESULT_FAILED (4)" in captured.out
+    assert "ezcompanion: warning: on_exit rtl: RTL refused: MAV_RESULT_FAILED (4)" in captured.err
+    # the refusal by the names a MAVLink user knows (a reviewer read "command 176 refused
+    # with result 4")
+    assert "MAV_CMD_DO_SET_MODE (176) refused: MAV_RESULT_FAILED (4)" in captured.out
 
 
 def test_every_other_end_has_its_own_code(

@@ -39,7 +39,14 @@ from ezcompanion.records import EventKind
 from ezcompanion.service.events import EventLog
 from ezcompanion.service.session import VehicleSession
 from ezcompanion.service.settings import OnExit
-from ezcompanion.wire import Message, is_fixed_wing, is_ground_vehicle, mavlink, mode_parameters
+from ezcompanion.wire import (
+    Message,
+    enum_name,
+    is_fixed_wing,
+    is_ground_vehicle,
+    mavlink,
+    mode_parameters,
+)
 
 __all__ = ["ExitReport", "end_mode", "exit_choice", "leave_vehicle"]
 
@@ -161,7 +168,7 @@ def leave_vehicle(
                        detail=f"{name} asked {_TRIES} times, never acknowledged")
     if ack[0] != mavlink.MAV_RESULT_ACCEPTED:
         return _report(events, now(), resolved, name, warn=True,
-                       detail=f"{name} refused (result {ack[0]})")
+                       detail=f"{name} refused: {enum_name('MAV_RESULT', ack[0])}")
     until = now() + _CONFIRM_S
     while session.mode != name and now() < until and session.connected:
         pump(until - now())

@@ -71,6 +71,7 @@ from ezcompanion.wire import (
     Link,
     Message,
     Projection,
+    enum_name,
     guided_mode,
     is_autopilot_heartbeat,
     is_fixed_wing,
@@ -272,7 +273,8 @@ class VehicleSession(StreamRequests):
             self.events.emit(
                 EventKind.COMMAND_ACK,
                 now,
-                f"command {msg.command} refused with result {msg.result}",
+                f"{enum_name('MAV_CMD', msg.command)} refused: "
+                f"{enum_name('MAV_RESULT', msg.result)}",
                 command=int(msg.command),
                 result=int(msg.result),
             )

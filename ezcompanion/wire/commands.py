@@ -125,6 +125,13 @@ def roll_setpoint(
     )
 
 
+def enum_name(enum: str, value: int) -> str:
+    """``value`` of MAVLink enum ``enum`` as the standard names it, with its number
+    ("MAV_RESULT_FAILED (4)"); the number alone where the dialect has no such entry."""
+    entry = mavlink.enums.get(enum, {}).get(int(value))
+    return f"{entry.name} ({int(value)})" if entry is not None else f"{enum} {int(value)}"
+
+
 def mode_name(heartbeat: Message) -> str:
     """The flight mode a HEARTBEAT reports, as the autopilot names it ("GUIDED", "OFFBOARD")."""
     return str(mavutil.mode_string_v10(heartbeat))

@@ -113,6 +113,9 @@ def test_a_refused_end_mode_is_reported_and_a_miss_exits_1(
     # the refusal by the names a MAVLink user knows (a reviewer read "command 176 refused
     # with result 4")
     assert "MAV_CMD_DO_SET_MODE (176) refused: MAV_RESULT_FAILED (4)" in captured.out
+    # and why it ended (a reviewer's read "not intercepted; miss distance 5.088 m": the
+    # time limit unsaid)
+    assert "ended: not intercepted (--max-time 15 s reached); miss distance" in captured.out
 
 
 def test_every_other_end_has_its_own_code(

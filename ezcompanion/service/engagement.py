@@ -326,8 +326,9 @@ class Engagement:
                 self._send(message)
                 self.brakes_sent += 1
 
-    def finish(self, now: float) -> EngagementOutcome:
-        """The end: stop, report the outcome (``ended`` event) and keep it. A vehicle still
+    def finish(self, now: float, why: str | None = None) -> EngagementOutcome:
+        """The end: stop, report the outcome (``ended`` event, with ``why`` it ended where
+        the engagement itself did not: the time limit, a stop) and keep it. A vehicle still
         being guided is told to stop where it is (the airframes that can): the last
         velocity sent was a full one, which PX4 flew for its 1 s and ArduCopter for its 3 s
         (GUID_TIMEOUT) past the target, unless an end mode took it first."""
@@ -348,6 +349,8 @@ class Engagement:
             zones_entered=tuple(self.zones_entered.items()),
         )
         verdict = "intercepted" if intercepted else "not intercepted"
+        if why is not None and not intercepted:
+            verdict += f" ({why})"
         if math.isinf(self.loop.miss_distance_m):  # the law never ran: no miss to speak of
             detail = "never guided (no vehicle in GUIDED with a fresh position)"
         else:

@@ -374,18 +374,24 @@ class CompanionService:
         assert link is not None
         started_s = clock.now_s()
         self._started_wall_s = time.monotonic()
+        why = None  # what ended it, where the engagement did not
         while not self._stop.is_set() and self.phase is not Phase.DONE:
             now = clock.now_s()
             if self._time_up(now, started_s, max_time_s):
+                why = f"--max-time {max_time_s:g} s reached"
                 break
             link.wait_readable(clock.wait_wall_s(self._due_s(now) - now))
             if not self._ticking():  # (while ticking, each tick takes it: _tick)
                 self._take_pending_scenario(clock.now_s())
             if not self._take_frames(link, started_s, max_time_s):
+                if self._time_up(clock.now_s(), started_s, max_time_s):
+                    why = f"--max-time {max_time_s:g} s reached"
                 break
             self._due_work(clock.now_s())
+        if self._stop.is_set() and why is None:
+            why = "stopped"
         self.phase = Phase.DONE
-        self.engagement.finish(clock.now_s())
+        self.engagement.finish(clock.now_s(), why)
         commanded = self.engagement.setpoints_sent + self.engagement.brakes_sent > 0
         self.exit_report = leave_vehicle(  # a defined end: the mode of on_exit (ending.py)
             self.settings.on_exit, self.session, self.events, commanded=commanded,

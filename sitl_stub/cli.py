@@ -124,6 +124,14 @@ def run(args: argparse.Namespace) -> int:
         with stop_on_signals(done), stub:
             if stub.serial_device is not None:
                 print(f"sitl-stub: serial port {stub.serial_device}", flush=True)
+            # one line that it runs (a reviewer's hand-started stub, silent, looked hung)
+            settings = config.settings
+            print(f"sitl-stub: {settings.profile} vehicle {settings.system_id} on "
+                  f"{settings.connect}, {settings.speedup:g}x"
+                  + (", in lockstep: its clock waits for `ezcompanion run --lockstep`"
+                     if args.lockstep else "")
+                  + (f", for {args.duration:g} s" if args.duration is not None else "")
+                  + " (Ctrl-C ends it)", flush=True)  # fmt: skip
             while stub.running and not done.wait(0.2):
                 pass
     finally:

@@ -39,12 +39,15 @@ def test_cli_runs_for_duration_and_writes_truth(tmp_path: Path) -> None:
         )
         try:
             beat = gcs.recv("HEARTBEAT", 10.0)
-            _, err = proc.communicate(timeout=15.0)
+            out, err = proc.communicate(timeout=15.0)
         finally:
             if proc.poll() is None:
                 proc.kill()
                 proc.wait()
     assert proc.returncode == 0, err
+    # one line that it runs (a hand-started stub had said nothing and looked hung)
+    assert out.splitlines() == [f"sitl-stub: copter vehicle 9 on udpout:127.0.0.1:{gcs.port}, "
+                                "10x, for 3 s (Ctrl-C ends it)"]  # fmt: skip
     assert beat is not None and beat.get_srcSystem() == 9  # from the file
     assert beat.type == 2  # quadrotor: the flag overrides the file's plane
     with truth.open(encoding="utf-8") as f:

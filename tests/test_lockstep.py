@@ -276,6 +276,34 @@ def test_a_lockstep_companion_refuses_a_vehicle_that_runs_its_own_clock() -> Non
     assert service.setpoints_sent == 0 and outcome
 
 
+def test_a_companion_not_in_lockstep_says_a_lockstep_vehicle_waits_for_it() -> None:
+    """The other way round: a `sitl-stub --lockstep` sends nothing but its requests for time
+    (TIMESYNC at t = 0), a heartbeat neither, until answered; a reviewer's companion without
+    --lockstep waited a minute for a vehicle, nothing said. It says so once, and flies
+    nothing."""
+    port = free_udp_port()
+    scenario = load_scenario(CONFIG / "paper_scenario1.yaml")
+    settings_ = companion_settings(scenario, connect=f"udpin:127.0.0.1:{port}", engage=True)
+    events = EventLog()
+    service = CompanionService(scenario, settings_, events=events)  # not in lockstep
+    thread = threading.Thread(target=lambda: service.run(max_time_s=60.0))
+    thread.start()
+    try:
+        time.sleep(0.5)
+        with SitlStub(make_config(port, speedup=10.0), lockstep=True):
+            deadline = time.monotonic() + 30.0
+            while time.monotonic() < deadline and not any(
+                    "lockstep" in e.message for e in events.of_kind(EventKind.WARNING)):
+                time.sleep(0.05)
+            time.sleep(1.5)  # (three more of its requests: said once)
+    finally:
+        service.stop()
+        thread.join(timeout=10.0)
+    said = [e for e in events.of_kind(EventKind.WARNING) if "lockstep" in e.message]
+    assert len(said) == 1 and "run with --lockstep" in said[0].message, said
+    assert service.setpoints_sent == 0 and not events.of_kind(EventKind.VEHICLE_FOUND)
+
+
 def test_a_vehicle_is_trusted_in_lockstep_once_it_stopped_within_a_grant_and_asked_again() -> None:
     """A lockstep companion asks nothing of the vehicle (mode, setpoints) before the vehicle
     has shown that it waits for its grants; one on its own clock is refused first. (With

@@ -362,6 +362,7 @@ class CompanionService:
             self._session = VehicleSession(
                 self.scenario, s, self.events, link, lambda msg: self._send(msg)
             )
+            self._session.lockstep = self._lockstep is not None
             self.events.emit(EventKind.LISTENING, self.clock.now_s(), f"link open on {s.connect}")
             self._serve(max_time_s)
         assert self.outcome is not None

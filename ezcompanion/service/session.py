@@ -89,6 +89,9 @@ _MODE_HEARTBEAT_AFTER_S = 0.1
 _DISCOVERY_S = 1.5  # listen this long for other autopilots before locking on one
 _SPOOF_HOLD_S = 3.0  # a heartbeat conflict holds guidance this long after the last one
 _TELEMETRY_HOLD_S = 0.5  # a refused position holds guidance this long after the last one
+# a TIMESYNC request stamped below this (ns) is a lockstep vehicle's at t = 0, waiting (an
+# autopilot's own request carries its time since boot, seconds at least)
+_LOCKSTEP_ASK_NS = 1_000_000
 _ORIGIN_RETRY_S = 0.5
 _ORIGIN_TRIES = 6  # then the scenario's origin is assumed (with a warning)
 # heard again disarmed after this long with nothing at all heard from it (or three periods
@@ -149,6 +152,8 @@ class VehicleSession(StreamRequests):
         self.connected = False
         self.refused = False  # several autopilots heard: none will be guided
         self.refused_frames = 0
+        self.lockstep = False  # the service follows the vehicle's clock (the runner sets it)
+        self._lockstep_said = False
         self._discovery_until_s: float | None = None
         self.alarms = Alarms(events)
         self._judge = HeartbeatJudge()
@@ -216,6 +221,17 @@ class VehicleSession(StreamRequests):
         safety argument reads are answered (or given up on): the frame can be latched."""
         return self.telemetry.origin_known and self.parameters.settled
 
+    def _say_lockstep_asked(self, msg: Message, now: float) -> None:
+        """A `sitl-stub --lockstep` asks for time (TIMESYNC tc1 = 0) and sends nothing, a
+        heartbeat neither, until answered: heard by a companion not in lockstep, say so once
+        (a reviewer's waited a minute for a vehicle, nothing said)."""
+        if self.lockstep or int(msg.tc1) != 0 or int(msg.ts1) >= _LOCKSTEP_ASK_NS:
+            return  # (an autopilot's own timesync request carries its clock: larger)
+        self._lockstep_said = True
+        self.events.emit(EventKind.WARNING, now, "a vehicle in lockstep asks for its time "
+                         "(TIMESYNC at t = 0) and waits for it: run with --lockstep to fly "
+                         "it", asked_ns=int(msg.ts1))  # fmt: skip
+
     # --- incoming -------------------------------------------------------------------------
 
     def on_frame(self, frame: Frame, now: float) -> str | None:
@@ -225,6 +241,8 @@ class VehicleSession(StreamRequests):
             self._on_heartbeat(frame, now)
             return None
         if not self.locked or (msg.get_srcSystem(), msg.get_srcComponent()) != self.target:
+            if not self.locked and kind == "TIMESYNC" and not self._lockstep_said:
+                self._say_lockstep_asked(msg, now)
             return None
         if not self.connected:  # the link lost: nothing is taken before its heartbeat
             return None  # (whose silence before it tells a reboot from a disarm)

@@ -13,6 +13,7 @@ holds files.
 from __future__ import annotations
 
 import itertools
+import shutil
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -342,6 +343,22 @@ def run_service(
     return ExitCode.FAILED
 
 
+def typed_name(argv0: str | None = None) -> str:
+    """``ezcompanion`` as the user can type it again: the name where it is on PATH, else the
+    path it was started by (``.venv/bin/ezcompanion`` after ``make demo``, which a
+    reviewer's demo had printed as ``ezcompanion``, not found)."""
+    started = Path(sys.argv[0] if argv0 is None else argv0)
+    if started.name != "ezcompanion":  # python -m ezcompanion, or a test: the name
+        return "ezcompanion"
+    on_path = shutil.which("ezcompanion")
+    if on_path is not None and Path(on_path).resolve() == started.resolve():
+        return "ezcompanion"
+    try:
+        return str(started.resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(started)
+
+
 def run_scale(
     config: Path,
     *,
@@ -432,10 +449,11 @@ def run_demo(
         if zenoh_listen is None and not endpoint.endswith(":7447"):
             print(f"    tcp/127.0.0.1:7447 is taken: telemetry on {endpoint} (choose with "
                   "--zenoh-listen ENDPOINT)")  # fmt: skip
-        print(f"    telemetry on {endpoint}: watch with `ezcompanion monitor --connect {endpoint}`")
+        me = typed_name()
+        print(f"    telemetry on {endpoint}: watch with `{me} monitor --connect {endpoint}`")
         if watch:
             print(
-                f"    or in Foxglove: `ezcompanion foxglove --connect {endpoint}`, then open "
+                f"    or in Foxglove: `{me} foxglove --connect {endpoint}`, then open "
                 "the WebSocket connection it prints",
                 flush=True,
             )

@@ -43,9 +43,12 @@ __all__ = [
 DEFAULT_BAUD = 57600
 MAX_BAUD = 12_000_000  # above any UART a flight controller has
 
+# (the loopback ones first: one on the network needs a signing key or --allow-unsigned, and a
+# reviewer who took the first example was then refused it)
 _EXAMPLES = (
-    "udpin:0.0.0.0:14550, udpout:127.0.0.1:14550, tcp:127.0.0.1:5760, /dev/ttyACM0,57600, "
-    "udp://:14540, udpin://0.0.0.0:14550, tcp://127.0.0.1:5760 or serial:///dev/ttyACM0:57600"
+    "udpin:127.0.0.1:14550, udpout:127.0.0.1:14550, tcp:127.0.0.1:5760, /dev/ttyACM0,57600, "
+    "udp://127.0.0.1:14540, tcp://127.0.0.1:5760, serial:///dev/ttyACM0:57600 or, signed, "
+    "udpin:0.0.0.0:14550"
 )
 _LABEL = re.compile(r"^(?!-)[A-Za-z0-9_-]{1,63}(?<!-)$")
 _WINDOWS_PORT = re.compile(r"^COM[0-9]{1,3}$", re.IGNORECASE)

@@ -20,7 +20,7 @@ from test_gate_check import _log as flight_log
 
 from ezcompanion import __version__
 from ezcompanion.cli import _parser, main
-from ezcompanion.commands import output_directory
+from ezcompanion.commands import output_directory, typed_name
 from ezcompanion.exit_codes import ExitCode
 from sitl_stub.cli import _parser as stub_parser
 from sitl_stub.cli import main as stub_main
@@ -84,6 +84,23 @@ def test_a_bad_flag_is_one_line_and_exit_2(
     line = one_line(capsys)
     assert line.startswith("ezcompanion") and ": error: " in line
     assert flag in line and said in line
+
+
+def test_the_demo_names_the_command_as_it_can_be_typed_again(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A reviewer's `make demo` printed "watch with `ezcompanion monitor ...`", which is not
+    on PATH after it: `.venv/bin/ezcompanion` is what was run."""
+    script = tmp_path / ".venv" / "bin" / "ezcompanion"
+    script.parent.mkdir(parents=True)
+    script.write_text("#!/bin/sh\n")
+    script.chmod(0o755)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("PATH", "/usr/bin:/bin")
+    assert typed_name(str(script)) == ".venv/bin/ezcompanion"
+    monkeypatch.setenv("PATH", f"{script.parent}:/usr/bin:/bin")  # an activated venv
+    assert typed_name(str(script)) == "ezcompanion"
+    assert typed_name(str(tmp_path / "ezcompanion" / "__main__.py")) == "ezcompanion"
 
 
 def test_a_reader_that_goes_away_ends_a_command_silently(tmp_path: Path) -> None:

@@ -147,7 +147,11 @@ def test_a_tcp_client_with_no_server_ends_in_one_line_when_its_budget_runs_out(
     argv = ["run", "--config", str(SCENARIO), "--connect", f"tcp://127.0.0.1:{port}",
             "--max-time", "1.5", "--no-telemetry"]  # fmt: skip
     assert main(argv) == ExitCode.LINK_FAILURE
-    (error,) = capsys.readouterr().err.splitlines()
+    captured = capsys.readouterr()
+    (error,) = captured.err.splitlines()
+    # the link's first line says it is not up (a reviewer read "link open on tcp:..." with
+    # nothing accepting)
+    assert f"listening: link open on {url} (not up yet: no server accepted" in captured.out
     assert re.fullmatch(
         r"ezcompanion: error: connect: no vehicle heard in [0-9.]+ s: no server accepted a "
         r"connection \(Connection refused, [0-9]+ attempts\) "

@@ -363,7 +363,9 @@ class CompanionService:
                 self.scenario, s, self.events, link, lambda msg: self._send(msg)
             )
             self._session.lockstep = self._lockstep is not None
-            self.events.emit(EventKind.LISTENING, self.clock.now_s(), f"link open on {s.connect}")
+            down = link.down_reason  # a tcp: client with no server yet, a serial port missing
+            self.events.emit(EventKind.LISTENING, self.clock.now_s(), f"link open on {s.connect}"
+                             + (f" (not up yet: {down}; trying again)" if down else ""))
             self._serve(max_time_s)
         assert self.outcome is not None
         return self.outcome

@@ -12,11 +12,13 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import pytest
 import yaml
 from test_gate_check import _log as flight_log
+from test_telemetry import free_endpoint
 
 from ezcompanion import __version__
 from ezcompanion.cli import _parser, main
@@ -101,6 +103,48 @@ def test_the_demo_names_the_command_as_it_can_be_typed_again(
     monkeypatch.setenv("PATH", f"{script.parent}:/usr/bin:/bin")  # an activated venv
     assert typed_name(str(script)) == "ezcompanion"
     assert typed_name(str(tmp_path / "ezcompanion" / "__main__.py")) == "ezcompanion"
+
+
+def _processes_naming(text: str) -> list[str]:
+    """The command lines of this machine's processes that name ``text`` (/proc)."""
+    found = []
+    for cmdline in Path("/proc").glob("[0-9]*/cmdline"):
+        try:
+            line = cmdline.read_bytes().replace(b"\0", b" ").decode(errors="replace")
+        except OSError:  # (gone meanwhile)
+            continue
+        if text in line:
+            found.append(line)
+    return found
+
+
+def test_a_demo_interrupted_alone_ends_its_companion_and_vehicle(tmp_path: Path) -> None:
+    """A reviewer's SIGINT to the demo's process alone (not its group, as Ctrl-C sends)
+    left its companion guiding for 12 s after the demo ended. The demo now ends both: exit
+    130, and no process of its run left."""
+    out = tmp_path / "out"
+    demo = subprocess.Popen(
+        [sys.executable, "-m", "ezcompanion", "demo", "--scenario", "1", "--watch", "--out",
+         str(out), "--zenoh-listen", free_endpoint()],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # (a shell's `&`)
+    )  # fmt: skip
+    assert demo.stdout is not None
+    try:
+        for line in demo.stdout:  # at 1x: the companion guiding, the vehicle flying
+            if "engaged:" in line:
+                break
+        assert _processes_naming(str(out)), "no companion or vehicle ran"
+        drain = threading.Thread(target=demo.stdout.read, daemon=True)  # (its children's
+        drain.start()  # stderr is this pipe too: read on, but judge when the demo ends)
+        demo.send_signal(signal.SIGINT)
+        demo.wait(timeout=60.0)
+    finally:
+        if demo.poll() is None:
+            demo.kill()
+            demo.wait()
+    assert demo.returncode == ExitCode.INTERRUPTED
+    assert _processes_naming(str(out)) == []
 
 
 def test_a_reader_that_goes_away_ends_a_command_silently(tmp_path: Path) -> None:

@@ -115,6 +115,18 @@ def wait_for_line(stream: IO[str], marker: str, quiet: bool = True) -> None:
     raise RuntimeError(f"the process ended before printing {marker!r}")
 
 
+def _end(process: subprocess.Popen[bytes] | subprocess.Popen[str]) -> None:
+    """Stop ``process`` if it still runs: SIGTERM, then SIGKILL after 10 s."""
+    if process.poll() is not None:
+        return
+    process.terminate()
+    try:
+        process.wait(timeout=10.0)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.wait()
+
+
 def _forward(stream: IO[str], quiet: bool) -> None:
     for line in stream:
         if not quiet:
@@ -271,28 +283,32 @@ def run_loopback(
     # started first would fly on in AUTO while the companion loads.
     companion = subprocess.Popen(companion_cmd, stdout=subprocess.PIPE, text=True, bufsize=1)
     assert companion.stdout is not None
+    stub: subprocess.Popen[bytes] | None = None
+    forward: threading.Thread | None = None
     try:
-        wait_for_line(companion.stdout, "listening:", quiet)
-    except RuntimeError:  # it said why on its stderr, which is ours
-        raise EzCompanionError(f"the companion ended before its link opened (exit "
-                               f"{companion.wait()}): its error is above") from None
-    forward = threading.Thread(target=_forward, args=(companion.stdout, quiet), daemon=True)
-    forward.start()
-    stub = subprocess.Popen(stub_cmd, stdout=subprocess.DEVNULL if quiet else None)
-    try:
-        wall_s = duration * _LOCKSTEP_WALL_PER_SIM_S if lockstep else duration / speedup
-        code = companion.wait(timeout=wall_s + _GRACE_WALL_S)
-    except subprocess.TimeoutExpired:
-        companion.kill()
-        code = companion.wait()
-    finally:
-        stub.terminate()
         try:
-            stub.wait(timeout=10.0)
+            wait_for_line(companion.stdout, "listening:", quiet)
+        except RuntimeError:  # it said why on its stderr, which is ours
+            raise EzCompanionError(f"the companion ended before its link opened (exit "
+                                   f"{companion.wait()}): its error is above") from None
+        forward = threading.Thread(target=_forward, args=(companion.stdout, quiet), daemon=True)
+        forward.start()
+        stub = subprocess.Popen(stub_cmd, stdout=subprocess.DEVNULL if quiet else None)
+        wall_s = duration * _LOCKSTEP_WALL_PER_SIM_S if lockstep else duration / speedup
+        try:
+            code = companion.wait(timeout=wall_s + _GRACE_WALL_S)
         except subprocess.TimeoutExpired:
-            stub.kill()
-            stub.wait()
-        forward.join(timeout=5.0)
+            companion.kill()
+            code = companion.wait()
+    finally:
+        # (this process interrupted, a SIGINT to it alone: the companion ends as on its own
+        # SIGTERM, the vehicle left as its on_exit says; a reviewer's had flown on for 12 s
+        # after the demo ended)
+        _end(companion)
+        if stub is not None:
+            _end(stub)
+        if forward is not None:
+            forward.join(timeout=5.0)
     try:
         judgement = judge_run(scenario, out_dir)[2]
     except (OSError, ValueError):  # the companion never guided: no view, judge the truth

@@ -9,6 +9,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -89,7 +90,8 @@ def test_sigusr1_dumps_every_threads_stack_and_the_run_goes_on() -> None:
     """``kill -USR1`` on a running stub writes each thread's Python stack to stderr (the
     simulation thread's in ``sitl_stub/server.py``) and the stub keeps running; SIGTERM then
     ends it with exit code 0. The loopback tests ask a stub that did not stop for this
-    before they kill it. Asked 20 times, 20 ms apart: with faulthandler's own C-level
+    before they kill it. Asked 20 times, each as soon as the dump before it is out (20 ms
+    apart, two merged on a loaded machine): with faulthandler's own C-level
     handler the stub died of SIGSEGV in 1 of 6 runs of this test (in 3 of 10 runs asked 30
     times, 30 ms apart; once in CI with one signal)."""
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as listener:
@@ -100,19 +102,30 @@ def test_sigusr1_dumps_every_threads_stack_and_the_run_goes_on() -> None:
              f"udpout:127.0.0.1:{port}", "--duration", "60"],
             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
         )  # fmt: skip
+        assert stub.stderr is not None
+        chunks: list[bytes] = []  # its stderr, read as it comes
+        reader = threading.Thread(target=lambda: chunks.extend(iter(
+            lambda: stub.stderr.read1(4096), b"")), daemon=True)  # type: ignore[union-attr]
+        reader.start()
         try:
             listener.settimeout(30.0)
             listener.recvfrom(4096)  # it runs: a frame came
-            for _ in range(_DUMPS):
+            for k in range(1, _DUMPS + 1):
                 stub.send_signal(signal.SIGUSR1)
-                time.sleep(0.02)
-            time.sleep(0.5)
+                # each dump before the next signal: two that come while its main thread
+                # waits for the CPU are one (a signal is pending or not), and a loaded
+                # machine had merged them
+                deadline = time.monotonic() + 30.0
+                while (b"".join(chunks).count(b"Current thread 0x") < k
+                       and time.monotonic() < deadline):  # fmt: skip
+                    time.sleep(0.005)
             assert stub.poll() is None  # still running
             stub.terminate()
-            _, err = stub.communicate(timeout=10.0)
+            stub.wait(timeout=10.0)
+            reader.join(timeout=10.0)
         finally:
             stub.kill()
-    text = err.decode()
+    text = b"".join(chunks).decode()
     # each dump: "Current thread 0x..." and "Thread 0x..." (the simulation's)
     assert text.count("hread 0x") >= 2 * _DUMPS, text
     assert "sitl_stub/server.py" in text, text

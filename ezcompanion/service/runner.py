@@ -824,8 +824,9 @@ class CompanionService:
         if guidance.abandon_hold_s > 0.0:
             where = "the scenario's"
         elif not self.settings.abandon_check:
-            self.events.emit(EventKind.ABANDON, now, "abandon check off (companion."
-                             "abandon_check): a setpoint may not be safe to keep flying")
+            self.events.emit(EventKind.ABANDON, now, "abandon check off: a setpoint is not "
+                             "checked safe to keep flying should the companion stop "
+                             "(companion.abandon_check: true checks each; docs/field.md)")
             return
         elif self.loop.assume_abandon(turn_s=profile.abandon_turn_s,
                                       hold_s=profile.abandon_straight_s,

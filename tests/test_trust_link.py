@@ -172,10 +172,12 @@ def test_an_origin_change_during_the_engagement_is_a_failsafe_never_applied(
     # Issue 10: one GPS_GLOBAL_ORIGIN 1 m east shifted 316 of 396 setpoints, and the truth
     # entered a zone by 0.594 m while the companion reported an intercept.
     mav = forger()
+    injected: list[float] = []  # the companion's clock as the origin is forged
 
     def attack(service: Any, relay: Relay, clock: Clock) -> None:
         assert wait_for(service, EventKind.ENGAGED)
         time.sleep(1.0 / SPEEDUP)
+        injected.append(service.clock.now_s())
         o = load_scenario(SCENARIO).origin
         # 1 m east as the vehicle (an ArduPilot) maps it: on its flat earth
         east_deg = 1.0 / ARDUPILOT_M_PER_DEG / math.cos(math.radians(o.lat_deg))
@@ -191,7 +193,9 @@ def test_an_origin_change_during_the_engagement_is_a_failsafe_never_applied(
     assert alarms  # 1 m, to the 1e-7 degree of the wire (1.1 cm)
     moved = float(alarms[0].message.split("moved by ")[1].split(" m")[0])
     assert moved == pytest.approx(1.0, abs=0.012)
-    failsafes = flight.events.of_kind(EventKind.FAILSAFE)
+    # the first failsafe from the forgery on (one before it, a stale one where the stub
+    # stalled 50 ms of wall time at 5x on a loaded machine, is not this test's: the audit)
+    failsafes = [f for f in flight.events.of_kind(EventKind.FAILSAFE) if f.time_s >= injected[0]]
     assert failsafes and failsafes[0].data["reason"] == "origin"
     assert [e.data["cause"] for e in flight.events.of_kind(EventKind.ABORTED)] == ["origin"]
     assert not flight.outcome.intercepted
@@ -270,7 +274,11 @@ def test_heartbeats_acks_and_a_stranger_on_the_port_steer_nothing(tmp_path: Path
     alarms = {e.data["cause"] for e in flight.events.of_kind(EventKind.ALARM)}
     assert "foreign_address" in alarms
     assert not flight.events.of_kind(EventKind.COMMAND_ACK)
-    assert not flight.events.of_kind(EventKind.FAILSAFE)  # refused, so nothing to hold
+    # refused, so nothing to hold (but a stale failsafe: at 5x, 50 ms of wall time with the
+    # stub stalled on a loaded machine is one, whatever the stranger sends; a reviewer's
+    # audit)
+    assert [f.data["reason"] for f in flight.events.of_kind(EventKind.FAILSAFE)
+            if f.data["reason"] != "stale"] == []  # fmt: skip
     assert not flight.events.of_kind(EventKind.MODE, ) or all(
         "STABILIZE" not in e.message for e in flight.events.of_kind(EventKind.MODE))
     assert flight.outcome.setpoints_sent > 80  # guidance went on (4 s at 20 Hz)

@@ -16,6 +16,7 @@ import contextlib
 import logging
 import math
 import os
+import select
 import signal
 import sys
 import threading
@@ -137,9 +138,13 @@ def guarded(prog: str, job: Callable[[], int]) -> int:
     except EzCompanionError as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return ExitCode.BAD_INPUT
-    except BrokenPipeError:  # the reader went away (`| head`): nothing to tell it, and what
-        # is still buffered for it goes nowhere (a reviewer's `simulate | head -3` had ended
-        # in "error: Broken pipe", exit 4, or 1 where the flush at exit raised it again)
+    except BrokenPipeError as exc:
+        if not _stdout_gone():  # another pipe or socket: an error like any other
+            print(f"{prog}: error: {exc.strerror or exc}", file=sys.stderr)
+            return ExitCode.IO_ERROR
+        # the reader of our output went away (`| head`): nothing to tell it, and what is
+        # still buffered for it goes nowhere (a reviewer's `simulate | head -3` had ended in
+        # "error: Broken pipe", exit 4, or 1 where the flush at exit raised it again)
         with contextlib.suppress(OSError, ValueError):
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return ExitCode.BROKEN_PIPE
@@ -159,6 +164,16 @@ def guarded(prog: str, job: Callable[[], int]) -> int:
             file=sys.stderr,
         )
         return ExitCode.INTERNAL_ERROR
+
+
+def _stdout_gone() -> bool:
+    """Standard output is a pipe whose reader has closed it (poll says POLLERR for it)."""
+    try:
+        poller = select.poll()
+        poller.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(events & select.POLLERR for _, events in poller.poll(0))
+    except (AttributeError, OSError, ValueError):  # (no poll, or no real stdout)
+        return False
 
 
 @contextmanager

@@ -351,15 +351,23 @@ def typed_name(argv0: str | None = None) -> str:
     path it was started by (``.venv/bin/ezcompanion`` after ``make demo``, which a
     reviewer's demo had printed as ``ezcompanion``, not found)."""
     started = Path(sys.argv[0] if argv0 is None else argv0)
-    if started.name != "ezcompanion":  # python -m ezcompanion, or a test: the name
+    if started.name == "__main__.py":  # python -m ezcompanion, by this interpreter
+        return f"{_typed_path(Path(sys.executable))} -m ezcompanion"
+    if started.name != "ezcompanion":  # (a test's runner)
         return "ezcompanion"
     on_path = shutil.which("ezcompanion")
     if on_path is not None and Path(on_path).resolve() == started.resolve():
         return "ezcompanion"
+    return _typed_path(started)
+
+
+def _typed_path(path: Path) -> str:
+    """``path`` relative to the working directory where it is under it, else as it is (its
+    links kept: a virtual environment's python is a link to the one it was made from)."""
     try:
-        return str(started.resolve().relative_to(Path.cwd().resolve()))
+        return str(path.absolute().relative_to(Path.cwd()))
     except ValueError:
-        return str(started)
+        return str(path)
 
 
 def run_scale(

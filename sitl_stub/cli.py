@@ -127,9 +127,10 @@ def run(args: argparse.Namespace) -> int:
             # one line that it runs (a reviewer's hand-started stub, silent, looked hung)
             settings = config.settings
             print(f"sitl-stub: {settings.profile} vehicle {settings.system_id} on "
-                  f"{settings.connect}, {settings.speedup:g}x"
-                  + (", in lockstep: its clock waits for `ezcompanion run --lockstep`"
-                     if args.lockstep else "")
+                  f"{settings.connect}, "
+                  + (f"in lockstep (at most {settings.speedup:g}x): its clock waits for "
+                     "`ezcompanion run --lockstep`" if args.lockstep else
+                     f"{settings.speedup:g}x")
                   + (f", for {args.duration:g} s" if args.duration is not None else "")
                   + " (Ctrl-C ends it)", flush=True)  # fmt: skip
             while stub.running and not done.wait(0.2):

@@ -78,7 +78,8 @@ class LockstepGate:
         wall = time.monotonic()
         if self._waiting_since_wall_s is None:
             self._waiting_since_wall_s = wall
-        elif not self._warned and wall - self._waiting_since_wall_s > _WARN_WALL_S:
+        elif (not self._warned and self.answers == 0  # (once answered: given_up says it)
+              and wall - self._waiting_since_wall_s > _WARN_WALL_S):
             self._warned = True
             _log.warning(
                 "lockstep: no answer for %.0f s at t = %.3f s (is the companion running with "

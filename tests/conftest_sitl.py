@@ -115,7 +115,7 @@ class Gcs:
                    clock: Callable[[], float] = time.monotonic, wall_s: float = 30.0
                    ) -> list[tuple[float, Msg]]:
         """(``clock()`` as each was read, message) of ``types`` in the order they came, up to
-        the first for which ``done`` holds (kept), or ``wall_s`` of wall time. Ended by a
+        the first for which ``done`` holds (kept); none within ``wall_s`` fails. Ended by a
         message (by its stamp), not by a clock: at 10-40x a test descheduled for 0.1 s of
         wall time would otherwise see seconds of the stub's time go by unread, and leave in
         its socket what came meanwhile."""
@@ -128,8 +128,9 @@ class Gcs:
                 continue
             out.append((clock(), msg))
             if done(msg):
-                break
-        return out
+                return out
+        raise AssertionError(f"no message of {wanted} ended the read in {wall_s:g} s "
+                             f"({len(out)} read)")
 
     def collect_until(self, types: str | tuple[str, ...], done: Callable[[Msg], bool]
                       ) -> list[Msg]:

@@ -22,6 +22,7 @@ from test_telemetry import free_endpoint
 
 from ezcompanion import __version__
 from ezcompanion.cli import _parser, main
+from ezcompanion.cli_args import guarded
 from ezcompanion.commands import output_directory, typed_name
 from ezcompanion.exit_codes import ExitCode
 from sitl_stub.cli import _parser as stub_parser
@@ -88,6 +89,19 @@ def test_a_bad_flag_is_one_line_and_exit_2(
     assert flag in line and said in line
 
 
+def test_a_broken_pipe_that_is_not_the_output_is_an_error(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Only a reader of our own output that went away ends silently (a reviewer: every EPIPE
+    had, a socket's too)."""
+
+    def job() -> int:
+        raise BrokenPipeError(32, "Broken pipe")
+
+    assert guarded("ezcompanion", job) == ExitCode.IO_ERROR  # (stdout here: pytest's)
+    assert capsys.readouterr().err == "ezcompanion: error: Broken pipe\n"
+
+
 def test_the_demo_names_the_command_as_it_can_be_typed_again(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -102,7 +116,7 @@ def test_the_demo_names_the_command_as_it_can_be_typed_again(
     assert typed_name(str(script)) == ".venv/bin/ezcompanion"
     monkeypatch.setenv("PATH", f"{script.parent}:/usr/bin:/bin")  # an activated venv
     assert typed_name(str(script)) == "ezcompanion"
-    assert typed_name(str(tmp_path / "ezcompanion" / "__main__.py")) == "ezcompanion"
+    assert typed_name(str(tmp_path / "ezcompanion" / "__main__.py")).endswith(" -m ezcompanion")
 
 
 def _processes_naming(text: str) -> list[str]:

@@ -25,7 +25,8 @@ _START_S = 1.7e9  # a log's wall clock
 def _log(path: Path, *, jump_at: int | None = None, autopilot: bool = True,
          step_back_at: int | None = None, reboot_at: int | None = None,
          attitude_ahead_ms: int | None = None, own: bool = False,
-         stall_at: int | None = None, other: bool = False, speedup: float = 1.0) -> Path:
+         stall_at: int | None = None, other: bool = False, speedup: float = 1.0,
+         boot_from_ms: int = 1000) -> Path:
     """``own``: the logger's own heartbeat too, once a second whatever the vehicle does
     (a companion's tlog); ``stall_at``: the logger stopped for 8 s there (nothing logged,
     the vehicle flying on); ``other``: a second autopilot's heartbeat beside each of the
@@ -45,7 +46,7 @@ def _log(path: Path, *, jump_at: int | None = None, autopilot: bool = True,
         log.write(frame(vehicle, M.MAVLink_gps_global_origin_message(
             deg_to_e7(ORIGIN.lat_deg), deg_to_e7(ORIGIN.lon_deg), m_to_mm(ORIGIN.alt_m), 0)),
             _START_S + 0.01)  # fmt: skip
-        clock_s, boot_ms = _START_S + 0.02, 1000
+        clock_s, boot_ms = _START_S + 0.02, boot_from_ms
         for k in range(250):  # 5 s at 50 Hz, north at 5 m/s, a heartbeat a second
             if k == step_back_at:
                 clock_s -= 1.0  # the logger's wall clock set back (NTP)
@@ -114,6 +115,12 @@ def test_a_run_at_10x_is_judged_on_its_own_clock(
     assert main(["gate-check", str(log)]) == ExitCode.FAILED
     assert ("the vehicle's clock ran 10.0 times the log's (a run with --lockstep or "
             "--speedup?)") in capsys.readouterr().out
+    # a vehicle 60 s after its boot: its clock starts at its first stamp, not at 0 (a
+    # reviewer's counted a lost link at once and dropped 49 positions)
+    late = check_tlog(_log(tmp_path / "late.tlog", speedup=10.0, boot_from_ms=60_000),
+                      lockstep=True)  # fmt: skip
+    assert late.clean and late.lost == 0 and late.used["LOCAL_POSITION_NED"] == 250
+    assert any(line.startswith("no TIMESYNC in the log") for line in late.lines())
     report = check_tlog(_log(tmp_path / "clean.tlog"))  # (at the log's pace: nothing said)
     assert report.clock_ratio == pytest.approx(1.0, rel=0.01)
     assert not any("times the log's" in line for line in report.lines())

@@ -19,6 +19,7 @@ rate checks, link loss, the engagement's time limit) is measured on one of these
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Protocol
 
 from ezcompanion.errors import ConfigError
@@ -85,13 +86,16 @@ class LockstepClock:
 
     lockstep = True
 
-    def __init__(self, *, stall_wall_s: float = 5.0) -> None:
+    def __init__(self, *, stall_wall_s: float = 5.0,
+                 wall_s: Callable[[], float] = time.monotonic) -> None:
+        """``wall_s``: the wall clock (a log's own times, replayed: ``gate_check``)."""
         if not stall_wall_s > 0.0:
             raise ConfigError("stall_wall_s", stall_wall_s, "must be > 0")
         self.stall_wall_s = stall_wall_s
+        self._wall_s = wall_s
         self._base_s = 0.0  # clock time at the last advance of the vehicle's time
         self._vehicle_s: float | None = None  # the vehicle's time at that advance
-        self._moved_wall_s = time.monotonic()
+        self._moved_wall_s = wall_s()
 
     @property
     def running(self) -> bool:
@@ -109,15 +113,15 @@ class LockstepClock:
         if last is None:  # the vehicle's time from now on
             self._base_s = vehicle_s
             self._vehicle_s = vehicle_s
-            self._moved_wall_s = time.monotonic()
+            self._moved_wall_s = self._wall_s()
         elif vehicle_s < last - _RESTART_BACKSTEP_S:
             self._base_s = self.now_s()  # a new time base: carry on from here
             self._vehicle_s = vehicle_s
-            self._moved_wall_s = time.monotonic()
+            self._moved_wall_s = self._wall_s()
         elif vehicle_s > last:
             self._base_s = self.now_s() + (vehicle_s - last)
             self._vehicle_s = vehicle_s
-            self._moved_wall_s = time.monotonic()
+            self._moved_wall_s = self._wall_s()
         return self.now_s()
 
     def now_s(self) -> float:
@@ -125,7 +129,7 @@ class LockstepClock:
         vehicle is heard)."""
         if self._vehicle_s is None:
             return self._base_s
-        silent_wall_s = time.monotonic() - self._moved_wall_s
+        silent_wall_s = self._wall_s() - self._moved_wall_s
         return self._base_s + max(0.0, silent_wall_s - self.stall_wall_s)
 
     def wait_wall_s(self, clock_s: float) -> float:

@@ -304,11 +304,13 @@ def run_loopback(
         # (this process interrupted, a SIGINT to it alone: the companion ends as on its own
         # SIGTERM, the vehicle left as its on_exit says; a reviewer's had flown on for 12 s
         # after the demo ended)
-        _end(companion)
-        if stub is not None:
-            _end(stub)
-        if forward is not None:
-            forward.join(timeout=5.0)
+        try:
+            _end(companion)
+        finally:  # (the vehicle too, whatever comes meanwhile: a second Ctrl-C)
+            if stub is not None:
+                _end(stub)
+            if forward is not None:
+                forward.join(timeout=5.0)
     try:
         judgement = judge_run(scenario, out_dir)[2]
     except (OSError, ValueError):  # the companion never guided: no view, judge the truth

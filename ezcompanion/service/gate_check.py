@@ -23,6 +23,7 @@ from pathlib import Path
 
 from ezcompanion.config import GeoOrigin
 from ezcompanion.service.autopilots import autopilot_profile
+from ezcompanion.service.clock import LockstepClock
 from ezcompanion.service.session import gate_bound_m_s2
 from ezcompanion.service.settings import CompanionSettings
 from ezcompanion.service.state import TelemetryState
@@ -38,6 +39,9 @@ _EXAMPLES = 3
 # the service's default: no heartbeat of the vehicle's for this long is a lost link, after
 # which its positions are judged afresh (TelemetryState.forget_motion)
 _LINK_LOST_S = CompanionSettings.link_lost_after_s
+# the service's lockstep clock runs on wall time after this long without the vehicle's
+# time moving (``CompanionService``: link loss plus 7 s)
+_LOCKSTEP_STALL_S = _LINK_LOST_S + 7.0
 # a vehicle clock this much faster than the log's is named (a vehicle's crystal, or a SITL
 # at real time, is within a few percent)
 _FAST_CLOCK = 1.5
@@ -60,6 +64,7 @@ class GateReport:
     # (log time, the vehicle's time) from its first stamped sample to its last
     clock_span: tuple[float, float] = (0.0, 0.0)
     judged_by: str = "the log's times"
+    timesyncs: int = 0  # TIMESYNC frames in the log (a lockstep run's are many)
 
     @property
     def clock_ratio(self) -> float | None:
@@ -92,6 +97,9 @@ class GateReport:
                "break, they end it)"]  # fmt: skip
         if self.judged_by != "the log's times":
             out.insert(1, f"the companion's clock: {self.judged_by}")
+        if self.judged_by == "the vehicle's clock" and self.timesyncs == 0:
+            out.insert(2, "no TIMESYNC in the log: not a lockstep run? (on the vehicle's "
+                       "clock a stamp ahead of it is not judged)")  # fmt: skip
         for reason, count in self.reasons.most_common():
             out.append(f"  {count} x {reason}")
             out += [f"      {example}" for example in self.examples[reason]]
@@ -128,7 +136,12 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
     clock ran where that is more than 1.5 times (``clock_ratio``)."""
     report = GateReport(judged_by="the vehicle's clock" if lockstep else
                         "the log's times" if speedup == 1.0 else f"the log's times x {speedup:g}")
-    vehicle_s = 0.0  # the vehicle's time as far as its stamps have told it
+    # the lockstep companion's clock: the vehicle's stamps (a reboot's a new base), run on
+    # by the log's own times where they stall, as the service's by its wall clock
+    logged_now = [0.0]
+    vehicle_clock = (LockstepClock(stall_wall_s=_LOCKSTEP_STALL_S, wall_s=lambda: logged_now[0])
+                     if lockstep else None)  # fmt: skip
+    vehicle_s = 0.0  # the vehicle's newest stamp (for clock_ratio)
     vehicle_first: tuple[float, float] | None = None  # (log time, vehicle time) first heard
     state: TelemetryState | None = None
     first_s: float | None = None
@@ -140,7 +153,9 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
         if logged_s + shift_s < last_s:
             shift_s = last_s - logged_s
         last_s = logged_s + shift_s
+        logged_now[0] = last_s
         kind = msg.get_type()
+        report.timesyncs += kind == "TIMESYNC"
         source = (msg.get_srcSystem(), msg.get_srcComponent())
         if report.vehicle is None:
             if kind != "HEARTBEAT" or not is_autopilot_heartbeat(msg) or (
@@ -152,7 +167,7 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
             report.accel_bound_m_s2 = gate_bound_m_s2(accel_bound_m_s2 or 0.0,
                                                       accel_max_m_s2 or 0.0, profile)  # fmt: skip
             projection = Projection.of_autopilot(int(msg.autopilot))
-            heartbeat_s = vehicle_s if lockstep else last_s * speedup
+            heartbeat_s = last_s * speedup  # (in lockstep: taken again at the first stamp)
             continue
         if source != report.vehicle:
             continue
@@ -161,7 +176,12 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
             vehicle_s = max(vehicle_s, boot_ms / 1000.0)
             vehicle_first = vehicle_first or (last_s, vehicle_s)
             report.clock_span = (last_s - vehicle_first[0], vehicle_s - vehicle_first[1])
-        clock_s = vehicle_s if lockstep else last_s * speedup
+            if vehicle_clock is not None:
+                started = vehicle_clock.running
+                vehicle_clock.observe(boot_ms / 1000.0)
+                if not started:  # the clock starts here: the heartbeats count from it
+                    heartbeat_s = vehicle_clock.now_s()
+        clock_s = vehicle_clock.now_s() if vehicle_clock is not None else last_s * speedup
         if clock_s - heartbeat_s > _LINK_LOST_S and not lost:
             lost = True  # as the service: the link lost, what the vehicle did meanwhile
             report.lost += 1  # unknown; nothing taken until it is found again

@@ -387,7 +387,7 @@ class CompanionService:
             if not self._ticking():  # (while ticking, each tick takes it: _tick)
                 self._take_pending_scenario(clock.now_s())
             if not self._take_frames(link, started_s, max_time_s):
-                if self._time_up(clock.now_s(), started_s, max_time_s):
+                if not self._done:  # (it stops for the time limit, or the end)
                     why = f"--max-time {max_time_s:g} s reached"
                 break
             self._due_work(clock.now_s())

@@ -33,9 +33,9 @@ What the law uses, and why:
   lower only by less than the least delay seen (milliseconds), or by a vehicle clock a
   little faster than ours: the offset may go down by at most ``_AHEAD_S`` in all, a budget
   that refills at ``_AHEAD_RATE`` a second. A sample beyond it is refused with
-  ``Hold.GATE``, naming the message and how far ahead. At the companion's start it may go
-  down by ``_START_CATCH_UP_S`` more within ``_START_WINDOW_S`` (a starved start reads a
-  backlog: its first sample waited). (One LOCAL_POSITION_NED at the
+  ``Hold.GATE``, naming the message and how far ahead. For a position it may go down by
+  ``_START_CATCH_UP_S`` more within ``_START_WINDOW_S`` of the first position the companion
+  takes (a starved start reads a backlog: its first sample waited). (One LOCAL_POSITION_NED at the
   target stamped 3 s ahead had widened the gate by what 3 s allow and been taken:
   "intercepted" 5.5 m from the target; a burst of 22, each 99 ms past the one before, did
   the same where each was judged against the one before; one ATTITUDE stamped 9 s ahead
@@ -183,17 +183,23 @@ _CLOCK_SLEW = 0.2
 # 0.01%; a SITL runs at real time or behind it); a forger gets no more
 _AHEAD_S = 0.1
 _AHEAD_RATE = 0.05
-# ... and, for _START_WINDOW_S of our clock from the first sample the companion takes, by
-# this much more: that sample may have waited (a companion starved as it starts reads a
-# backlog, and each sample after the first claims a lower offset). A reviewer's companion,
+# ... and a position, for _START_WINDOW_S of our clock from the first position the
+# companion takes, by this much more: that sample may have waited (a companion starved as it
+# starts reads a backlog, and each sample after the first claims a lower offset; a window
+# of 1 s leaves room for a second stall while the backlog drains). A reviewer's companion,
 # starved at start-up beside two busy loops, had taken a gate failsafe before guidance
 # began: its first samples' delays, 20 ms apart in wall time, were 0.1 s on its 5x clock.
-# A forger gets as much in that window only (a sample that far ahead shows the vehicle
-# where it will be that much later, on its path: the vehicle's own samples, behind it, are
-# then dropped as reordered for _REORDER_S and named after); none after a lost link or a
-# reboot, mid-engagement (a first sample that waited is then retaken by a run, named)
+# Positions only: an attitude's yaw may move with the time its stamp claims (a reviewer's
+# forged ATTITUDE 0.59 s ahead had been taken 115 degrees off), and attitudes do not move
+# the clock. What it gives a forger, in that window alone: a position up to 0.6 s ahead on
+# the vehicle's own path (where the vehicle will be then; off it, the gate refuses it) is
+# taken and lowers the least offset, so the vehicle's own samples read that much older
+# (held as stale, failing closed) and, behind it, are dropped as reordered, or named a
+# second source where they are farther than _REORDER_S from every taken one. None after a
+# lost link that followed a taken sample, or a reboot: mid-engagement a first sample that
+# waited is retaken by a run, named.
 _START_CATCH_UP_S = 0.5
-_START_WINDOW_S = 0.5
+_START_WINDOW_S = 1.0
 # after a lost link, a position source is used only once its samples have come for this
 # long (our clock): its first was taken with no gate, and a forger's first, at the target,
 # would otherwise be flown (and judged an intercept) before the vehicle's own samples,
@@ -321,11 +327,11 @@ class _VehicleClock:
     least_s: float = math.nan  # the least offset seen in this time base (no slew)
     budget_s: float = _AHEAD_S  # how far it may still go down (refilling)
     budget_at_s: float = 0.0  # our clock when the budget was last counted
-    # how far it may go down besides, within _START_WINDOW_S of our clock from base_at_s:
-    # the first time base's first sample (the companion's start)
+    # how far it may go down besides, for a position, within _START_WINDOW_S of our clock
+    # from base_at_s: the first time base's first sample (the companion's start)
     catch_up_s: float = 0.0
     base_at_s: float = -math.inf
-    first_base: bool = True  # False in a clock started afresh after a lost link
+    first_base: bool = True  # False once a time base has begun (a sample taken)
     # (our clock, offset) of each sample refused as ahead since one was last taken
     ahead_run: list[tuple[float, float]] = field(default_factory=list)
     rebasing: bool = False  # a run let one through: if taken, it sets the least afresh
@@ -338,13 +344,15 @@ class _VehicleClock:
             return seen  # the first sample, or a rebooted vehicle's: a new time base
         return min(self.offset_s + _CLOCK_SLEW * max(0.0, now_s - self.at_s), seen)
 
-    def ahead_s(self, boot_s: float, now_s: float) -> tuple[float, float]:
+    def ahead_s(self, boot_s: float, now_s: float, *, position: bool) -> tuple[float, float]:
         """How far a sample stamped ``boot_s``, read at ``now_s``, is stamped ahead of the
-        vehicle's clock (the least offset seen), and how far it may be (the budget); the
-        sample is refused where the first is larger. (0, 0) in a new time base."""
+        vehicle's clock (the least offset seen), and how far it may be (the budget, and for
+        a position the start's catch-up); the sample is refused where the first is larger.
+        (0, 0) in a new time base."""
         if self._new_base(boot_s):
             return 0.0, 0.0
-        return self.least_s - (now_s - boot_s), self._budget(now_s) + self._catch_up(now_s)
+        allowed = self._budget(now_s) + (self._catch_up(now_s) if position else 0.0)
+        return self.least_s - (now_s - boot_s), allowed
 
     def refused_ahead(self, boot_s: float, now_s: float) -> bool:
         """Count a sample refused as ahead; True where it ends a run of them that may start
@@ -494,7 +502,9 @@ class TelemetryState:
         stay: a vehicle that comes back in another frame is still refused."""
         self._tracks.clear()
         self._skipped_seen.clear()
-        self._clock = _VehicleClock(first_base=False)
+        # (the start's catch-up stays for a clock that has taken no sample yet: a link lost
+        # before the first position, as while the origin is asked for)
+        self._clock = _VehicleClock(first_base=self._clock.first_base)
         self._attitude_s = self._attitude_boot_s = -math.inf
         self._yaw_run.clear()
         self._yaw_taken.clear()
@@ -788,7 +798,7 @@ class TelemetryState:
     def _stamp_ok(self, kind: str, boot_s: float, now_s: float, *, position: bool) -> bool:
         """A sample's stamp is not ahead of the vehicle's clock (else refused, named; a run
         of positions so, agreeing, starts the clock's least offset afresh)."""
-        ahead, allowed = self._clock.ahead_s(boot_s, now_s)
+        ahead, allowed = self._clock.ahead_s(boot_s, now_s, position=position)
         if ahead <= allowed:
             if position:  # the vehicle's clock is not ahead of the least offset after all:
                 self._clock.ahead_run.clear()  # whatever happens to this sample next

@@ -75,6 +75,7 @@ def test_version(tool: object, capsys: pytest.CaptureFixture[str]) -> None:
          "tcp/127.0.0.1:7447"),
         (["run", "--config", str(SCENARIO), "--zenoh-connect", "x"], "--zenoh-connect", "'x'"),
         (["monitor", "--connect", "127.0.0.1:7447"], "--connect", "'127.0.0.1:7447'"),
+        (["monitor", "--connect", "tcp/127.0.0.1"], "--connect", "'tcp/127.0.0.1'"),  # no port
         (["router", "--listen", "0.0.0.0:7447"], "--listen", "'0.0.0.0:7447'"),
         (["--log-level", "LOUD", "simulate", str(SCENARIO)], "--log-level", "'LOUD'"),
         (["fly"], "COMMAND", "'fly'"),
@@ -362,6 +363,17 @@ def test_a_bug_is_one_line_and_exit_70(
         "ezcompanion: internal error: RuntimeError: a bug over two lines "
         "(rerun with --log-level DEBUG for the traceback)"
     )
+
+
+def test_a_run_says_where_its_telemetry_is(capsys: pytest.CaptureFixture[str]) -> None:
+    """A reviewer: `run` never said where its telemetry listens, so a user could not tell
+    that it was on."""
+    endpoint = free_endpoint()
+    assert main(["run", "--config", str(SCENARIO), "--connect",
+                 f"udpin:127.0.0.1:{_free_udp_port()}", "--max-time", "0.2",
+                 "--zenoh-listen", endpoint]) == ExitCode.LINK_FAILURE  # fmt: skip
+    first = capsys.readouterr().out.splitlines()[0]
+    assert first.endswith(f"; telemetry on {endpoint}"), first
 
 
 def test_sigint_during_run_is_exit_130_in_one_line() -> None:

@@ -175,3 +175,25 @@ def test_run_records_its_own_telemetry_to_mcap(tmp_path: Path) -> None:
     # after the end, only the end mode: asked for, the vehicle's reports of it, the answer
     assert set(kinds[kinds.index("ended") + 1:]) <= {"on_exit", "mode", "statustext"}
     assert ("intercepted" in kinds) == (code == 0)
+
+
+def test_an_mcap_that_cannot_be_written_or_is_replayed_is_said_in_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A reviewer's `monitor --record /proc/x.mcap` said only "No such file or directory
+    (os error 2)", and `monitor --replay run.mcap` "not UTF-8 text: ...". Each now names
+    the flag, the file and what to do."""
+    blocked = tmp_path / "a-file"
+    blocked.write_text("")
+    path = blocked / "x.mcap"  # (its directory is a file)
+    assert main(["monitor", "--connect", free_endpoint(), "--record", str(path),
+                 "--duration", "0.1"]) == 2  # fmt: skip
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith("ezcompanion: error: --record: cannot be written: ")
+    assert line.endswith("x.mcap')")  # (the file named; a long path is shortened)
+    recording = tmp_path / "run.mcap"
+    recording.write_bytes(b"\x89MCAP0\r\n")
+    assert main(["monitor", "--replay", str(recording)]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith("ezcompanion: error: --replay: is an MCAP recording")
+    assert "Foxglove" in line

@@ -182,6 +182,10 @@ def test_settings_default_to_a_loopback_peer_without_multicast() -> None:
     assert json.loads(conf.get_json("listen/endpoints")) == ["tcp/127.0.0.1:7447"]
     # shared memory off (its watchdog woke a thread every 50 ms once a peer connected)
     assert json.loads(conf.get_json("transport/shared_memory/enabled")) is False
+    # an endpoint not up yet tried again within 0.5 s (zenoh's 1 to 4 s: a monitor started
+    # before its vehicle missed the engagement's start, docs/telemetry.md)
+    retry = json.loads(conf.get_json("connect/retry"))
+    assert (retry["period_init_ms"], retry["period_max_ms"]) == (250, 500)
     client = telemetry_settings({"mode": "client", "connect": "tcp/10.0.0.2:7447"})
     assert client.listen == () and client.connect == ("tcp/10.0.0.2:7447",)
 

@@ -364,8 +364,13 @@ class CompanionService:
             )
             self._session.lockstep = self._lockstep is not None
             down = link.down_reason  # a tcp: client with no server yet, a serial port missing
+            telemetry = ""  # where a subscriber finds it (a reviewer's run never said)
+            if self._publisher is not None and self._zenoh_settings is not None:
+                where = self._zenoh_settings.listen or self._zenoh_settings.connect
+                telemetry = "; telemetry on " + (", ".join(where) or "zenoh")
             self.events.emit(EventKind.LISTENING, self.clock.now_s(), f"link open on {s.connect}"
-                             + (f" (not up yet: {down}; trying again)" if down else ""))
+                             + (f" (not up yet: {down}; trying again)" if down else "")
+                             + telemetry)
             self._serve(max_time_s)
         assert self.outcome is not None
         return self.outcome

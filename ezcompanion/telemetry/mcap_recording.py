@@ -38,10 +38,15 @@ class McapRecorder:
                 "--record", str(self.path), "exists: an MCAP recording is written once, "
                 "give a new file name",
             )  # fmt: skip
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.context = foxglove.Context()
-        self.telemetry = FoxgloveTelemetry(context=self.context, origin=origin)
-        self._writer = foxglove.open_mcap(self.path, context=self.context)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self.context = foxglove.Context()
+            self.telemetry = FoxgloveTelemetry(context=self.context, origin=origin)
+            self._writer = foxglove.open_mcap(self.path, context=self.context)
+        except OSError as exc:  # (foxglove's names no file: "No such file or directory
+            # (os error 2)", a reviewer's whole message for /proc/x.mcap)
+            raise ConfigError("--record", str(self.path),
+                              f"cannot be written: {exc.strerror or exc}") from None
         self._closed = False
 
     def take(self, key_expr: str, payload: Any, received_unix_s: float) -> None:

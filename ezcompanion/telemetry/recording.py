@@ -40,6 +40,10 @@ def iter_recording(path: str | Path) -> Iterator[dict[str, Any]]:
     and a ``payload`` (anything else is a ConfigError naming the file and line)."""
     if not Path(path).is_file():
         raise ConfigError("recording", str(path), "no such file")
+    if Path(path).suffix.lower() == ".mcap":  # (a reviewer's read "not UTF-8 text: ...")
+        raise ConfigError("--replay", str(path), "is an MCAP recording: replay takes the "
+                          "--json lines `monitor --record FILE` writes; open an MCAP file in "
+                          "Foxglove")  # fmt: skip
     with Path(path).open(encoding="utf-8", errors="strict") as handle:
         try:
             for number, text in enumerate(handle, start=1):

@@ -436,7 +436,8 @@ def _query(session: zenoh.Session, key_expr: str, payload: bytes | None = None) 
 def test_status_gives_version_provider_and_last_state(endpoint: str) -> None:
     command = next(engagement(1))
     with (
-        publisher(endpoint, status=lambda: {"phase": "guiding", "scenario": {"name": "x"}}) as pub,
+        publisher(endpoint, status=lambda: {"phase": "guiding", "scenario": {"name": "x"},
+                                            "last_state": "the provider's"}) as pub,
         zenoh.open(peer(endpoint)) as session,
     ):
         pub.publish_tick(command)
@@ -447,7 +448,10 @@ def test_status_gives_version_provider_and_last_state(endpoint: str) -> None:
     assert encoding == f"application/json;{SCHEMAS['status']}"
     assert status["version"] and status["vehicle_id"] == "vehicle1"
     assert (status["phase"], status["scenario"]) == ("guiding", {"name": "x"})
+    # the state sample itself, whatever the provider adds (the service's five numbers had
+    # taken its place: a reviewer's)
     assert status["last_state"]["north_m"] == command.state.north_m
+    assert {"seq", "down_m", "yaw_rad"} <= set(status["last_state"])
     assert status["recent_events"][0]["kind"] == "engaged"
 
 

@@ -314,7 +314,8 @@ class CompanionService:
             "setpoints_sent": self.setpoints_sent,
             "setpoint_write_failures": self.engagement.setpoint_write_failures,
             "failsafes": self.failsafes,
-            "last_state": None
+            # (not "last_state": the publisher's own, a whole state sample, is that)
+            "last_command": None
             if last is None
             else {
                 "time_s": last.time_s,

@@ -319,7 +319,9 @@ class TelemetryPublisher:
             "recent_events": list(self._recent_events),
         }
         try:
-            reply.update(self._status())
+            for name, value in self._status().items():  # what the provider adds: never in
+                reply.setdefault(name, value)  # place of the publisher's own (a reviewer's
+                # last_state had been the service's five numbers, not the state sample)
         except Exception as exc:  # a broken provider must not take the queryable down
             reply["status_error"] = bounded(f"{type(exc).__name__}: {exc}")
             _log.warning("telemetry: status provider failed: %s", reply["status_error"])

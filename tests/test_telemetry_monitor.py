@@ -79,7 +79,9 @@ def fly(pub: Any, ticks: int = 40) -> list[Any]:
     return commands
 
 
-def test_the_live_table_shows_margins_mode_accelerations_and_outcome(tmp_path: Path) -> None:
+def test_the_live_table_shows_margins_mode_accelerations_and_outcome(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     endpoint = free_endpoint()
     record = tmp_path / "engagement.jsonl"
     status = {"phase": "guiding", "scenario": SCENARIO_RAW}
@@ -116,6 +118,13 @@ def test_the_live_table_shows_margins_mode_accelerations_and_outcome(tmp_path: P
         run.margin_m, [c.step.law.margin_m for c in commands], rtol=1e-8, atol=1e-9
     )
     np.testing.assert_allclose(run.heading_rad, [c.course_rad for c in commands], rtol=1e-8)
+    # recorded twice into one file (`--record` appends): the last engagement is the track,
+    # and that is said (a reviewer's two had been joined into one, time going back)
+    twice = tmp_path / "twice.jsonl"
+    twice.write_text(record.read_text() * 2)
+    again = read_recording(twice, track_csv=tmp_path / "twice.csv")
+    np.testing.assert_allclose(again.t_s, run.t_s, rtol=0, atol=1e-9)
+    assert any("holds 2 engagements" in r.getMessage() for r in caplog.records)
 
 
 def test_json_lines_are_the_raw_samples() -> None:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import csv
 import json
+import logging
 import math
 from collections.abc import Iterator
 from pathlib import Path
@@ -30,6 +31,8 @@ __all__ = [
     "recorded_scenario",
     "recording_to_track_csv",
 ]
+
+_log = logging.getLogger(__name__)
 
 # track column -> guidance payload field, where the names differ
 _RENAMED = {"t_s": "time_s", "heading_rad": "course_rad"}
@@ -116,7 +119,18 @@ def recording_to_track_csv(
     names = scenario.zones().names
     header = track_header(names)
     rows = []
-    for payload in _samples(path, "guidance", vehicle):
+    samples = _samples(path, "guidance", vehicle)
+    # `monitor --record` appends: a file may hold several engagements of one vehicle, each
+    # its clock from its start. The last is the track (a reviewer's two flights had been
+    # joined into one, a line drawn from the end of the first to the start of the second)
+    starts = [k for k in range(1, len(samples))
+              if _time_s(samples[k]) < _time_s(samples[k - 1])]  # fmt: skip
+    if starts:
+        _log.warning("%s holds %d engagements (its time goes back at sample %s): the last "
+                     "one is the track", path, len(starts) + 1,
+                     ", ".join(str(k + 1) for k in starts))  # fmt: skip
+        samples = samples[starts[-1]:]
+    for payload in samples:
         zones = {z["name"]: z for z in payload.get("zones", [])}
         if tuple(zones) != names:
             continue
@@ -132,6 +146,11 @@ def recording_to_track_csv(
         writer.writerow(header)
         writer.writerows([f"{v:.9g}" for v in row] for row in rows)
     return len(rows)
+
+
+def _time_s(payload: dict[str, Any]) -> float:
+    value = payload.get("time_s", payload.get("t_s"))
+    return float(value) if isinstance(value, int | float) else math.nan
 
 
 def _cell(payload: dict[str, Any], zones: dict[str, dict[str, Any]], column: str) -> float:

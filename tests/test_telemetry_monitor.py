@@ -246,6 +246,14 @@ def test_replay_of_a_missing_or_broken_file_is_one_line_and_exit_2(
         out, err = capsys.readouterr()
         assert out == "" and err.count("\n") == 1 and error in err, err
         assert "Traceback" not in err
+    # a vehicle the recording does not hold (a reviewer's printed "no vehicle yet: waiting
+    # ..." from a file, and exit 0)
+    one = tmp_path / "one.jsonl"
+    one.write_text('{"key": "ezcompanion/vehicle1/alive", "payload": true}\n')
+    assert main(["monitor", "--replay", str(one), "--vehicle", "vehicle9"]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1, err
+    assert "--vehicle: not in the recording" in err and "holds vehicle1" in err, err
 
 
 def test_replay_with_json_prints_the_recorded_lines(

@@ -20,6 +20,7 @@ import zenoh
 
 from ezcompanion.cli_args import number_within, stop_on_signals, zenoh_endpoint
 from ezcompanion.config import load_scenario
+from ezcompanion.errors import ConfigError
 from ezcompanion.telemetry.monitor import MonitorView, run_monitor
 from ezcompanion.telemetry.recording import iter_recording, plot_recording, read_recording
 from ezcompanion.telemetry.schema import vehicle_of
@@ -91,12 +92,18 @@ def replay(
     """Show the end of a recording (``json_lines``: print its lines, as ``monitor --json``
     does live); with ``plot_png``/``track_csv``, draw or convert it."""
     view = MonitorView()
+    seen: set[str] = set()
     for line in iter_recording(path):
+        seen.add(vehicle_of(line["key"])[0])
         if vehicle is None or vehicle_of(line["key"])[0] == vehicle:
             if json_lines:
                 print(json.dumps(line, separators=(",", ":")))
             else:
                 view.update(line["key"], line["payload"])
+    if vehicle is not None and vehicle not in seen:  # (a reviewer's had printed "no vehicle
+        # yet: waiting ..." from a file, and exit 0)
+        raise ConfigError("--vehicle", vehicle, f"not in the recording {str(path)!r}, which "
+                          f"holds {', '.join(sorted(seen)) or 'no vehicle'}")
     if not json_lines:
         print(view.render())
     notes = sys.stderr if json_lines else sys.stdout  # JSON lines stay JSON lines

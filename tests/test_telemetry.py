@@ -445,6 +445,10 @@ def test_status_gives_version_provider_and_last_state(endpoint: str) -> None:
         # nobody subscribes: the tick is not built, the event is put (zenoh drops it)
         assert wait_for(lambda: pub.ticks_published == 1 and pub.samples_published == 1)
         encoding, status = _query(session, key("vehicle1", "status"))
+        # asked of every vehicle, each answers under its own key (a reviewer's replies came
+        # back keyed with the wildcard: several vehicles could not be told apart)
+        (reply,) = list(session.get("ezcompanion/*/status", timeout=5.0))
+        assert reply.ok is not None and str(reply.ok.key_expr) == key("vehicle1", "status")
     assert encoding == f"application/json;{SCHEMAS['status']}"
     assert status["version"] and status["vehicle_id"] == "vehicle1"
     assert (status["phase"], status["scenario"]) == ("guiding", {"name": "x"})

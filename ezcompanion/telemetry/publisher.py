@@ -95,6 +95,7 @@ class TelemetryPublisher:
         self._on_scenario = on_scenario
         self._zone_names = tuple(zone_names)
         self._scenario_key = key(vid, "scenario")
+        self._status_key = key(vid, "status")
         self._period_s = 1.0 / settings.publish_rate_hz
         # the newest tick not yet sent: (command, wall_unix_s, zone_names)
         self._latest: tuple[TickCommand, float, tuple[str, ...]] | None = None
@@ -140,7 +141,7 @@ class TelemetryPublisher:
                 congestion_control=drop,
                 priority=zenoh.Priority.DATA_HIGH,
             )
-            self._status_q = self.session.declare_queryable(key(vid, "status"), self._on_status)
+            self._status_q = self.session.declare_queryable(self._status_key, self._on_status)
             self._scenario_q = (
                 self.session.declare_queryable(self._scenario_key, self._on_scenario_query)
                 if settings.scenario_updates.enabled
@@ -281,8 +282,10 @@ class TelemetryPublisher:
     def _on_status(self, query: zenoh.Query) -> None:
         # ``with query``: the query ends (its final reply leaves) here, whatever still refers
         # to it (a logged exception's frames would otherwise hold it until it times out).
+        # On its own key, not the query's: one on ezcompanion/*/status gets each vehicle's
+        # reply under that vehicle's key (a reviewer's came back all keyed with the wildcard)
         with query:
-            query.reply(query.key_expr, _dumps(self._status_reply()), encoding=encoding("status"))
+            query.reply(self._status_key, _dumps(self._status_reply()), encoding=encoding("status"))
 
     def _status_reply(self) -> dict[str, Any]:
         s = self.settings

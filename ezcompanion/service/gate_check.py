@@ -63,7 +63,10 @@ class GateReport:
     examples: dict[str, list[str]] = field(default_factory=dict)
     # (log time, the vehicle's time) from its first stamped sample to its last
     clock_span: tuple[float, float] = (0.0, 0.0)
-    judged_by: str = "the log's times"
+    # the clock the log is judged on (check_tlog's): the log's times this many times as
+    # fast, or the vehicle's stamps
+    speedup: float = 1.0
+    lockstep: bool = False
     timesyncs: int = 0  # TIMESYNC frames in the log (a lockstep run's are many)
 
     @property
@@ -95,16 +98,19 @@ class GateReport:
                "none is named below: out of range, before a fix, frozen or repeated)",
                f"named: {self.reasons.total()} (each holds guidance 0.5 s; for 3 s without a "
                "break, they end it)"]  # fmt: skip
-        if self.judged_by != "the log's times":
-            out.insert(1, f"the companion's clock: {self.judged_by}")
-        if self.judged_by == "the vehicle's clock" and self.timesyncs == 0:
+        if self.lockstep:
+            out.insert(1, "the companion's clock: the vehicle's clock")
+        elif self.speedup != 1.0:
+            out.insert(1, f"the companion's clock: the log's times x {self.speedup:g}")
+        if self.lockstep and self.timesyncs == 0:
             out.insert(2, "no TIMESYNC in the log: not a lockstep run? (on the vehicle's "
                        "clock a stamp ahead of it is not judged)")  # fmt: skip
         for reason, count in self.reasons.most_common():
             out.append(f"  {count} x {reason}")
             out += [f"      {example}" for example in self.examples[reason]]
         ratio = self.clock_ratio
-        if self.judged_by == "the log's times" and ratio is not None and ratio > _FAST_CLOCK:
+        by_log = not self.lockstep and self.speedup == 1.0
+        if by_log and ratio is not None and ratio > _FAST_CLOCK:
             out.append(f"the vehicle's clock ran {ratio:.1f} times the log's (a run with "
                        "--lockstep or --speedup?): judged by the log's times; judge it as "
                        "that run did with --lockstep or --speedup N")  # fmt: skip
@@ -134,8 +140,7 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
     the wall clock the logger stamped, and by the log's times the vehicle's samples were
     all ahead). Judged by the log's times, the report says how much faster the vehicle's
     clock ran where that is more than 1.5 times (``clock_ratio``)."""
-    report = GateReport(judged_by="the vehicle's clock" if lockstep else
-                        "the log's times" if speedup == 1.0 else f"the log's times x {speedup:g}")
+    report = GateReport(speedup=speedup, lockstep=lockstep)
     # the lockstep companion's clock: the vehicle's stamps (a reboot's a new base), run on
     # by the log's own times where they stall, as the service's by its wall clock
     logged_now = [0.0]

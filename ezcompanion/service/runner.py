@@ -361,9 +361,9 @@ class CompanionService:
                 self.engagement.publisher = self._publisher
             self._link = link
             self._session = VehicleSession(
-                self.scenario, s, self.events, link, lambda msg: self._send(msg)
+                self.scenario, s, self.events, link, lambda msg: self._send(msg),
+                lockstep=self._lockstep is not None,
             )
-            self._session.lockstep = self._lockstep is not None
             down = link.down_reason  # a tcp: client with no server yet, a serial port missing
             telemetry = ""  # where a subscriber finds it (a reviewer's run never said)
             if self._publisher is not None and self._zenoh_settings is not None:
@@ -383,22 +383,19 @@ class CompanionService:
         assert link is not None
         started_s = clock.now_s()
         self._started_wall_s = time.monotonic()
-        why = None  # what ended it, where the engagement did not
         while not self._stop.is_set() and self.phase is not Phase.DONE:
             now = clock.now_s()
             if self._time_up(now, started_s, max_time_s):
-                why = f"--max-time {max_time_s:g} s reached"
                 break
             link.wait_readable(clock.wait_wall_s(self._due_s(now) - now))
             if not self._ticking():  # (while ticking, each tick takes it: _tick)
                 self._take_pending_scenario(clock.now_s())
             if not self._take_frames(link, started_s, max_time_s):
-                if not self._done:  # (it stops for the time limit, or the end)
-                    why = f"--max-time {max_time_s:g} s reached"
                 break
             self._due_work(clock.now_s())
-        if self._stop.is_set() and why is None:
-            why = "stopped"
+        why = None  # what ended it where the engagement did not: a stop, else the time limit
+        if not self._done:
+            why = "stopped" if self._stop.is_set() else f"--max-time {max_time_s:g} s reached"
         self.phase = Phase.DONE
         self.engagement.finish(clock.now_s(), why)
         commanded = self.engagement.setpoints_sent + self.engagement.brakes_sent > 0

@@ -130,6 +130,8 @@ class VehicleSession(StreamRequests):
         events: EventLog,
         link: Link,
         send: Callable[[Message], object],
+        *,
+        lockstep: bool = False,
     ) -> None:
         self.settings = settings
         self._accel_max_m_s2 = scenario.guidance.accel_max_m_s2
@@ -152,7 +154,7 @@ class VehicleSession(StreamRequests):
         self.connected = False
         self.refused = False  # several autopilots heard: none will be guided
         self.refused_frames = 0
-        self.lockstep = False  # the service follows the vehicle's clock (the runner sets it)
+        self.lockstep = lockstep  # the service follows the vehicle's clock
         self._lockstep_said = False
         self._discovery_until_s: float | None = None
         self.alarms = Alarms(events)

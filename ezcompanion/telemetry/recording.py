@@ -149,7 +149,7 @@ def recording_to_track_csv(
 
 
 def _time_s(payload: dict[str, Any]) -> float:
-    value = payload.get("time_s", payload.get("t_s"))
+    value = payload.get("time_s")
     return float(value) if isinstance(value, int | float) else math.nan
 
 

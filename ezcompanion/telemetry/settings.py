@@ -66,8 +66,9 @@ _ENDPOINT = re.compile(r"^[a-z][a-z0-9\-]*/\S+$")
 
 
 # ... an IP protocol's with its port (a reviewer's `tcp/127.0.0.1` was taken and waited on)
+_IP_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")
 _IP_ENDPOINT = re.compile(
-    r"^(?:tcp|udp|tls|quic|ws)/(?:\[[^\]\s]+\]|[^\s:/\[\]]+):\d{1,5}(?:[?#]\S*)?$")
+    rf"^(?:{'|'.join(_IP_PROTOCOLS)})/(?:\[[^\]\s]+\]|[^\s:/\[\]]+):\d{{1,5}}(?:[?#]\S*)?$")
 
 
 def is_zenoh_endpoint(text: object) -> bool:
@@ -75,8 +76,7 @@ def is_zenoh_endpoint(text: object) -> bool:
     port for tcp, udp, tls, quic and ws)."""
     if not isinstance(text, str) or _ENDPOINT.match(text) is None:
         return False
-    return text.split("/", 1)[0] not in {"tcp", "udp", "tls", "quic", "ws"} or (
-        _IP_ENDPOINT.match(text) is not None)
+    return text.split("/", 1)[0] not in _IP_PROTOCOLS or _IP_ENDPOINT.match(text) is not None
 
 
 @dataclass(frozen=True, kw_only=True)

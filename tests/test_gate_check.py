@@ -26,10 +26,12 @@ def _log(path: Path, *, jump_at: int | None = None, autopilot: bool = True,
          step_back_at: int | None = None, reboot_at: int | None = None,
          attitude_ahead_ms: int | None = None, own: bool = False,
          stall_at: int | None = None, other: bool = False, speedup: float = 1.0,
-         boot_from_ms: int = 1000) -> Path:
-    """``own``: the logger's own heartbeat too, once a second whatever the vehicle does
-    (a companion's tlog); ``stall_at``: the logger stopped for 8 s there (nothing logged,
-    the vehicle flying on); ``other``: a second autopilot's heartbeat beside each of the
+         boot_from_ms: int = 1000, backlog: int = 0) -> Path:
+    """``backlog``: the first positions logged at once, as the next one is (a companion
+    starved as it started, reading them from its socket together); ``own``: the logger's
+    own heartbeat too, once a second whatever the vehicle does (a companion's tlog);
+    ``stall_at``: the logger stopped for 8 s there (nothing logged, the vehicle flying
+    on); ``other``: a second autopilot's heartbeat beside each of the
     vehicle's frames (on the same link: silent with it); ``speedup``: the vehicle's time
     runs that many times the log's (a loopback run at 10x)."""
     vehicle, station = forger(1, 1), forger(255, 190)
@@ -65,13 +67,26 @@ def _log(path: Path, *, jump_at: int | None = None, autopilot: bool = True,
             east = 3.0 if jump_at is not None and k >= jump_at else 0.0
             msg = M.MAVLink_local_position_ned_message(boot_ms + 20 * k, 0.1 * k, east, -20.0,
                                                        5.0, 0.0, 0.0)  # fmt: skip
-            log.write(frame(vehicle, msg), clock_s)
+            held_s = _START_S + 0.02 + (backlog * 0.02 + 1e-4 * k) / speedup
+            log.write(frame(vehicle, msg), clock_s if k >= backlog else held_s)
             if attitude_ahead_ms is not None:
                 attitude = M.MAVLink_attitude_message(boot_ms + 20 * k + attitude_ahead_ms,
                                                       0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # fmt: skip
                 log.write(frame(vehicle, attitude), clock_s + 0.001)
             clock_s += 0.02 / speedup
     return path
+
+
+def test_a_start_that_read_a_backlog_is_told_not_refused(tmp_path: Path) -> None:
+    """A companion that read its first 0.3 s of positions at once: the start's catch-up
+    takes them (nothing refused) and the report tells it, with its time."""
+    report = check_tlog(_log(tmp_path / "backlog.tlog", backlog=15))
+    assert report.clean and report.used["LOCAL_POSITION_NED"] == 250
+    assert len(report.notices) == 1 and "caught up 0.30 s" in report.notices[0]
+    assert [line for line in report.lines() if line.startswith("told: at 1.")] == [
+        f"told: {report.notices[0]}"
+    ]
+    assert check_tlog(_log(tmp_path / "clean.tlog")).notices == []
 
 
 def test_a_clean_flight_passes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

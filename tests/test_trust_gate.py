@@ -210,14 +210,15 @@ def attitude(boot_ms: int, yaw: float = 0.0) -> Any:
     return mavlink.MAVLink_attitude_message(boot_ms, 0.0, 0.0, yaw, 0.0, 0.0, 0.0)
 
 
-def starved_start(t: Any, backlog_s: float, *, read_from_s: float = 105.0
-                  ) -> tuple[int, list[str], int]:
+def starved_start(t: Any, backlog_s: float, *, read_from_s: float = 105.0,
+                  told: list[str] | None = None) -> tuple[int, list[str], int]:
     """The vehicle sends LOCAL_POSITION_NED and ATTITUDE at 50 Hz, its clock 100 s behind
     ours; the companion reads nothing until ``read_from_s``, then the ``backlog_s`` that
     waited in its socket at once (0.1 ms apart), then each sample 2 ms after it was sent,
     for 2 s. How many positions it took, the refusals it named, and how many positions it
-    took before the first."""
+    took before the first (``told``: gets what it told without refusing)."""
     taken, whys, before = 0, [], -1
+    told = [] if told is None else told
     now = read_from_s
     first = round((read_from_s - 100.0 - backlog_s) * 1000)
     for boot_ms in range(first, first + 2000 + round(backlog_s * 1000), 20):
@@ -228,6 +229,9 @@ def starved_start(t: Any, backlog_s: float, *, read_from_s: float = 105.0
             if refusal is not None:
                 before = taken - 1 if before < 0 else before
                 whys.append(refusal[1])
+            notice = t.take_notice()
+            if notice is not None:
+                told.append(notice)
             t.update(attitude(boot_ms), now)
     return taken, whys, before
 
@@ -244,9 +248,15 @@ def test_a_companion_starved_as_it_starts_takes_its_backlog_without_a_failsafe(
     more: a backlog of that much is taken whole, nothing named, and the newest sample's
     age is its delay."""
     t = known_origin()
-    taken, whys, _ = starved_start(t, backlog_s)
+    told: list[str] = []
+    taken, whys, _ = starved_start(t, backlog_s, told=told)
     assert not whys, whys[:2]
     assert taken == round((2.0 + backlog_s) / DT_S)
+    # told once, as the window ends, with what it took (the first sample's wait, less the
+    # 2 ms each sample takes): a forger's use of it is as visible
+    assert len(told) == 1 and told[0].startswith(
+        f"the vehicle's clock caught up {backlog_s - 0.002:.2f} s in the companion's first 1 s"
+    ), told
     # the same after a link lost before any position was taken (a reviewer: it had lost the
     # start's catch-up with it)
     lost_early = known_origin()
@@ -1068,3 +1078,44 @@ def test_the_window_judged_in_one_step_agrees_with_each_sample_judged_alone() ->
                           and not state_module._on_path(p, sample, 5.7)), None)  # fmt: skip
             assert window.first_off(sample, 5.7) == alone, (period_s, k)
             window.add(sample)
+
+
+def test_a_start_that_did_not_wait_tells_nothing_and_a_forger_that_used_the_catch_up_is_told(
+) -> None:
+    """The start's catch-up is told once its window is over, where it was used: not at a
+    start whose samples did not wait, and where a forger's sample 0.55 s ahead used it."""
+    told: list[str] = []
+    taken, whys, _ = starved_start(known_origin(), 0.0, told=told)
+    assert taken == round(2.0 / DT_S) and not whys and not told
+    t = known_origin()
+    used, (north, east, _) = fly_track(t, [0.0] * 10)
+    assert all(used)
+    assert t.update(local(1000 + 20 * 10 + 550, north + 0.55, east), 1.0 + DT_S * 10) is not None
+    told = []
+    for k in range(10, 100):  # the vehicle's own samples for 1.8 s more
+        t.update(local(1000 + 20 * k, DT_S * k, 0.0), 1.0 + DT_S * k)
+        t.take_refusal()
+        notice = t.take_notice()
+        if notice is not None:
+            told.append(notice)
+    assert len(told) == 1 and "caught up 0.50 s" in told[0], told
+
+
+def test_the_session_tells_the_starts_catch_up_as_a_warning() -> None:
+    """A companion that read its first 0.3 s of positions at once: the session says so, a
+    ``warning`` with cause ``clock_catch_up``, once, and refuses nothing."""
+    with session_and_vehicle() as (session, _):
+        session.on_frame(heartbeat(armed=True), 0.0)
+        origin = session.telemetry.origin  # the vehicle tells the scenario's origin
+        session.on_frame(vehicle_frame(M.MAVLink_gps_global_origin_message(
+            deg_to_e7(origin.lat_deg), deg_to_e7(origin.lon_deg), m_to_mm(origin.alt_m), 0)),
+            0.5)  # fmt: skip
+        reads = [(1.3 + 1e-4 * k, 1000 + 20 * k) for k in range(15)]  # sent 1.00-1.28
+        reads += [(ms / 1000 + 0.002, ms) for ms in range(1300, 3000, 20)]  # then live
+        for now, boot_ms in reads:
+            session.on_frame(vehicle_frame(local(boot_ms, boot_ms / 1000, 0.0)), now)
+    assert session.telemetry.refused == {}
+    told = [e for e in session.events.of_kind(EventKind.WARNING)
+            if e.data.get("cause") == "clock_catch_up"]  # fmt: skip
+    assert len(told) == 1 and "caught up 0.30 s" in told[0].message, told
+    assert not session.events.of_kind(EventKind.ALARM)

@@ -61,6 +61,7 @@ class GateReport:
     # each reason (numbers masked), how often, and its first few in full with their times
     reasons: Counter[str] = field(default_factory=Counter)
     examples: dict[str, list[str]] = field(default_factory=dict)
+    notices: list[str] = field(default_factory=list)  # told, not refused (with their times)
     # (log time, the vehicle's time) from its first stamped sample to its last
     clock_span: tuple[float, float] = (0.0, 0.0)
     # the clock the log is judged on (check_tlog's): the log's times this many times as
@@ -108,6 +109,7 @@ class GateReport:
         for reason, count in self.reasons.most_common():
             out.append(f"  {count} x {reason}")
             out += [f"      {example}" for example in self.examples[reason]]
+        out += [f"told: {notice}" for notice in self.notices]
         ratio = self.clock_ratio
         by_log = not self.lockstep and self.speedup == 1.0
         if by_log and ratio is not None and ratio > _FAST_CLOCK:
@@ -220,6 +222,9 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
             seen = report.examples.setdefault(reason, [])
             if len(seen) < _EXAMPLES:
                 seen.append(f"at {now_s:.2f} s: {refusal[1]}")
+        notice = state.take_notice()
+        if notice is not None:
+            report.notices.append(f"at {now_s:.2f} s: {notice}")
     if state is not None:
         report.refused.update(state.refused)
         report.skipped = state.skipped

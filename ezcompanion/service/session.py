@@ -265,6 +265,9 @@ class VehicleSession(StreamRequests):
         if refusal is not None:
             cause, why = refusal
             self.alarms.hold(cause, now, why, hold_s=_TELEMETRY_HOLD_S)
+        notice = self.telemetry.take_notice()
+        if notice is not None:
+            self.events.emit(EventKind.WARNING, now, notice, cause="clock_catch_up")
         if kind == "COMMAND_ACK":
             self._on_ack(msg, now)
         elif kind == "PARAM_VALUE":

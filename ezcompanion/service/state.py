@@ -332,6 +332,7 @@ class _VehicleClock:
     catch_up_s: float = 0.0
     base_at_s: float = -math.inf
     first_base: bool = True  # False once a time base has begun (a sample taken)
+    caught_s: float = 0.0  # how much of the catch-up was spent (told once the window ends)
     # (our clock, offset) of each sample refused as ahead since one was last taken
     ahead_run: list[tuple[float, float]] = field(default_factory=list)
     rebasing: bool = False  # a run let one through: if taken, it sets the least afresh
@@ -398,6 +399,7 @@ class _VehicleClock:
             down = self.least_s - seen
             caught = min(down, self._catch_up(now_s))  # (spent first, while it lasts)
             self.catch_up_s -= caught
+            self.caught_s += caught
             self.budget_s = max(0.0, self._budget(now_s) - (down - caught))
             self.budget_at_s = now_s
             self.least_s = seen
@@ -408,6 +410,15 @@ class _VehicleClock:
 
     def _catch_up(self, now_s: float) -> float:
         return self.catch_up_s if now_s - self.base_at_s < _START_WINDOW_S else 0.0
+
+    def catch_up_told(self, now_s: float) -> float:
+        """How much of the start's catch-up was spent, once its window is over, where that
+        is more than the budget would have allowed without it (``_AHEAD_S``); else 0, and
+        0 again after it: it is told once."""
+        if now_s - self.base_at_s < _START_WINDOW_S:
+            return 0.0
+        caught, self.caught_s = self.caught_s, 0.0
+        return caught if caught > _AHEAD_S else 0.0
 
     def _new_base(self, boot_s: float) -> bool:
         """No sample yet, or one from a rebooted vehicle (its time well back)."""
@@ -460,6 +471,7 @@ class TelemetryState:
     _latched: bool = False
     _origin_told: bool = False  # adopt_origin: the vehicle's origin has been taken
     _refusal: tuple[Hold, str] | None = None
+    _notice: str | None = None  # what the last update tells without refusing (once)
     # the newest skipped global position: (lat, lon, alt as sent, boot_s, speed_m_s)
     _skipped_global: tuple[tuple[int, int, int], float, float] | None = None
     # the global positions skipped in the last _REPEATS_S, by stamp: a copy of one arriving
@@ -495,6 +507,12 @@ class TelemetryState:
         refusal, self._refusal = self._refusal, None
         return refusal
 
+    def take_notice(self) -> str | None:
+        """What the last :meth:`update` tells that is no refusal, once: the start's
+        catch-up used (``_START_CATCH_UP_S``), told as its window ends."""
+        notice, self._notice = self._notice, None
+        return notice
+
     def forget_motion(self) -> None:
         """After a lost link: what the vehicle did meanwhile is unknown, so its position,
         velocity and attitude start afresh (judged from the next samples on, as at the
@@ -504,7 +522,9 @@ class TelemetryState:
         self._skipped_seen.clear()
         # (the start's catch-up stays for a clock that has taken no sample yet: a link lost
         # before the first position, as while the origin is asked for)
-        self._clock = _VehicleClock(first_base=self._clock.first_base)
+        old = self._clock  # (its catch-up's use is still told, once its window is over)
+        self._clock = _VehicleClock(first_base=old.first_base, caught_s=old.caught_s,
+                                    base_at_s=old.base_at_s)  # fmt: skip
         self._attitude_s = self._attitude_boot_s = -math.inf
         self._yaw_run.clear()
         self._yaw_taken.clear()
@@ -793,6 +813,14 @@ class TelemetryState:
         ):
             return False
         self._clock.keep(sample.boot_s, now_s)
+        caught = self._clock.catch_up_told(now_s)
+        if caught > 0.0:
+            self._notice = (
+                f"the vehicle's clock caught up {caught:.2f} s in the companion's first "
+                f"{_START_WINDOW_S:g} s, more than the {_AHEAD_S:g} s it may gain otherwise "
+                f"(at most {_START_CATCH_UP_S:g} s more): positions that waited as it started "
+                f"were taken, as one stamped ahead of the vehicle's own on its path would be"
+            )
         return True
 
     def _stamp_ok(self, kind: str, boot_s: float, now_s: float, *, position: bool) -> bool:

@@ -1,3 +1,3 @@
-from ezcompanion.cli import main
+from ezcompanion.console import main
 
 raise SystemExit(main())

@@ -13,6 +13,7 @@ import socket
 import subprocess
 import sys
 import threading
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -28,7 +29,8 @@ from ezcompanion.exit_codes import ExitCode
 from sitl_stub.cli import _parser as stub_parser
 from sitl_stub.cli import main as stub_main
 
-CONFIG = Path(__file__).resolve().parents[1] / "config"
+ROOT = Path(__file__).resolve().parents[1]
+CONFIG = ROOT / "config"
 SCENARIO = CONFIG / "paper_scenario1.yaml"
 
 
@@ -463,3 +465,44 @@ def test_a_signal_that_comes_while_the_main_thread_holds_the_stop_events_lock_st
     done = subprocess.run([sys.executable, "-c", _HELD], capture_output=True, text=True,
                           timeout=20.0, check=False)  # fmt: skip
     assert done.stdout.strip() == "stopped", done.stderr
+
+
+_SIGINT_ON_IMPORT = """
+import os, signal, sys
+class _CtrlC:  # a real SIGINT as the command first imports numpy (its modules loading)
+    def find_spec(self, name, path=None, target=None):
+        if name == "numpy":
+            sys.meta_path.remove(self)
+            os.kill(os.getpid(), signal.SIGINT)
+        return None
+sys.meta_path.insert(0, _CtrlC())
+"""
+
+
+@pytest.mark.parametrize(
+    ("script", "entry", "argv"),
+    [("ezcompanion", "ezcompanion.console:main", ["simulate", str(SCENARIO)]),
+     ("sitl-stub", "ezcompanion.console:sitl_stub", ["--connect", "udpout:127.0.0.1:9"])],
+)  # fmt: skip
+def test_a_ctrl_c_while_the_modules_load_is_exit_130_in_one_line(
+    script: str, entry: str, argv: list[str]
+) -> None:
+    """A Ctrl-C in a command's first half second (numpy, numba and zenoh loading) had ended
+    in Python's traceback and a death by SIGINT; now as one a moment later does. The
+    console scripts are the guarded entries, and a SIGINT as the first module loads ends in
+    one line, exit 130. (The same SIGINT with the command line imported unguarded, as the
+    scripts did, is a traceback: what the test would see without the guard.)"""
+    with open(ROOT / "pyproject.toml", "rb") as f:
+        assert tomllib.load(f)["project"]["scripts"][script] == entry
+    module, name = entry.split(":")
+    guarded_run = f"from {module} import {name}; sys.exit({name}())"
+    unguarded = f"from {'sitl_stub' if script == 'sitl-stub' else 'ezcompanion'}.cli import main"
+    for call, code in ((guarded_run, ExitCode.INTERRUPTED), (f"{unguarded}; sys.exit(main())", -2)):
+        proc = subprocess.run([sys.executable, "-c", _SIGINT_ON_IMPORT + call, *argv],
+                              capture_output=True, text=True, timeout=60)  # fmt: skip
+        assert proc.returncode == code, proc.stderr[-500:]
+        if code == ExitCode.INTERRUPTED:
+            assert proc.stderr.splitlines() == [f"{script}: interrupted"]
+            assert proc.stdout == ""
+        else:
+            assert "Traceback" in proc.stderr and "KeyboardInterrupt" in proc.stderr

@@ -8,10 +8,12 @@ PACKAGES := ezcompanion sitl_stub
 
 .PHONY: demo test lint typecheck pytest bench clean
 
+# (pip -qq: errors only. pip 26 passes on setuptools' editable-install banner as a warning,
+# 11 lines, and a machine's pip config may add a line for each index location it ignores)
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	$(BIN)/python -m pip install -qq --upgrade pip
+	$(BIN)/python -m pip install -qq -e '.[dev]'
 	@echo "compiling the guidance kernels into numba's cache (once, 25 to 45 s on a 2-core machine)"
 	$(BIN)/ezcompanion compile
 	touch $(STAMP)

@@ -198,11 +198,15 @@ def make_config(port: int, **settings: Any) -> StubConfig:
 
 
 @contextmanager
-def running_stub(gcs: Gcs, *, record_truth: bool = True, **settings: Any) -> Iterator[SitlStub]:
-    """A started stub talking to ``gcs``; waits for its first heartbeat."""
-    stub = SitlStub(make_config(gcs.port, **settings), record_truth=record_truth)
+def running_stub(gcs: Gcs, *, record_truth: bool = True, lockstep: bool = False,
+                 **settings: Any) -> Iterator[SitlStub]:
+    """A started stub talking to ``gcs``; waits for its first heartbeat (``lockstep``: its
+    first request for time, sent before anything else: drive it with :class:`Lockstep`)."""
+    stub = SitlStub(make_config(gcs.port, **settings), record_truth=record_truth,
+                    lockstep=lockstep)  # fmt: skip
     with stub:
-        assert gcs.recv("HEARTBEAT", ANSWER_WAIT_S) is not None, "no heartbeat from the stub"
+        first = "TIMESYNC" if lockstep else "HEARTBEAT"
+        assert gcs.recv(first, ANSWER_WAIT_S) is not None, f"no {first} from the stub"
         address = stub.local_address  # bound by its first send
         assert address is not None
         gcs.lock(address[1])
@@ -212,6 +216,67 @@ def running_stub(gcs: Gcs, *, record_truth: bool = True, **settings: Any) -> Ite
             gcs.unlock()
     assert stub.error is None, stub.error
     assert stub.handler_errors == 0
+
+
+NS = 1_000_000_000
+
+
+class Lockstep:
+    """The ground station's side of lockstep (:mod:`sitl_stub.lockstep`) for a stub started
+    with ``lockstep=True``: its time moves only as far as granted here, so what the test
+    sends while the stub is stopped takes effect at that simulated time however long the
+    test was descheduled (a stream's period, a timeout, on the stub's clock alone). Every
+    other message read on the way is kept in ``read``, with the stub's time as it was read
+    (that of the message or later, by less than to the stub's next stop)."""
+
+    def __init__(self, gcs: Gcs, stub: SitlStub) -> None:
+        self.gcs, self.stub = gcs, stub
+        self.read: list[tuple[float, Msg]] = []
+        self.last_sent_s = -math.inf  # the stub's time at the last ``every``
+        # the request read and left unanswered where the last run stopped (ts1), answered as
+        # the next one starts; at first none (an answer to 0 grants time, holds nothing)
+        self._pending: int | None = 0
+        self._answered: set[int] = set()  # (a request resent before its answer came: not again)
+
+    def run(self, until_s: float, *, every: Callable[[], None] | None = None,
+            period_s: float = 0.1, done: Callable[[Msg], bool] | None = None,
+            wall_s: float = 120.0) -> Msg | None:
+        """Let the stub's time run to ``until_s``, where it stays stopped (None), or until a
+        message for which ``done`` holds is read (that message), answering each of its
+        requests for time. ``every`` is called at the first stop before ``until_s`` and then
+        at the first at or after each ``period_s`` of the stub's time from it (before
+        ``until_s``), before the answer: what it sends takes effect at that stop's time."""
+        eps = 1e-4  # (the stub's times are whole physics steps, 10 ms)
+        next_s = -math.inf
+        deadline = time.monotonic() + wall_s
+        request, self._pending = self._pending, None
+        while True:
+            if request is not None:  # the stub is stopped at its time until answered
+                t = self.stub.sim_time_s
+                if t >= until_s - eps:
+                    self._pending = request
+                    return None
+                if every is not None and t >= next_s - eps:
+                    every()
+                    self.last_sent_s = t
+                    next_s = t + period_s if next_s == -math.inf else next_s + period_s
+                    while next_s <= t + eps:
+                        next_s += period_s
+                grant = until_s if every is None else min(next_s, until_s)
+                self.gcs.mav.timesync_send(round(grant * NS), request)
+                self._answered.add(request)
+                request = None
+            assert time.monotonic() < deadline, f"the stub did not reach {until_s:g} s"
+            msg = self.gcs.conn.recv_match(blocking=True, timeout=0.2)
+            if msg is None:
+                continue
+            if msg.get_type() == "TIMESYNC" and msg.tc1 == 0:
+                if int(msg.ts1) not in self._answered:
+                    request = int(msg.ts1)
+                continue
+            self.read.append((self.stub.sim_time_s, msg))
+            if done is not None and done(msg):
+                return msg
 
 
 def stream_until(stub: SitlStub, send: Callable[[], None], until_s: float,

@@ -10,7 +10,9 @@ import math
 import pytest
 from conftest_sitl import (
     Gcs,
+    Lockstep,
     M,
+    Msg,
     angle_diff_deg,
     between,
     course_deg,
@@ -179,26 +181,46 @@ def test_plane_roll_target_held_for_3_s(gcs: Gcs) -> None:
 
 
 def test_px4_offboard_needs_setpoints_then_fails_safe(gcs: Gcs) -> None:
-    # 5x: the stream must beat COM_OF_LOSS_T (1 s simulated) on a loaded machine (issue 12)
-    with running_stub(gcs, profile="px4", speedup=5.0) as stub:
+    # In lockstep: the stub's time moves only as this test grants it, so the stream's 0.1 s
+    # period and COM_OF_LOSS_T (1 s) are both on its clock (at 5x in real time, 200 ms of
+    # wall time with this process descheduled was a gap that failed safe in the stream:
+    # issue 12, then an audit's)
+    with running_stub(gcs, profile="px4", speedup=20.0, lockstep=True) as stub:
+        steps = Lockstep(gcs, stub)
+
+        def setpoint() -> None:
+            gcs.velocity(0.0, 1.0)
+
         ack = gcs.set_mode(6)  # OFFBOARD without a setpoint stream
         assert ack is not None and ack.result == M.MAV_RESULT_TEMPORARILY_REJECTED
         t0 = stub.sim_time_s
-        stream_until(stub, lambda: gcs.velocity(0.0, 1.0), t0 + 0.5)
+        steps.run(t0 + 0.5, every=setpoint)
         ack = gcs.set_mode(6)
         assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
         # the course follows with PX4's 1.2 s lag: 56 degrees off decay to < 1 in 6 s
-        stream_until(stub, lambda: gcs.velocity(0.0, 1.0), stub.sim_time_s + 6.0)
+        steps.run(stub.sim_time_s + 6.0, every=setpoint)
         assert abs(angle_diff_deg(course_deg(stub.state), 90.0)) < 1.0
         height0 = stub.state.height_m
-        # the stream stops: after COM_OF_LOSS_T (1 s) PX4 fails safe to POSCTL, no RC: descends
-        text = gcs.recv("STATUSTEXT", 3.0, lambda m: "Failsafe" in m.text)
+        last_s = steps.last_sent_s
+        # the stream stops: after COM_OF_LOSS_T (1 s) PX4 fails safe to POSCTL, no RC:
+        # descends (said as it fails safe, read by the stub's next stop: 0.1 s at most)
+        text = steps.run(last_s + 3.0,
+                         done=lambda m: m.get_type() == "STATUSTEXT" and "Failsafe" in m.text)
         assert text is not None
+        failed_s = steps.read[-1][0]
+        assert last_s + 1.0 < failed_s <= last_s + 1.0 + 0.1 + 0.02, (last_s, failed_s)
         posctl = 3 << 16
-        assert gcs.recv("HEARTBEAT", 3.0, lambda m: m.custom_mode == posctl) is not None
+
+        def says_posctl(msg: Msg) -> bool:
+            return msg.get_type() == "HEARTBEAT" and msg.custom_mode == posctl
+
+        # (its heartbeat, once a second, may have gone out in the step that failed safe)
+        assert any(says_posctl(m) for _, m in steps.read) or (
+            steps.run(failed_s + 3.0, done=says_posctl) is not None
+        )
         assert stub.mode_name == "POSCTL"
         s1 = stub.state
-        assert stub.wait_sim_time(s1.t_s + 1.5)
+        steps.run(s1.t_s + 1.5)
         s2 = stub.state
         assert s2.speed_m_s == 0.0
         assert s2.climb_m_s == pytest.approx(-0.8)

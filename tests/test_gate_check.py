@@ -67,7 +67,7 @@ def _log(path: Path, *, jump_at: int | None = None, autopilot: bool = True,
             east = 3.0 if jump_at is not None and k >= jump_at else 0.0
             msg = M.MAVLink_local_position_ned_message(boot_ms + 20 * k, 0.1 * k, east, -20.0,
                                                        5.0, 0.0, 0.0)  # fmt: skip
-            held_s = _START_S + 0.02 + (backlog * 0.02 + 1e-4 * k) / speedup
+            held_s = _START_S + 0.02 + (backlog * 0.02 - 1e-4 * (backlog - k)) / speedup
             log.write(frame(vehicle, msg), clock_s if k >= backlog else held_s)
             if attitude_ahead_ms is not None:
                 attitude = M.MAVLink_attitude_message(boot_ms + 20 * k + attitude_ahead_ms,
@@ -82,7 +82,7 @@ def test_a_start_that_read_a_backlog_is_told_not_refused(tmp_path: Path) -> None
     takes them (nothing refused) and the report tells it, with its time."""
     report = check_tlog(_log(tmp_path / "backlog.tlog", backlog=15))
     assert report.clean and report.used["LOCAL_POSITION_NED"] == 250
-    assert len(report.notices) == 1 and "caught up 0.30 s" in report.notices[0]
+    assert len(report.notices) == 1 and "came forward 0.30 s" in report.notices[0]
     assert [line for line in report.lines() if line.startswith("told: at 1.")] == [
         f"told: {report.notices[0]}"
     ]

@@ -231,7 +231,7 @@ def starved_start(t: Any, backlog_s: float, *, read_from_s: float = 105.0,
                 whys.append(refusal[1])
             notice = t.take_notice()
             if notice is not None:
-                told.append(notice)
+                told.append(notice[0])
             t.update(attitude(boot_ms), now)
     return taken, whys, before
 
@@ -252,11 +252,13 @@ def test_a_companion_starved_as_it_starts_takes_its_backlog_without_a_failsafe(
     taken, whys, _ = starved_start(t, backlog_s, told=told)
     assert not whys, whys[:2]
     assert taken == round((2.0 + backlog_s) / DT_S)
-    # told once, as the window ends, with what it took (the first sample's wait, less the
-    # 2 ms each sample takes): a forger's use of it is as visible
+    # told once, as the window ends, with how far the clock came forward (the first
+    # sample's wait, less the 2 ms each sample takes), all of it by the start's allowance:
+    # a forger's use of it is as visible
+    drop = f"{backlog_s - 0.002:.2f}"
     assert len(told) == 1 and told[0].startswith(
-        f"the vehicle's clock caught up {backlog_s - 0.002:.2f} s in the companion's first 1 s"
-    ), told
+        f"the vehicle's clock came forward {drop} s within 1 s of its first position, {drop} s "
+        "of it by the start's allowance"), told  # fmt: skip
     # the same after a link lost before any position was taken (a reviewer: it had lost the
     # start's catch-up with it)
     lost_early = known_origin()
@@ -1082,11 +1084,15 @@ def test_the_window_judged_in_one_step_agrees_with_each_sample_judged_alone() ->
 
 def test_a_start_that_did_not_wait_tells_nothing_and_a_forger_that_used_the_catch_up_is_told(
 ) -> None:
-    """The start's catch-up is told once its window is over, where it was used: not at a
-    start whose samples did not wait, and where a forger's sample 0.55 s ahead used it."""
-    told: list[str] = []
-    taken, whys, _ = starved_start(known_origin(), 0.0, told=told)
-    assert taken == round(2.0 / DT_S) and not whys and not told
+    """The start's catch-up is told once its window is over, where it took more than the
+    budget gives (0.1 s): not at a start whose samples did not wait or waited less (0.05 s),
+    told where a forger's sample 0.55 s ahead used it, and after a link lost in the window
+    (a reviewer: its use was dropped with the clock)."""
+    for backlog_s in (0.0, 0.05):
+        told: list[str] = []
+        taken, whys, _ = starved_start(known_origin(), backlog_s, told=told)
+        assert taken == len(range(0, 2000 + round(backlog_s * 1000), 20))  # every one
+        assert not whys and not told
     t = known_origin()
     used, (north, east, _) = fly_track(t, [0.0] * 10)
     assert all(used)
@@ -1097,8 +1103,25 @@ def test_a_start_that_did_not_wait_tells_nothing_and_a_forger_that_used_the_catc
         t.take_refusal()
         notice = t.take_notice()
         if notice is not None:
-            told.append(notice)
-    assert len(told) == 1 and "caught up 0.50 s" in told[0], told
+            told.append(notice[0])
+    assert len(told) == 1, told
+    assert "came forward 0.55 s within 1 s of its first position, 0.50 s of it" in told[0]
+
+    t = known_origin()  # a 0.3 s backlog, then the link lost within the window
+    told = []
+    starved_start(t, 0.3, told=told)
+    t2 = known_origin()
+    for boot_ms in range(4700, 5200, 20):  # (as starved_start reads them, to 0.2 s live)
+        t2.update(local(boot_ms, boot_ms / 1000, 0.0), max(105.0 + 1e-4 * (boot_ms - 4700) / 20,
+                                                           100.0 + boot_ms / 1000 + 0.002))
+    assert t2.take_notice() is None  # (the window not over)
+    t2.forget_motion()
+    for boot_ms in range(5600, 7000, 20):  # heard again 0.4 s later, past the window
+        t2.update(local(boot_ms, boot_ms / 1000, 0.0), 100.0 + boot_ms / 1000 + 0.002)
+        notice = t2.take_notice()
+        if notice is not None:
+            told.append(notice[0])
+    assert len(told) == 2 and told[0] == told[1], told  # (told as without the lost link)
 
 
 def test_the_session_tells_the_starts_catch_up_as_a_warning() -> None:
@@ -1117,5 +1140,7 @@ def test_the_session_tells_the_starts_catch_up_as_a_warning() -> None:
     assert session.telemetry.refused == {}
     told = [e for e in session.events.of_kind(EventKind.WARNING)
             if e.data.get("cause") == "clock_catch_up"]  # fmt: skip
-    assert len(told) == 1 and "caught up 0.30 s" in told[0].message, told
+    assert len(told) == 1 and "came forward 0.30 s" in told[0].message, told
+    assert told[0].data["drop_s"] == pytest.approx(0.3, abs=0.002)
+    assert told[0].data["caught_s"] == told[0].data["drop_s"]
     assert not session.events.of_kind(EventKind.ALARM)

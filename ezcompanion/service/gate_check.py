@@ -224,7 +224,7 @@ def check_tlog(path: str | Path, *, accel_bound_m_s2: float | None = None,
                 seen.append(f"at {now_s:.2f} s: {refusal[1]}")
         notice = state.take_notice()
         if notice is not None:
-            report.notices.append(f"at {now_s:.2f} s: {notice}")
+            report.notices.append(f"at {now_s:.2f} s: {notice[0]}")
     if state is not None:
         report.refused.update(state.refused)
         report.skipped = state.skipped

@@ -267,7 +267,8 @@ class VehicleSession(StreamRequests):
             self.alarms.hold(cause, now, why, hold_s=_TELEMETRY_HOLD_S)
         notice = self.telemetry.take_notice()
         if notice is not None:
-            self.events.emit(EventKind.WARNING, now, notice, cause="clock_catch_up")
+            self.events.emit(EventKind.WARNING, now, notice[0], cause="clock_catch_up",
+                             **notice[1])  # fmt: skip
         if kind == "COMMAND_ACK":
             self._on_ack(msg, now)
         elif kind == "PARAM_VALUE":

@@ -35,7 +35,9 @@ What the law uses, and why:
   that refills at ``_AHEAD_RATE`` a second. A sample beyond it is refused with
   ``Hold.GATE``, naming the message and how far ahead. For a position it may go down by
   ``_START_CATCH_UP_S`` more within ``_START_WINDOW_S`` of the first position the companion
-  takes (a starved start reads a backlog: its first sample waited). (One LOCAL_POSITION_NED at the
+  takes (a starved start reads a backlog: its first sample waited); where it took more
+  than ``_AHEAD_S``, that is told once the window is over (:meth:`TelemetryState.take_notice`).
+  (One LOCAL_POSITION_NED at the
   target stamped 3 s ahead had widened the gate by what 3 s allow and been taken:
   "intercepted" 5.5 m from the target; a burst of 22, each 99 ms past the one before, did
   the same where each was judged against the one before; one ATTITUDE stamped 9 s ahead
@@ -197,7 +199,8 @@ _AHEAD_RATE = 0.05
 # (held as stale, failing closed) and, behind it, are dropped as reordered, or named a
 # second source where they are farther than _REORDER_S from every taken one. None after a
 # lost link that followed a taken sample, or a reboot: mid-engagement a first sample that
-# waited is retaken by a run, named.
+# waited is retaken by a run, named. Where it took more than _AHEAD_S, it is told once the
+# window is over (``take_catch_up``): up to that much, as much as the budget gives, is not.
 _START_CATCH_UP_S = 0.5
 _START_WINDOW_S = 1.0
 # after a lost link, a position source is used only once its samples have come for this
@@ -332,7 +335,10 @@ class _VehicleClock:
     catch_up_s: float = 0.0
     base_at_s: float = -math.inf
     first_base: bool = True  # False once a time base has begun (a sample taken)
-    caught_s: float = 0.0  # how much of the catch-up was spent (told once the window ends)
+    # in that window: how far the least offset came down, and how much of it the catch-up
+    # took (told once the window is over, where that is more than _AHEAD_S)
+    window_drop_s: float = 0.0
+    caught_s: float = 0.0
     # (our clock, offset) of each sample refused as ahead since one was last taken
     ahead_run: list[tuple[float, float]] = field(default_factory=list)
     rebasing: bool = False  # a run let one through: if taken, it sets the least afresh
@@ -400,6 +406,8 @@ class _VehicleClock:
             caught = min(down, self._catch_up(now_s))  # (spent first, while it lasts)
             self.catch_up_s -= caught
             self.caught_s += caught
+            if now_s - self.base_at_s < _START_WINDOW_S:
+                self.window_drop_s += down
             self.budget_s = max(0.0, self._budget(now_s) - (down - caught))
             self.budget_at_s = now_s
             self.least_s = seen
@@ -411,14 +419,18 @@ class _VehicleClock:
     def _catch_up(self, now_s: float) -> float:
         return self.catch_up_s if now_s - self.base_at_s < _START_WINDOW_S else 0.0
 
-    def catch_up_told(self, now_s: float) -> float:
-        """How much of the start's catch-up was spent, once its window is over, where that
-        is more than the budget would have allowed without it (``_AHEAD_S``); else 0, and
-        0 again after it: it is told once."""
-        if now_s - self.base_at_s < _START_WINDOW_S:
-            return 0.0
-        caught, self.caught_s = self.caught_s, 0.0
-        return caught if caught > _AHEAD_S else 0.0
+    def take_catch_up(self, now_s: float) -> tuple[float, float] | None:
+        """(how far the least offset came down in the start's window, how much of it the
+        catch-up took), once the window is over, where the catch-up took more than the
+        budget gives (``_AHEAD_S``; 1 us over it, not round-off); else None, and None
+        again after: it is told once. (The catch-up is spent first, so up to ``_AHEAD_S``
+        of it, as much as the budget gives anyway, is not told: a forger may take that
+        much unseen, as it may the budget.)"""
+        if self.caught_s <= 0.0 or now_s - self.base_at_s < _START_WINDOW_S:
+            return None
+        told = (self.window_drop_s, self.caught_s)
+        self.caught_s = self.window_drop_s = 0.0
+        return told if told[1] > _AHEAD_S + 1e-6 else None
 
     def _new_base(self, boot_s: float) -> bool:
         """No sample yet, or one from a rebooted vehicle (its time well back)."""
@@ -471,7 +483,8 @@ class TelemetryState:
     _latched: bool = False
     _origin_told: bool = False  # adopt_origin: the vehicle's origin has been taken
     _refusal: tuple[Hold, str] | None = None
-    _notice: str | None = None  # what the last update tells without refusing (once)
+    # what an update tells without refusing: (the message, its data), once
+    _notice: tuple[str, dict[str, float]] | None = None
     # the newest skipped global position: (lat, lon, alt as sent, boot_s, speed_m_s)
     _skipped_global: tuple[tuple[int, int, int], float, float] | None = None
     # the global positions skipped in the last _REPEATS_S, by stamp: a copy of one arriving
@@ -484,6 +497,8 @@ class TelemetryState:
         type if it was used, None if not ours, skipped or refused."""
         if kind is None:
             kind = str(msg.get_type())
+        if self._clock.caught_s > 0.0:  # (the start's catch-up, told as its window is over)
+            self._tell_catch_up(now_s)
         handler = _HANDLERS.get(kind)
         if handler is None:
             return None
@@ -507,11 +522,24 @@ class TelemetryState:
         refusal, self._refusal = self._refusal, None
         return refusal
 
-    def take_notice(self) -> str | None:
-        """What the last :meth:`update` tells that is no refusal, once: the start's
-        catch-up used (``_START_CATCH_UP_S``), told as its window ends."""
+    def take_notice(self) -> tuple[str, dict[str, float]] | None:
+        """What the last :meth:`update` tells that is no refusal, once, and its data: the
+        start's catch-up (``_START_CATCH_UP_S``) where it took more than the budget gives,
+        told by the first message after its window."""
         notice, self._notice = self._notice, None
         return notice
+
+    def _tell_catch_up(self, now_s: float) -> None:
+        told = self._clock.take_catch_up(now_s)
+        if told is not None:
+            drop, caught = told
+            self._notice = (
+                f"the vehicle's clock came forward {drop:.2f} s within {_START_WINDOW_S:g} s "
+                f"of its first position, {caught:.2f} s of it by the start's allowance (the "
+                f"budget gives {_AHEAD_S:g} s): its first positions had waited, or one was "
+                f"stamped ahead of the vehicle's own (a forger)",
+                {"drop_s": drop, "caught_s": caught},
+            )
 
     def forget_motion(self) -> None:
         """After a lost link: what the vehicle did meanwhile is unknown, so its position,
@@ -523,8 +551,9 @@ class TelemetryState:
         # (the start's catch-up stays for a clock that has taken no sample yet: a link lost
         # before the first position, as while the origin is asked for)
         old = self._clock  # (its catch-up's use is still told, once its window is over)
-        self._clock = _VehicleClock(first_base=old.first_base, caught_s=old.caught_s,
-                                    base_at_s=old.base_at_s)  # fmt: skip
+        self._clock = _VehicleClock(first_base=old.first_base, base_at_s=old.base_at_s,
+                                    window_drop_s=old.window_drop_s,
+                                    caught_s=old.caught_s)  # fmt: skip
         self._attitude_s = self._attitude_boot_s = -math.inf
         self._yaw_run.clear()
         self._yaw_taken.clear()
@@ -813,14 +842,6 @@ class TelemetryState:
         ):
             return False
         self._clock.keep(sample.boot_s, now_s)
-        caught = self._clock.catch_up_told(now_s)
-        if caught > 0.0:
-            self._notice = (
-                f"the vehicle's clock caught up {caught:.2f} s in the companion's first "
-                f"{_START_WINDOW_S:g} s, more than the {_AHEAD_S:g} s it may gain otherwise "
-                f"(at most {_START_CATCH_UP_S:g} s more): positions that waited as it started "
-                f"were taken, as one stamped ahead of the vehicle's own on its path would be"
-            )
         return True
 
     def _stamp_ok(self, kind: str, boot_s: float, now_s: float, *, position: bool) -> bool:

@@ -12,6 +12,7 @@ PACKAGES := ezcompanion sitl_stub
 # 11 lines, and a machine's pip config may add a line for each index location it ignores)
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
+	@echo "installing ezcompanion and its dependencies into $(VENV) (a minute or two the first time)"
 	$(BIN)/python -m pip install -qq --upgrade pip
 	$(BIN)/python -m pip install -qq -e '.[dev]'
 	@echo "compiling the guidance kernels into numba's cache (once, 25 to 45 s on a 2-core machine)"

@@ -2,6 +2,6 @@
 
 import sys
 
-from sitl_stub.cli import main
+from sitl_stub.console import main
 
 sys.exit(main())

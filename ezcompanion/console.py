@@ -43,7 +43,8 @@ def entry(prog: str, module: str) -> int:
     except BaseException as exc:
         if not signals or isinstance(exc, SystemExit):
             raise
-        signal.signal(signal.SIGINT, signal.SIG_IGN)  # (a second Ctrl-C as it ends: no more)
+        for sig in before:  # (a second Ctrl-C, or a SIGTERM, as it ends: no more)
+            signal.signal(sig, signal.SIG_IGN)
         print(f"{prog}: interrupted", file=sys.stderr)
         for stream in (sys.stdout, sys.stderr):
             with contextlib.suppress(OSError, ValueError):

@@ -51,6 +51,7 @@ _MODULES = {
 
 
 def __getattr__(name: str) -> Any:
+    """``name`` of ``__all__``, from its module (loaded now, if it was not)."""
     module = _MODULES.get(name)
     if module is None:
         raise AttributeError(f"module 'sitl_stub' has no attribute {name!r}")

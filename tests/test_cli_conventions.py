@@ -537,7 +537,8 @@ def test_the_console_scripts_are_the_guarded_entries_and_unguarded_a_signal_is_a
          "print(sorted(m for m in sys.modules if m.startswith(('sitl_stub', 'numpy'))))"],
         capture_output=True, text=True, timeout=60, check=True).stdout  # fmt: skip
     assert "sitl_stub.server" not in loaded and "sitl_stub.config" in loaded, loaded
-    with pytest.raises(AttributeError, match="has no attribute 'Nothing'"):
-        import sitl_stub
+    import sitl_stub
 
+    assert all(getattr(sitl_stub, name) is not None for name in sitl_stub.__all__)
+    with pytest.raises(AttributeError, match="has no attribute 'Nothing'"):
         _ = sitl_stub.Nothing  # type: ignore[attr-defined]

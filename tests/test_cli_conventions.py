@@ -7,6 +7,7 @@ tracebacks)."""
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import signal
 import socket
@@ -135,33 +136,49 @@ def _processes_naming(text: str) -> list[str]:
     return found
 
 
-def test_a_demo_interrupted_alone_ends_its_companion_and_vehicle(tmp_path: Path) -> None:
+@pytest.mark.parametrize("group", [False, True])
+def test_an_interrupted_demo_ends_its_companion_by_its_on_exit_then_its_vehicle(
+    tmp_path: Path, group: bool
+) -> None:
     """A reviewer's SIGINT to the demo's process alone (not its group, as Ctrl-C sends)
     left its companion guiding for 12 s after the demo ended. The demo now ends both: exit
-    130, and no process of its run left."""
+    130, and no process of its run left. A Ctrl-C at the terminal (``group``: the SIGINT to
+    the demo's process group) had reached the vehicle too, which ended first: the
+    companion, in lockstep with it, waited on a clock that had stopped until the demo
+    killed it 10 s later, its on_exit never said. The vehicle is now in a session of its
+    own, ended after the companion, which says its on_exit, taken."""
     out = tmp_path / "out"
     demo = subprocess.Popen(
         [sys.executable, "-m", "ezcompanion", "demo", "--scenario", "1", "--watch", "--out",
          str(out), "--zenoh-listen", free_endpoint()],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=group,
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # (a shell's `&`)
     )  # fmt: skip
     assert demo.stdout is not None
+    said: list[str] = []
     try:
         for line in demo.stdout:  # at 1x: the companion guiding, the vehicle flying
             if "engaged:" in line:
                 break
         assert _processes_naming(str(out)), "no companion or vehicle ran"
-        drain = threading.Thread(target=demo.stdout.read, daemon=True)  # (its children's
-        drain.start()  # stderr is this pipe too: read on, but judge when the demo ends)
-        demo.send_signal(signal.SIGINT)
+        # (its children's stderr is this pipe too: read on, but judge when the demo ends)
+        drain = threading.Thread(target=lambda: said.extend(demo.stdout or ()), daemon=True)
+        drain.start()
+        if group:
+            os.killpg(demo.pid, signal.SIGINT)
+        else:
+            demo.send_signal(signal.SIGINT)
         demo.wait(timeout=60.0)
+        drain.join(timeout=10.0)
     finally:
         if demo.poll() is None:
             demo.kill()
             demo.wait()
     assert demo.returncode == ExitCode.INTERRUPTED
     assert _processes_naming(str(out)) == []
+    if group:
+        on_exit = [line for line in said if "on_exit:" in line]
+        assert on_exit and "NOT APPLIED" not in on_exit[0], said[-6:]
 
 
 def test_a_reader_that_goes_away_ends_a_command_silently(tmp_path: Path) -> None:
@@ -423,6 +440,32 @@ def test_issue_10_scenarios_are_one_line_in_both_tools(
     assert one_line(capsys).startswith(f"ezcompanion: error: {message}")
     assert stub_main(["--config", str(path), "--connect", "udpout:127.0.0.1:9"]) == 2
     assert one_line(capsys).startswith(f"sitl-stub: error: {message}")
+
+
+@pytest.mark.parametrize(
+    ("section", "message"),
+    [("companion:\n  on_exit: land\n",
+      "companion.on_exit: must be one of hold, loiter, rtl, none or default (got 'land')"),
+     ("companion:\n  stale_after: 0.5\n",
+      "companion.stale_after: unknown key; did you mean stale_after_s?"),
+     ("companion:\n  connect: udp:nowhere\n", "companion.connect: "),
+     ("telemetry:\n  publish_rate: 20\n", "telemetry.publish_rate: unknown key")],
+)  # fmt: skip
+def test_simulate_checks_the_sections_run_reads(
+    section: str, message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A reviewer checked a file with ``simulate`` before a field day: its wrong
+    ``companion.on_exit`` passed there, exit 0, and was found only by ``run``. ``simulate``
+    now checks the companion's and the telemetry's sections as ``run`` does, though the
+    reference simulator uses neither: one line, exit 2, as ``run`` says it."""
+    path = tmp_path / "scenario.yaml"
+    path.write_text(SCENARIO.read_text() + "\n" + section)
+    assert main(["simulate", str(path)]) == ExitCode.BAD_INPUT
+    said = one_line(capsys)
+    assert said.startswith(f"ezcompanion: error: {message}"), said
+    assert main(["run", "--config", str(path), "--max-time", "0.1", "--no-telemetry"]
+                ) == ExitCode.BAD_INPUT  # fmt: skip
+    assert one_line(capsys) == said
 
 
 def test_the_scenarios_connect_takes_mavsdk_urls_too(

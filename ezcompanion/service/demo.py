@@ -293,7 +293,12 @@ def run_loopback(
                                    f"{companion.wait()}): its error is above") from None
         forward = threading.Thread(target=_forward, args=(companion.stdout, quiet), daemon=True)
         forward.start()
-        stub = subprocess.Popen(stub_cmd, stdout=subprocess.DEVNULL if quiet else None)
+        # (in a session of its own: a Ctrl-C at the terminal reaches the companion, which
+        # ends by its on_exit with the vehicle still there to take it, and the vehicle is
+        # ended after it; a reviewer's, the vehicle gone first, had held the demo 10 s and
+        # the companion's on_exit was never said)
+        stub = subprocess.Popen(stub_cmd, stdout=subprocess.DEVNULL if quiet else None,
+                                start_new_session=True)  # fmt: skip
         wall_s = duration * _LOCKSTEP_WALL_PER_SIM_S if lockstep else duration / speedup
         try:
             code = companion.wait(timeout=wall_s + _GRACE_WALL_S)

@@ -74,6 +74,22 @@ def _load(config: Path) -> Scenario:
     return scenario
 
 
+def _check_service_sections(scenario: Scenario) -> None:
+    """The scenario's ``companion:`` and ``telemetry:`` sections checked as ``run`` checks
+    them, though the reference simulator uses neither: a file tried with ``simulate`` before
+    a field day had a wrong ``companion.on_exit`` found only by ``run`` (a reviewer's).
+    (``sitl_stub:`` is the loopback vehicle's, checked by it.)"""
+    from ezcompanion.endpoint import pymavlink_url
+    from ezcompanion.service.settings import companion_settings
+    from ezcompanion.telemetry.settings import telemetry_settings
+
+    section = scenario.sections.get("companion", {})
+    if "connect" in section:
+        pymavlink_url(section["connect"], field="companion.connect")
+    companion_settings(scenario)
+    telemetry_settings(scenario.sections.get("telemetry", {}))
+
+
 def run_compile() -> int:
     """Compile the service's kernels (the one-vehicle step, with the law, the shield and the
     abandon check; the response fits' scan) into numba's cache, or say they are there
@@ -237,7 +253,9 @@ def run_simulate(
     from ezcompanion.sim.engine import simulate
     from ezcompanion.sim.output import write_result_csv
 
-    run = simulate(_load(config), LawName(law) if law else None)
+    scenario = _load(config)
+    _check_service_sections(scenario)
+    run = simulate(scenario, LawName(law) if law else None)
     print(run.summary())
     if out_csv is not None:
         print(f"  wrote {write_result_csv(run, out_csv)}")

@@ -140,15 +140,19 @@ def run_gate_check(tlog: Path, *, accel_bound_m_s2: float | None,
     from ezcompanion.service.gate_check import check_tlog
 
     if not tlog.is_file():
-        raise FileNotFoundError(f"{tlog}: no such telemetry log")
+        why = "a directory, not a telemetry log" if tlog.is_dir() else "no such telemetry log"
+        raise FileNotFoundError(f"{tlog}: {why}")
     report = check_tlog(tlog, accel_bound_m_s2=accel_bound_m_s2, accel_max_m_s2=accel_max_m_s2,
                         gate_position_m=gate_position_m, system_id=system_id, speedup=speedup,
                         lockstep=lockstep)  # fmt: skip
+    if report.vehicle is None:  # (a file of anything else, or of another system: one line)
+        of = f" of system {system_id}" if system_id is not None else ""
+        raise ConfigError("tlog", str(tlog), f"no autopilot heartbeat{of} in the log: nothing "
+                          "checked")  # fmt: skip
     print("\n".join(report.lines()))
     if not report.used:
-        print(f"{tlog}: no position of the autopilot's with its origin (GPS_GLOBAL_ORIGIN) in "
-              "the log: nothing checked", file=sys.stderr)  # fmt: skip
-        return ExitCode.BAD_INPUT
+        raise ConfigError("tlog", str(tlog), "no position of the autopilot's with its origin "
+                          "(GPS_GLOBAL_ORIGIN) in the log: nothing checked")  # fmt: skip
     return ExitCode.OK if report.clean else ExitCode.FAILED
 
 

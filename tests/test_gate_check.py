@@ -97,7 +97,7 @@ def test_a_clean_flight_passes(tmp_path: Path, capsys: pytest.CaptureFixture[str
     assert main(["gate-check", str(log)]) == ExitCode.OK
     out = capsys.readouterr().out
     assert "vehicle 1/1 (ArduCopter), acceleration bound 5.66 m/s^2" in out
-    assert "refused: none" in out and "named: 0" in out and "3 s): 0 times" in out
+    assert "\nrefused: none\n" in out and "named: 0" in out and "3 s): 0 times" in out
 
 
 def test_a_jump_is_named_and_fails(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -146,9 +146,22 @@ def test_a_log_with_no_autopilot_or_no_file_says_so(
 ) -> None:
     log = _log(tmp_path / "station.tlog", autopilot=False)
     assert main(["gate-check", str(log)]) == ExitCode.BAD_INPUT
-    assert "no autopilot heartbeat in the log" in capsys.readouterr().out
+    said = capsys.readouterr()  # (one line, a reviewer's had been two, neither an error's)
+    assert said.out == "" and said.err.count("\n") == 1
+    assert said.err.startswith("ezcompanion: error: tlog: no autopilot heartbeat in the log: "
+                               "nothing checked (got '")  # (a long path is shortened)
+    assert said.err.endswith("station.tlog')\n")
+    assert main(["gate-check", str(_log(tmp_path / "one.tlog")), "--system-id", "7"]
+                ) == ExitCode.BAD_INPUT  # fmt: skip
+    assert "no autopilot heartbeat of system 7 in the log" in capsys.readouterr().err
+    garbage = tmp_path / "garbage.tlog"
+    garbage.write_bytes(bytes(range(256)) * 40)
+    assert main(["gate-check", str(garbage)]) == ExitCode.BAD_INPUT
+    assert capsys.readouterr().err.startswith("ezcompanion: error: tlog: no autopilot")
     assert main(["gate-check", str(tmp_path / "none.tlog")]) == ExitCode.IO_ERROR
     assert "none.tlog: no such telemetry log" in capsys.readouterr().err
+    assert main(["gate-check", str(tmp_path)]) == ExitCode.IO_ERROR
+    assert capsys.readouterr().err.endswith(": a directory, not a telemetry log\n")
 
 
 def test_a_clock_set_back_a_lost_link_and_an_odd_file_name_are_read_as_the_service_would(

@@ -95,8 +95,9 @@ class GateReport:
                "used: " + _counts(self.used) + f"; skipped {self.skipped} global positions "
                f"(the local one fresh); link lost (no heartbeat for {_LINK_LOST_S:g} s): "
                f"{self.lost} times",
-               "refused: " + (_counts(self.refused) or "none") + " (without an alarm where "
-               "none is named below: out of range, before a fix, frozen or repeated)",
+               "refused: " + (_counts(self.refused) + " (without an alarm where none is "
+                              "named below: out of range, before a fix, frozen or repeated)"
+                              if self.refused else "none"),
                f"named: {self.reasons.total()} (each holds guidance 0.5 s; for 3 s without a "
                "break, they end it)"]  # fmt: skip
         if self.lockstep:

@@ -109,10 +109,11 @@ class Stream:
         self.connections += 1
         if self._noticed:
             _log.warning(
-                "%s: %s after %d attempts in %.1f s",
+                "%s: %s after %d attempt%s in %.1f s",
                 self.url,
                 "connected" if self._verb == "connect" else "open again",
                 self.attempts,
+                "" if self.attempts == 1 else "s",
                 time.monotonic() - self._down_since_s,
             )
         self.down_reason = None
@@ -121,7 +122,8 @@ class Stream:
         return True
 
     def _waiting(self, reason: str) -> None:
-        self.down_reason = f"{self._failed} ({reason}, {self.attempts} attempts)"
+        tries = f"{self.attempts} attempt{'' if self.attempts == 1 else 's'}"
+        self.down_reason = f"{self._failed} ({reason}, {tries})"
         now = time.monotonic()
         if now < self._next_notice_s:
             return

@@ -12,10 +12,13 @@ holds files.
 
 from __future__ import annotations
 
+import errno
 import itertools
+import os
 import shutil
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -44,11 +47,14 @@ PAPER_SCENARIOS = {1: "paper_scenario1.yaml", 2: "paper_scenario2.yaml"}
 
 
 def output_directory(given: Path | None, default: Path) -> Path:
-    """Where a command writes: ``given`` as asked (with a note on stdout if it already holds
-    files), else ``default`` or the first of ``default-2``, ``default-3``, ... that is absent
-    or empty, claimed by creating it."""
+    """Where a command writes: ``given`` as asked (``--out``: made now, so that one that
+    cannot be is said before the work, naming the flag; with a note on stdout if it already
+    holds files), else ``default`` or the first of ``default-2``, ``default-3``, ... that is
+    absent or empty, claimed by creating it."""
     if given is not None:
-        if given.is_dir() and any(given.iterdir()):
+        with _naming("--out", given):
+            given.mkdir(parents=True, exist_ok=True)
+        if any(given.iterdir()):
             print(f"note: {given}/ holds earlier results; files of the same name are replaced")
         return given
     for number in itertools.count(1):
@@ -62,6 +68,32 @@ def output_directory(given: Path | None, default: Path) -> Path:
             print(f"writing to {candidate}/ ({default}/ holds earlier results)")
         return candidate
     raise AssertionError("unreachable")  # pragma: no cover
+
+
+@contextmanager
+def _naming(flag: str, path: Path) -> Iterator[None]:
+    """An OSError about ``path`` said with the flag that gave it: "--out PATH: reason" (a
+    reviewer's read "/proc/x: No such file or directory", after the whole simulation)."""
+    try:
+        yield
+    except OSError as exc:
+        code, reason = exc.errno, exc.strerror
+        if isinstance(exc, FileExistsError):  # (a file where a directory must be made)
+            code, reason = errno.ENOTDIR, os.strerror(errno.ENOTDIR)
+        where = f" ({exc.filename})" if exc.filename and str(exc.filename) != str(path) else ""
+        raise OSError(code, reason, f"{flag} {path}{where}") from exc
+
+
+def _output_file(path: Path | None, flag: str) -> None:
+    """Before the work: the directory of output file ``path`` made (as its writer would)
+    and writable, and the file too where it is there already."""
+    if path is None:
+        return
+    with _naming(flag, path):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        for target in (path.parent, path) if path.exists() else (path.parent,):
+            if not os.access(target, os.W_OK):
+                raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(target))
 
 
 def _load(config: Path) -> Scenario:
@@ -259,6 +291,8 @@ def run_simulate(
 
     scenario = _load(config)
     _check_service_sections(scenario)
+    _output_file(out_csv, "--out")
+    _output_file(plot_png, "--plot")
     run = simulate(scenario, LawName(law) if law else None)
     print(run.summary())
     if out_csv is not None:

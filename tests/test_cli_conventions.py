@@ -341,17 +341,6 @@ def test_default_output_directories_never_reuse_earlier_results(
     assert _parser().parse_args(["validate"]).out is None  # resolved the same way
 
 
-def test_an_unwritable_output_is_exit_4_in_one_line(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    blocker = tmp_path / "file"
-    blocker.write_text("not a directory")
-    argv = ["simulate", str(SCENARIO), "--out", str(blocker / "run.csv")]
-    assert main(argv) == ExitCode.IO_ERROR
-    err = capsys.readouterr().err
-    assert err.splitlines()[-1].startswith(f"ezcompanion: error: {blocker}")
-
-
 @pytest.mark.parametrize("tool", ["ezcompanion", "sitl_stub"])
 def test_a_binary_scenario_as_a_real_process(tool: str, tmp_path: Path) -> None:
     path = tmp_path / "scenario.yaml"
@@ -466,6 +455,27 @@ def test_simulate_checks_the_sections_run_reads(
     assert main(["run", "--config", str(path), "--max-time", "0.1", "--no-telemetry"]
                 ) == ExitCode.BAD_INPUT  # fmt: skip
     assert one_line(capsys) == said
+
+
+def test_an_output_that_cannot_be_written_is_said_first_naming_its_flag(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A reviewer's ``simulate --out /proc/x/y.csv`` flew the whole engagement, printed its
+    summary, then said "/proc/x: No such file or directory"; ``demo --out`` the same after
+    its first header. Each is now said before the work, naming the flag: one line, exit 4,
+    nothing on stdout."""
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    for argv, flag in (
+        (["simulate", str(SCENARIO), "--out", str(blocker / "run.csv")], "--out"),
+        (["simulate", str(SCENARIO), "--plot", str(blocker / "fig.png")], "--plot"),
+        (["demo", "--scenario", "1", "--out", str(blocker / "demo")], "--out"),
+    ):
+        assert main(argv) == ExitCode.IO_ERROR
+        said = capsys.readouterr()
+        assert said.out == "" and said.err.count("\n") == 1, said
+        assert said.err.startswith(f"ezcompanion: error: {flag} {blocker}/"), said.err
+        assert said.err.endswith(": Not a directory\n"), said.err
 
 
 def test_the_scenarios_connect_takes_mavsdk_urls_too(

@@ -444,6 +444,9 @@ def run_scale(
     from ezcompanion.errors import ConfigError
     from ezcompanion.guidance.scaling import ScaleFactors
 
+    if out.exists() and config.exists() and out.samefile(config):
+        raise ConfigError("--out", str(out), "is the file to scale: it would be lost; write "
+                          "the scaled one elsewhere")  # fmt: skip
     raw = read_yaml_file(config)
     if isinstance(raw, dict) and "scale" in raw:
         raise ConfigError("scale", raw["scale"], f"{config} is scaled already (its scale: key); "
@@ -470,8 +473,9 @@ def run_scale(
         f"and a_max {scaled.guidance.accel_max_m_s2:.6g} m/s^2:\n"
         f"# lengths x L = {length:.6g}, times x T = {time:.6g}, every gain by its units\n"
     )
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(header + yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    with _naming("--out", out):
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(header + yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
     g = scaled.guidance
     print(f"{source.name}: L = {length:.6g} (lengths), T = {time:.6g} (times); "
           f"speed {scaled.start.speed_m_s:g} m/s, a_max {g.accel_max_m_s2:.6g} m/s^2, "

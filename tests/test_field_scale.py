@@ -125,6 +125,22 @@ def test_bad_scale_flags_are_one_line_and_exit_2(
     assert not out.exists()
 
 
+def test_scale_never_writes_over_the_file_it_scales(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A reviewer: `scale --out` writes over what is there without a word; over the file it
+    scales, the original would be lost. That is refused, one line, the file as it was."""
+    source = tmp_path / "mine.yaml"
+    source.write_text(PAPER.read_text())
+    before = source.read_bytes()
+    assert main(["scale", str(source), "--speed-m-s", "22", "--accel-max-m-s2", "4.5", "--out",
+                 str(tmp_path / "." / "mine.yaml")]) == 2  # fmt: skip
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("ezcompanion: error: --out: is the file "
+                                                   "to scale: it would be lost"), lines
+    assert source.read_bytes() == before
+
+
 @pytest.mark.parametrize(
     ("scale", "message"),
     [

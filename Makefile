@@ -9,7 +9,7 @@ PACKAGES := ezcompanion sitl_stub
 .PHONY: demo test lint typecheck pytest bench clean
 
 # (pip -qq: errors only. pip 26 passes on setuptools' editable-install banner as a warning,
-# 11 lines, and a machine's pip config may add a line for each index location it ignores)
+# 10 lines, and a machine's pip config may add a line for each index location it ignores)
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	@echo "installing ezcompanion and its dependencies into $(VENV) (a minute or two the first time)"

@@ -85,15 +85,15 @@ def _naming(flag: str, path: Path) -> Iterator[None]:
 
 
 def _output_file(path: Path | None, flag: str) -> None:
-    """Before the work: the directory of output file ``path`` made (as its writer would)
-    and writable, and the file too where it is there already."""
+    """Before the work: the directory of output file ``path`` made (as its writer would),
+    and the file writable where it is there already, else its directory."""
     if path is None:
         return
     with _naming(flag, path):
         path.parent.mkdir(parents=True, exist_ok=True)
-        for target in (path.parent, path) if path.exists() else (path.parent,):
-            if not os.access(target, os.W_OK):
-                raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(target))
+        target = path if path.exists() else path.parent  # (written over, or made there)
+        if not os.access(target, os.W_OK):
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(target))
 
 
 def _load(config: Path) -> Scenario:

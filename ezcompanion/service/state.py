@@ -28,26 +28,25 @@ What the law uses, and why:
   loop fails closed on it. A time stamp back by more than ``_REBOOT_BACKSTEP_S`` (a reboot)
   and a lost link start the offset afresh. Only accepted position samples move it.
 - a stamp ahead of the vehicle's clock: the least offset seen (our clock at arrival less the
-  stamp) is the vehicle's clock plus the least delay, so a sample whose own offset is
-  lower claims to have been sent before the vehicle's clock got there. A genuine one is
-  lower only by less than the least delay seen (milliseconds), or by a vehicle clock a
-  little faster than ours: the offset may go down by at most ``_AHEAD_S`` in all, a budget
-  that refills at ``_AHEAD_RATE`` a second. A sample beyond it is refused with
-  ``Hold.GATE``, naming the message and how far ahead. For a position it may go down by
-  ``_START_CATCH_UP_S`` more within ``_START_WINDOW_S`` of the first position the companion
-  takes (a starved start reads a backlog: its first sample waited); where it took more
-  than ``_AHEAD_S``, that is told once the window is over (:meth:`TelemetryState.take_notice`).
-  (One LOCAL_POSITION_NED at the
-  target stamped 3 s ahead had widened the gate by what 3 s allow and been taken:
+  stamp) is the vehicle's clock plus the least delay, so a sample whose own offset is lower
+  claims to have been sent before the vehicle's clock got there. A genuine one is lower only
+  by less than the least delay seen (milliseconds), or by a vehicle clock a little faster
+  than ours: the offset may go down by at most ``_AHEAD_S`` in all, a budget that refills at
+  ``_AHEAD_RATE`` a second. A sample beyond it is refused with ``Hold.GATE``, naming the
+  message and how far ahead. For a position it may go down by ``_START_CATCH_UP_S`` more
+  within ``_START_WINDOW_S`` of the first position the companion takes (a starved start
+  reads a backlog: its first sample waited); where it took more than ``_AHEAD_S``, that is
+  told once the window is over (``TelemetryState.take_notice``). (One LOCAL_POSITION_NED at
+  the target stamped 3 s ahead had widened the gate by what 3 s allow and been taken:
   "intercepted" 5.5 m from the target; a burst of 22, each 99 ms past the one before, did
-  the same where each was judged against the one before; one ATTITUDE stamped 9 s ahead
-  had aged every genuine position by 9 s.) Where the least offset itself came from a
-  sample that waited (the first after a lost link, out of a buffer), the vehicle's own
-  samples are all "ahead": ``_REBASE_SAMPLES`` or more over ``_REBASE_S`` of our clock,
-  the last of them agreeing, none taken for as long and no position between them stamped
-  otherwise, let the next through, and if the gate takes it, it starts the least afresh
-  (an ``alarm``); a forger's run cannot last so while the vehicle's own samples, not
-  ahead, arrive between (taken or not).
+  the same where each was judged against the one before; one ATTITUDE stamped 9 s ahead had
+  aged every genuine position by 9 s.) Where the least offset itself came from a sample that
+  waited (the first after a lost link, out of a buffer), the vehicle's own samples are all
+  "ahead": ``_REBASE_SAMPLES`` or more over ``_REBASE_S`` of our clock, the last of them
+  agreeing, none taken for as long and no position between them stamped otherwise, let the
+  next through, and if the gate takes it, it starts the least afresh (an ``alarm``); a
+  forger's run cannot last so while the vehicle's own samples, not ahead, arrive between
+  (taken or not).
 
 Refused, and counted (a refused sample changes nothing the law reads; the gate's
 prediction goes on through it, below):
@@ -406,7 +405,7 @@ class _VehicleClock:
             caught = min(down, self._catch_up(now_s))  # (spent first, while it lasts)
             self.catch_up_s -= caught
             self.caught_s += caught
-            if now_s - self.base_at_s < _START_WINDOW_S:
+            if self._in_window(now_s):
                 self.window_drop_s += down
             self.budget_s = max(0.0, self._budget(now_s) - (down - caught))
             self.budget_at_s = now_s
@@ -416,8 +415,12 @@ class _VehicleClock:
     def _budget(self, now_s: float) -> float:
         return min(_AHEAD_S, self.budget_s + _AHEAD_RATE * max(0.0, now_s - self.budget_at_s))
 
+    def _in_window(self, now_s: float) -> bool:
+        """Within the start's window (``_START_WINDOW_S`` from ``base_at_s``)."""
+        return now_s - self.base_at_s < _START_WINDOW_S
+
     def _catch_up(self, now_s: float) -> float:
-        return self.catch_up_s if now_s - self.base_at_s < _START_WINDOW_S else 0.0
+        return self.catch_up_s if self._in_window(now_s) else 0.0
 
     def take_catch_up(self, now_s: float) -> tuple[float, float] | None:
         """(how far the least offset came down in the start's window, how much of it the
@@ -426,7 +429,7 @@ class _VehicleClock:
         again after: it is told once. (The catch-up is spent first, so up to ``_AHEAD_S``
         of it, as much as the budget gives anyway, is not told: a forger may take that
         much unseen, as it may the budget.)"""
-        if self.caught_s <= 0.0 or now_s - self.base_at_s < _START_WINDOW_S:
+        if self.caught_s <= 0.0 or self._in_window(now_s):
             return None
         told = (self.window_drop_s, self.caught_s)
         self.caught_s = self.window_drop_s = 0.0

@@ -21,6 +21,7 @@ from ezcompanion.service.demo import DemoResult, judge_run
 from ezcompanion.sim.compare_plot import comparison_figure
 from ezcompanion.sim.demo_plot import demo_figure
 from ezcompanion.sim.engine import SimResult, simulate
+from ezcompanion.sim.judge import judge
 from ezcompanion.sim.output import write_result_csv
 from ezcompanion.sim.plot import _band, run_title
 
@@ -71,6 +72,17 @@ def test_the_title_is_the_summary_and_counts_from_the_engagement(tmp_path: Path)
     lines = {line.split("  ")[1].strip(): line for line in summary.splitlines()[1:]}
     assert f"{ratio:.3f}" in lines["max |a| / a_max"]
     assert f"{clearance:+.3f}" in lines["min true clearance"]
+    # each figure named for what it is: the time from the first setpoint, and the closest
+    # approach up to the intercept (not a miss distance: it is within the capture radius)
+    assert f"t = {judgement.engaged_s:.2f} s" in lines["the first setpoint / intercepted"]
+    assert "after the first setpoint" in title
+    closest = lines["closest approach"]
+    assert closest.endswith("(up to the intercept)")
+    assert _numbers(closest)[0] == round(judgement.miss_distance_m, 3) <= (
+        SCENARIO.guidance.intercept_radius_m)  # fmt: skip
+    # a companion that never guided leaves no view: timed from the track's start, said so
+    alone = judge(track)
+    assert alone.engaged_s == track.t_s[0] and "after the track's start" in alone.headline("x")
     # every time axis starts at the engagement
     for ax in figure.axes[1:]:
         assert ax.get_xlim()[0] <= 0.0 < ax.get_xlim()[1] < 0.5 * OFFSET_S

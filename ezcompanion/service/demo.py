@@ -92,11 +92,13 @@ class DemoResult:
         clear = ", ".join(f"{n} {c:+.3f} m" for n, c in zip(names, j.min_clearance_m, strict=True))
         safe = "yes" if j.safe else "NO: entered an engagement zone"
         end = "intercepted" if j.intercepted else "ended"
+        upto = " (up to the intercept)" if j.intercepted else ""
         return "\n".join(
             [
                 f"loopback (judged by the vehicle's own track) {self.headline(scenario)}",
-                f"  engaged / {end:<11}  t = {j.engaged_s:.2f} s / {j.time_s:.2f} s (vehicle time)",
-                f"  miss distance        {j.miss_distance_m:.3f} m",
+                f"  {j.started_by} / {end}  t = {j.engaged_s:.2f} s / {j.time_s:.2f} s "
+                "(vehicle time)",
+                f"  closest approach     {j.miss_distance_m:.3f} m{upto}",
                 f"  min true clearance   {clear}",
                 f"  stayed outside EZs   {safe}",
                 f"  max |a| / a_max      {j.max_accel_ratio:.3f}",

@@ -91,10 +91,13 @@ class Judgement:
 
     intercepted: bool  # the vehicle came within the intercept radius
     time_s: float  # truth time of interception (or of the last row)
-    engaged_s: float  # truth time the engagement started
-    miss_distance_m: float
+    engaged_s: float  # truth time the engagement started (``started_by``)
+    miss_distance_m: float  # closest approach to the target, up to the intercept
     min_clearance_m: tuple[float, ...]  # per zone, r - rho, min over the track
     max_accel_ratio: float  # max |a| / a_max of the vehicle
+    # what engaged_s is: the first setpoint's time (where the companion's first tick saw
+    # the vehicle), or, for a companion that never guided, the track's first row
+    started_by: str = "the first setpoint"
 
     @property
     def guided_s(self) -> float:
@@ -108,7 +111,7 @@ class Judgement:
     def headline(self, scenario_name: str) -> str:
         """One line: the verdict and the numbers (the summary's first line, the title)."""
         verdict = (
-            f"intercepted {self.guided_s:.2f} s after engaging"
+            f"intercepted {self.guided_s:.2f} s after {self.started_by}"
             if self.intercepted
             else f"NOT intercepted (closest {self.miss_distance_m:.2f} m)"
         )
@@ -120,7 +123,9 @@ class Judgement:
 
 
 def judge(track: TruthTrack, engaged_s: float | None = None) -> Judgement:
-    """The truth's verdict up to interception (the first row within the intercept radius)."""
+    """The truth's verdict up to interception (the first row within the intercept radius),
+    timed from ``engaged_s``, the first setpoint's truth time (None: the track's first row,
+    said so)."""
     scenario = track.scenario
     inside = np.flatnonzero(track.range_to_target_m <= scenario.guidance.intercept_radius_m)
     end = int(inside[0]) if inside.size else track.t_s.size - 1
@@ -128,6 +133,7 @@ def judge(track: TruthTrack, engaged_s: float | None = None) -> Judgement:
         intercepted=bool(inside.size),
         time_s=float(track.t_s[end]),
         engaged_s=float(track.t_s[0]) if engaged_s is None else engaged_s,
+        started_by="the track's start" if engaged_s is None else "the first setpoint",
         miss_distance_m=float(track.range_to_target_m[: end + 1].min()),
         min_clearance_m=tuple(float(c) for c in track.clearance_m[: end + 1].min(axis=0)),
         max_accel_ratio=float(

@@ -97,7 +97,7 @@ def main() -> None:
         args_kernel = (
             packed, zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_term,
             np.array([2.0]), np.array([0.0]), np.array([8.0]), np.array([-4.0]),
-            np.array([2.5]), np.array([1.0]), np.array([0.1]),
+            np.array([2.5]), np.array([1.0]), np.array([0.1]), np.array([0.1]),
             np.empty((1, O_SIZE)), np.empty((1, Z_SIZE, count)),
         )  # fmt: skip
         number = 2000 if count < 300 else 500
@@ -418,8 +418,8 @@ def _timed_parts(
                      plan_k, out, out_zone, scratch, result, flags, captured)  # fmt: skip
             kernel.append(clock() - start)
             start = clock()
-            evaluate_batch(c._packed, zn, ze, zmur, zterm, tn1, te1, n1, e1, h1, v1, accel, out,
-                           out_zone)  # fmt: skip
+            evaluate_batch(c._packed, zn, ze, zmur, zterm, tn1, te1, n1, e1, h1, v1, accel, av1,
+                           out, out_zone)  # fmt: skip
             _advance_batch(c._packed, out, accel, dt, a_next, mode)
             if shielded:
                 shield_batch(c._shield, zn, ze, zmur, zreach, n1, e1, h1, accel, av1, v1,

@@ -23,6 +23,7 @@ from conftest_sitl import SCENARIO
 from ezcompanion.config import Scenario, load_scenario
 from ezcompanion.records import TickCommand, VehicleState
 from ezcompanion.service import identify, identify_monitor
+from ezcompanion.service.autopilots import ARDUCOPTER, ARDUPLANE, PX4_COPTER
 from ezcompanion.service.demo import free_udp_port, judge_truth
 from ezcompanion.service.events import EventKind, EventLog
 from ezcompanion.service.identify import ResponseWindow, SpeedFit, speed_models
@@ -319,3 +320,25 @@ def test_a_review_of_too_few_samples_says_so_and_raises_nothing() -> None:
     assert found.speed is None and found.speed_refused is not None
     assert "samples" in found.speed_refused
     assert loop.speed_factor == 1.0
+
+
+def test_a_profiles_lag_comes_with_its_lead_and_a_scenarios_with_its_own() -> None:
+    """The law's lead on the lag (``intercept_lead_ratio``) is given with the lag: the
+    ArduPlane profile's 1 s comes with no lead (its course loop is not the first-order lag
+    the lead is for: docs/guidance.md, "The nominal's lead"), the copters' with the
+    scenario's; a scenario that states its own lag keeps its own lead, later ones too."""
+    assert ARDUPLANE.intercept_lead_ratio == 0.0
+    assert ARDUCOPTER.intercept_lead_ratio is None and PX4_COPTER.intercept_lead_ratio is None
+    plane = GuidanceLoop(load_scenario(SCENARIO), loop_rate_hz=50.0, stale_after_s=0.5)
+    plane.assume_response_lag(ARDUPLANE.response_lag_s, ARDUPLANE.intercept_lead_ratio)
+    guidance = plane.scenario.guidance
+    assert (guidance.response_lag_s, guidance.intercept_lead_ratio) == (1.0, 0.0)
+    plane.update_scenario(load_scenario(SCENARIO))  # a zenoh update stating no lag
+    assert plane.scenario.guidance.intercept_lead_ratio == 0.0
+    plane.update_scenario(_stating(0.8))  # one stating its lag: its own lead (the default)
+    guidance = plane.scenario.guidance
+    assert (guidance.response_lag_s, guidance.intercept_lead_ratio) == (0.8, 0.5)
+    copter = GuidanceLoop(load_scenario(SCENARIO), loop_rate_hz=50.0, stale_after_s=0.5)
+    copter.assume_response_lag(ARDUCOPTER.response_lag_s, ARDUCOPTER.intercept_lead_ratio)
+    guidance = copter.scenario.guidance
+    assert (guidance.response_lag_s, guidance.intercept_lead_ratio) == (0.6, 0.5)

@@ -52,6 +52,9 @@ def test_bad_defender_names_the_field(changes: dict[str, float], field: str) -> 
         ({"reference_limit_ratio": 1.0}, "reference_limit_ratio"),
         ({"command_limit_1_s": 0.5}, "command_limit_1_s"),
         ({"shield_margin_m": 0.0}, "shield_margin_m"),  # the give-way rule needs a margin
+        ({"intercept_lead_ratio": -0.1}, "intercept_lead_ratio"),  # a share of the lag
+        ({"intercept_lead_ratio": 1.5}, "intercept_lead_ratio"),
+        ({"intercept_lead_ratio": float("nan")}, "intercept_lead_ratio"),
     ],
 )
 def test_bad_guidance_parameter_names_the_field(changes: dict[str, float], field: str) -> None:

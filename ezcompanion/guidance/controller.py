@@ -248,7 +248,7 @@ class GuidanceController:
 
     def evaluate(self, state: KinematicState) -> LawOutput:
         """The law at ``state`` and the current actuator state, without advancing it."""
-        out, out_zone = self._run_law(self._state_rows(state))
+        out, out_zone = self._run_law(self._state_rows(state), state)
         return LawOutput(out, out_zone, self._shape)
 
     def step(self, state: KinematicState, dt_s: float) -> GuidanceStep:
@@ -267,7 +267,7 @@ class GuidanceController:
         """``step`` through the batch kernels (the law, the actuator, the shield), for any
         shape, one vehicle included."""
         rows = self._state_rows(state, least_speed_m_s(self.params.accel_max_m_s2, dt_s))
-        out, out_zone = self._run_law(rows)
+        out, out_zone = self._run_law(rows, state)
         accel = self._accel
         accel_next = np.empty_like(accel)
         mode = np.empty(accel.shape, dtype=np.int8)
@@ -405,15 +405,7 @@ class GuidanceController:
         """The backup law: the robust command through the shield, for every vehicle not yet
         captured; overwrites ``accel_next`` and ``mode`` for those."""
         north, east, course, speed = rows
-        bound = self.params.accel_max_m_s2
-        if state.course_rate_rad_s is None:
-            flown = self._flown
-        else:
-            rate = np.empty_like(speed)
-            rate.reshape(self._shape)[...] = state.course_rate_rad_s
-            if not np.isfinite(rate).all():
-                raise StateError("course_rate_rad_s", state.course_rate_rad_s, "must be finite")
-            flown = np.clip(speed * rate, -bound, bound)
+        flown = self._flown_now(state, speed)
         active = mode != _CAPTURED
         shield = np.full((accel_next.shape[0], 6), math.nan)
         zones = self.zones
@@ -438,13 +430,26 @@ class GuidanceController:
         return backup, shield
 
     def _run_law(
-        self, rows: tuple[FloatArray, FloatArray, FloatArray, FloatArray]
+        self, rows: tuple[FloatArray, FloatArray, FloatArray, FloatArray], state: KinematicState
     ) -> tuple[FloatArray, FloatArray]:
         north, east, course, speed = rows
+        flown = self._flown_now(state, speed) if self._shielded else None
         return run_kernel(
             self._packed, self.zones, self._target_n, self._target_e, north, east, course,
-            speed, self._accel,
+            speed, self._accel, flown,
         )  # fmt: skip
+
+    def _flown_now(self, state: KinematicState, speed: FloatArray) -> FloatArray:
+        """The flown lateral acceleration a_v (backup law): the measured course rate times
+        the speed, clipped to a_max, else the model's."""
+        if state.course_rate_rad_s is None:
+            return self._flown
+        rate = np.empty_like(speed)
+        rate.reshape(self._shape)[...] = state.course_rate_rad_s
+        if not np.isfinite(rate).all():
+            raise StateError("course_rate_rad_s", state.course_rate_rad_s, "must be finite")
+        bound = self.params.accel_max_m_s2
+        return np.clip(speed * rate, -bound, bound)
 
     def _state_rows(
         self, state: KinematicState, least_speed: float = 0.0

@@ -57,7 +57,10 @@ Law variants (``LawName``), numbered as the typos in docs/guidance.md:
   alpha fades out (smoothstep in r_T, its rate exact), so it arrives instead of holding
   off a zone next to the target (measured: near-target safe interceptions 48% -> 60%).
   (The robust law's own avoidance routes the vehicle; the shield only acts where that
-  would leave no certified escape.)
+  would leave no certified escape.) With a lag tau (``response_lag_s``) its interception
+  law steers the heading the vehicle will have ``intercept_lead_ratio`` tau on:
+  a_T - (1 - alpha) K_T ratio tau a_v, a_v the flown lateral acceleration (without it
+  lagging vehicles passed the target 0.1 to 0.2 m off and circled it).
 """
 
 from __future__ import annotations
@@ -100,8 +103,10 @@ BoolArray = npt.NDArray[np.bool_]
     P_R_FLOOR,
     P_INTERCEPT_R,
     P_FADE_NEAR,
+    P_LEAD,
+    P_LAG,
     P_SIZE,
-) = range(23)
+) = range(25)
 
 # Per-vehicle outputs of the kernel, and per-zone outputs.
 (
@@ -261,7 +266,10 @@ def pack_params(law: LawName, params: GuidanceParams) -> FloatArray:
     p[P_ACT_FLOOR] = params.actuator_floor
     p[P_R_FLOOR] = params.range_floor_m
     p[P_INTERCEPT_R] = params.intercept_radius_m
-    p[P_FADE_NEAR] = params.safety_fade_turn_radii if LawName(law) is LawName.BACKUP else 0.0
+    backup = LawName(law) is LawName.BACKUP
+    p[P_FADE_NEAR] = params.safety_fade_turn_radii if backup else 0.0
+    p[P_LEAD] = params.intercept_lead_ratio if backup else 0.0
+    p[P_LAG] = params.response_lag_s
     return p
 
 
@@ -303,12 +311,14 @@ def _evaluate_one(
     course: float,
     v: float,
     a: float,
+    av: float,
     out: FloatArray,
     out_zone: FloatArray,
     k: int,
     scratch: FloatArray,
 ) -> None:
-    """The law for vehicle ``k`` with zone row ``kz``; writes ``out[k, O_*]`` and
+    """The law for vehicle ``k`` with zone row ``kz`` (``a``: the actuator state; ``av``:
+    the flown lateral acceleration, a with no lag); writes ``out[k, O_*]`` and
     ``out_zone[k, Z_*, i]``. (Whole arrays and indices rather than row slices: a slice is a
     reference-counted view in numba, and six of them per vehicle cost more than the maths.)"""
     robust = p[P_LAW_ROBUST] > 0.5
@@ -411,6 +421,18 @@ def _evaluate_one(
         psi_rate = p[P_KS] * h_rate - lie_rate - (s_rate * a_t + s_grad * a_t_rate) * inv_v
         alpha, dalpha = cbf_blend_weight(psi, p[P_CBF_W])
         alpha_rate = dalpha * psi_rate
+        lead = p[P_LEAD] * p[P_LAG]
+        if lead > 0.0:
+            # the backup law with a lag tau: its interception law steers the heading the
+            # vehicle will have a share of the lag on, sigma_T + ratio tau a_v / v (a_T
+            # shifted by -K_T ratio tau a_v, whose rate under the lag, a_v' = (a - a_v) / tau,
+            # is -K_T ratio (a - a_v)); weighted by 1 - alpha (alpha before the fade below),
+            # so that it does not act where the nominal's own safety law turns it from a
+            # zone (docs/guidance.md, "The nominal's lead")
+            shift = -p[P_KT] * lead * av
+            shift_rate = -p[P_KT] * p[P_LEAD] * (a - av)
+            a_t_rate += shift_rate * (1.0 - alpha) - shift * alpha_rate
+            a_t += shift * (1.0 - alpha)
         if p[P_FADE_NEAR] > 0.0:
             # the backup law near the target: the shield keeps it safe, so the nominal's own
             # safety share fades out within a few turn radii and the interception law
@@ -492,6 +514,7 @@ def _evaluate_range(
     course: FloatArray,
     v: FloatArray,
     a: FloatArray,
+    av: FloatArray,
     out: FloatArray,
     out_zone: FloatArray,
     start: int,
@@ -507,7 +530,7 @@ def _evaluate_range(
         kt = 0 if shared_target else k
         _evaluate_one(
             p, zn, ze, zmur, zterm, kz, tn[kt], te[kt], n[k], e[k], course[k], v[k], a[k],
-            out, out_zone, k, scratch,
+            av[k], out, out_zone, k, scratch,
         )  # fmt: skip
 
 
@@ -525,12 +548,13 @@ def evaluate_batch(
     course: FloatArray,
     v: FloatArray,
     a: FloatArray,
+    av: FloatArray,
     out: FloatArray,
     out_zone: FloatArray,
 ) -> None:
     """The law over a batch, on this thread: outputs ``out[k, O_*]``, ``out_zone[k, Z_*, i]``."""
     _evaluate_range(
-        p, zn, ze, zmur, zterm, tn, te, n, e, course, v, a, out, out_zone, 0, n.shape[0]
+        p, zn, ze, zmur, zterm, tn, te, n, e, course, v, a, av, out, out_zone, 0, n.shape[0]
     )
 
 
@@ -548,6 +572,7 @@ def evaluate_batch_parallel(
     course: FloatArray,
     v: FloatArray,
     a: FloatArray,
+    av: FloatArray,
     out: FloatArray,
     out_zone: FloatArray,
     chunks: int,
@@ -556,7 +581,7 @@ def evaluate_batch_parallel(
     size = n.shape[0]
     for c in prange(chunks):
         _evaluate_range(
-            p, zn, ze, zmur, zterm, tn, te, n, e, course, v, a, out, out_zone,
+            p, zn, ze, zmur, zterm, tn, te, n, e, course, v, a, av, out, out_zone,
             c * size // chunks, (c + 1) * size // chunks,
         )  # fmt: skip
 
@@ -575,8 +600,10 @@ def run_kernel(
     course: FloatArray,
     speed: FloatArray,
     accel: FloatArray,
+    flown: FloatArray | None = None,
 ) -> tuple[FloatArray, FloatArray]:
-    """Evaluate flat, contiguous inputs on one thread or, for a large batch, on all of them.
+    """Evaluate flat, contiguous inputs on one thread or, for a large batch, on all of them
+    (``flown``: the flown lateral acceleration a_v; None: the actuator state, no lag).
 
     Returns the raw outputs ``(out, out_zone)`` for ``LawOutput``.
     """
@@ -585,7 +612,8 @@ def run_kernel(
     out_zone = np.empty((size, Z_SIZE, zones.north_m.shape[1]))
     args = (
         p, zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_term, target_north_m,
-        target_east_m, north, east, course, speed, accel, out, out_zone,
+        target_east_m, north, east, course, speed, accel, accel if flown is None else flown,
+        out, out_zone,
     )  # fmt: skip
     if size >= PARALLEL_MIN_BATCH:
         evaluate_batch_parallel(*args, min(size, 4 * get_num_threads()))
@@ -611,14 +639,18 @@ def evaluate_law(
     course_rad: float | FloatArray,
     speed_m_s: float | FloatArray,
     accel_m_s2: float | FloatArray,
+    flown_accel_m_s2: float | FloatArray | None = None,
 ) -> LawOutput:
-    """Evaluate the law at one state (or a batch); ``accel_m_s2`` is the actuator state a.
+    """Evaluate the law at one state (or a batch); ``accel_m_s2`` is the actuator state a,
+    ``flown_accel_m_s2`` the flown lateral acceleration a_v that a lag leaves behind it
+    (None: a; only the backup law with a ``response_lag_s`` reads it).
 
     Stateless and unchecked: see ``GuidanceController`` for the checked, stateful interface.
     """
+    flown = accel_m_s2 if flown_accel_m_s2 is None else flown_accel_m_s2
     shape = np.broadcast_shapes(
         np.shape(north_m), np.shape(east_m), np.shape(course_rad), np.shape(speed_m_s),
-        np.shape(accel_m_s2),
+        np.shape(accel_m_s2), np.shape(flown),
     )  # fmt: skip
     size = int(np.prod(shape))
     out, out_zone = run_kernel(
@@ -631,5 +663,6 @@ def evaluate_law(
         _flat(course_rad, size),
         _flat(speed_m_s, size),
         _flat(accel_m_s2, size),
+        _flat(flown, size),
     )
     return LawOutput(out, out_zone, shape)

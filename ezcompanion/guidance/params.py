@@ -182,6 +182,10 @@ class GuidanceParams:
     # ... and its nominal's own safety share fades out within this many turn radii
     # (v^2 / a_max) beyond one of the target, so that it arrives (0: no fade)
     safety_fade_turn_radii: float = 4.0
+    # ... and, with a lag, its interception law steers the heading the vehicle will have
+    # this far into its lag, sigma_T + ratio tau a_v / v, where the nominal's own safety
+    # law is not engaged (0: the heading it has; docs/guidance.md, "The nominal's lead")
+    intercept_lead_ratio: float = 0.5
     prediction_step_ratio: float = 0.05
     # what the autopilot flies if the companion falls silent (0 s: not checked): straight
     # for abandon_hold_s, then braking (0: none); with abandon_turn_s > 0 (a course setpoint,
@@ -250,6 +254,12 @@ class GuidanceParams:
                 f"must be an integer in [0, {SHIELD_PLAN_DEPTH_MAX}]",
             )  # fmt: skip
         _non_negative("safety_fade_turn_radii", self.safety_fade_turn_radii)
+        _finite("intercept_lead_ratio", self.intercept_lead_ratio)
+        if not 0.0 <= self.intercept_lead_ratio <= 1.0:
+            raise ConfigError(
+                "intercept_lead_ratio", self.intercept_lead_ratio,
+                "must be in [0, 1] (a share of the lag: 0, none)",
+            )  # fmt: skip
         _finite("prediction_step_ratio", self.prediction_step_ratio)
         if not 0.0 < self.prediction_step_ratio <= 0.25:
             raise ConfigError(

@@ -255,7 +255,9 @@ def step_one(
     s = k[P_SIZE:_S_END]
     zn, ze, zmur, zterm, zreach = zones[0], zones[1], zones[2], zones[3], zones[4]
     a = accel[0]
-    _evaluate_one(p, zn, ze, zmur, zterm, 0, k[_S_END], k[_S_END + 1], n, e, course, v, a,
+    bound = p[P_AMAX]  # the flown a_v: measured (clipped to the bound), else the model's
+    av = flown[0] if math.isnan(rate) else min(max(v * rate, -bound), bound)
+    _evaluate_one(p, zn, ze, zmur, zterm, 0, k[_S_END], k[_S_END + 1], n, e, course, v, a, av,
                   out, out_zone, 0, scratch)  # fmt: skip
     captured = out[0, O_RT] <= p[P_INTERCEPT_R]
     command = out[0, O_AC]
@@ -270,8 +272,6 @@ def step_one(
         if captured:
             flown[0] = a_next
         else:
-            bound = p[P_AMAX]
-            av = flown[0] if math.isnan(rate) else min(max(v * rate, -bound), bound)
             shield = scratch[5:6]
             # the one vehicle's row, 0, as a number known only at run time: with a literal 0
             # numba compiles the shield and all below it once more than for the batch's

@@ -116,11 +116,14 @@ class GuidanceLoop:
             )  # fmt: skip
         self.period_s = period
 
-    def assume_response_lag(self, lag_s: float) -> None:
+    def assume_response_lag(self, lag_s: float, lead_ratio: float | None = None) -> None:
         """Give the law the vehicle's response lag ``lag_s`` (its autopilot's measured
-        default) unless the scenario states one; keeps the actuator state."""
+        default) and the lead on it ``lead_ratio`` (None: the scenario's) unless the scenario
+        states its own lag; keeps the actuator state."""
         if lag_s > 0.0:
             self._assumed["response_lag_s"] = lag_s
+            if lead_ratio is not None:
+                self._assumed["intercept_lead_ratio"] = lead_ratio
             self.update_scenario(self.scenario)
 
     def assume_measured_lag(self, lag_s: float) -> None:
@@ -196,8 +199,9 @@ class GuidanceLoop:
         update, a placement) keeps them."""
         guidance = scenario.guidance
         changes = dict(self._assumed)
-        if guidance.response_lag_s > 0.0:
+        if guidance.response_lag_s > 0.0:  # its own lag, and its own lead on it
             changes.pop("response_lag_s", None)
+            changes.pop("intercept_lead_ratio", None)
         if guidance.abandon_hold_s > 0.0:
             for name in ("abandon_turn_s", "abandon_hold_s", "abandon_brake_m_s2"):
                 changes.pop(name, None)

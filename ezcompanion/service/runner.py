@@ -599,7 +599,8 @@ class CompanionService:
                 profile = session.profile  # the autopilot's measured response
                 if profile is not None:
                     self.engagement.setpoints.use_profile(profile)
-                    self.loop.assume_response_lag(profile.response_lag_s)
+                    self.loop.assume_response_lag(profile.response_lag_s,
+                                                  profile.intercept_lead_ratio)
                     self.identify.use_profile(profile)
             self.phase = Phase.WAITING
         if (

@@ -193,6 +193,23 @@ CHECKS: dict[str, Check] = {
     "ezcompanion validate --runs 2000 --seed 2026 --law backup --map-runs 500 --chatter-runs 0 "
     "--no-figures --workers 1 --out validation-out-jitter-0": Check.PARSE,
     **{
+        f"ezcompanion validate {campaign} --set intercept_lead_ratio={k} "
+        f"--out validation-out-lead-{name}-{k}": Check.PARSE
+        for name, campaign, ratios in (
+            ("clear", "--runs 2000 --seed 2040 --law backup --dist response_lag_s=1.0,1.4 "
+             "--dist ideal_response_probability=0 --dist target_near_probability=0 "
+             "--map-runs 0 --chatter-runs 0 --no-figures", ("0", "0.25", "0.5", "0.75", "1")),
+            ("near", "--runs 2000 --seed 2042 --law backup --dist response_lag_s=0.2,1.4 "
+             "--dist ideal_response_probability=0 --dist target_near_probability=1 "
+             "--map-runs 0 --chatter-runs 0 --no-figures", ("0", "0.5")),
+            ("2026", "--runs 10000 --seed 2026 --law backup --map-runs 2000 "
+             "--chatter-runs 100 --no-figures", ("0", "0.5")),
+            ("rate-filter", "--runs 10000 --seed 2026 --law backup --rate-filter 0.1 "
+             "--map-runs 2000 --chatter-runs 0 --no-figures", ("0", "0.5")),
+        )
+        for k in ratios
+    },
+    **{
         "ezcompanion validate --runs 2000 --seed 2026 --law backup --map-runs 500 "
         f"--chatter-runs 0 --no-figures --workers 1 --hold-jitter {j} "
         f"--out validation-out-jitter-{j}": Check.PARSE

@@ -374,10 +374,11 @@ def test_the_lead_shifts_the_interception_law_by_its_share_of_the_lag() -> None:
 
     def a_t(av: float, *, law: LawName = LawName.BACKUP, params: GuidanceParams = LAGGED,
             zones: ZoneSet = far, state: tuple[float, float, float] = (6.0, 3.0, 3.0),
-            ) -> tuple[float, float]:  # fmt: skip
-        out = evaluate_law(law, params, zones, target_north_m=0.0, target_east_m=0.0,
-                           north_m=state[0], east_m=state[1], course_rad=state[2],
-                           speed_m_s=1.0, accel_m_s2=0.3, flown_accel_m_s2=av)  # fmt: skip
+            target: tuple[float, float] = (0.0, 0.0)) -> tuple[float, float]:  # fmt: skip
+        out = evaluate_law(law, params, zones, target_north_m=target[0],
+                           target_east_m=target[1], north_m=state[0], east_m=state[1],
+                           course_rad=state[2], speed_m_s=1.0, accel_m_s2=0.3,
+                           flown_accel_m_s2=av)  # fmt: skip
         return float(out.accel_intercept_m_s2), float(out.alpha)
 
     plain, alpha = a_t(0.0)
@@ -393,7 +394,14 @@ def test_the_lead_shifts_the_interception_law_by_its_share_of_the_lag() -> None:
     # D2's boundary, heading in: the nominal's own safety law has it, so no lead
     held, alpha = a_t(0.0, zones=ZONES, state=STATES[0])
     assert alpha == 1.0
-    assert a_t(0.7, zones=ZONES, state=STATES[0])[0] == held
+    assert a_t(0.7, zones=ZONES, state=STATES[0]) == (held, alpha)  # alpha does not move
+    # ... and so with the target 0.5 m ahead, where the safety share fades out (alpha 0):
+    # the weight is the law's alpha before the fade, not after
+    course = STATES[0][2]
+    ahead = (STATES[0][0] + 0.5 * math.cos(course), STATES[0][1] + 0.5 * math.sin(course))
+    near, alpha = a_t(0.0, zones=ZONES, state=STATES[0], target=ahead)
+    assert alpha == 0.0
+    assert a_t(0.7, zones=ZONES, state=STATES[0], target=ahead) == (near, alpha)
 
 
 @settings(max_examples=60, deadline=None)

@@ -323,10 +323,11 @@ def test_a_review_of_too_few_samples_says_so_and_raises_nothing() -> None:
 
 
 def test_a_profiles_lag_comes_with_its_lead_and_a_scenarios_with_its_own() -> None:
-    """The law's lead on the lag (``intercept_lead_ratio``) is given with the lag: the
+    """The law's lead on the lag (``intercept_lead_ratio``) is the autopilot's: the
     ArduPlane profile's 1 s comes with no lead (its course loop is not the first-order lag
-    the lead is for: docs/guidance.md, "The nominal's lead"), the copters' with the
-    scenario's; a scenario that states its own lag keeps its own lead, later ones too."""
+    the lead is for: docs/guidance.md, "The nominal's lead"), whoever gives the lag, later
+    scenarios too, unless a scenario states a lead of its own; the copters' profiles give
+    the scenario's."""
     assert ARDUPLANE.intercept_lead_ratio == 0.0
     assert ARDUCOPTER.intercept_lead_ratio is None and PX4_COPTER.intercept_lead_ratio is None
     plane = GuidanceLoop(load_scenario(SCENARIO), loop_rate_hz=50.0, stale_after_s=0.5)
@@ -335,10 +336,16 @@ def test_a_profiles_lag_comes_with_its_lead_and_a_scenarios_with_its_own() -> No
     assert (guidance.response_lag_s, guidance.intercept_lead_ratio) == (1.0, 0.0)
     plane.update_scenario(load_scenario(SCENARIO))  # a zenoh update stating no lag
     assert plane.scenario.guidance.intercept_lead_ratio == 0.0
-    plane.update_scenario(_stating(0.8))  # one stating its lag: its own lead (the default)
+    plane.update_scenario(_stating(0.8))  # one stating its lag: the profile's lead on it
     guidance = plane.scenario.guidance
-    assert (guidance.response_lag_s, guidance.intercept_lead_ratio) == (0.8, 0.5)
-    copter = GuidanceLoop(load_scenario(SCENARIO), loop_rate_hz=50.0, stale_after_s=0.5)
-    copter.assume_response_lag(ARDUCOPTER.response_lag_s, ARDUCOPTER.intercept_lead_ratio)
-    guidance = copter.scenario.guidance
+    assert (guidance.response_lag_s, guidance.intercept_lead_ratio) == (0.8, 0.0)
+    led = _stating(0.8)  # ... and one stating its own lead too: its own
+    led = dataclasses.replace(led, guidance=dataclasses.replace(led.guidance,
+                                                                intercept_lead_ratio=0.3))
+    plane.update_scenario(led)
+    assert plane.scenario.guidance.intercept_lead_ratio == 0.3
+    # a profile with none (the copters') gives the scenario's, and forgets one given before
+    plane.assume_response_lag(ARDUCOPTER.response_lag_s, ARDUCOPTER.intercept_lead_ratio)
+    plane.update_scenario(load_scenario(SCENARIO))
+    guidance = plane.scenario.guidance
     assert (guidance.response_lag_s, guidance.intercept_lead_ratio) == (0.6, 0.5)

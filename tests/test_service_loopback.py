@@ -270,6 +270,9 @@ def test_each_setpoint_profile_flies_the_stub(
     engaged = flight.events.of_kind(EventKind.ENGAGED)
     assert engaged and ("OFFBOARD" if profile == "px4" else "GUIDED") in engaged[0].message
     assert flight.outcome.intercepted and flight.outcome.setpoints_sent > 20
+    # the profile's lag came with its lead on it: none for the plane's course loop
+    lead = flight.service.loop.scenario.guidance.intercept_lead_ratio
+    assert lead == (0.0 if profile == "plane" else 0.5)
     intercepted, _, _, clearance, accel = judge_truth(load_scenario(config), flight.truth)
     assert intercepted and min(clearance) > 0.0 and accel <= 1.0
 

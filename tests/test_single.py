@@ -78,12 +78,17 @@ def assert_same(single: GuidanceStep, batch: GuidanceStep, k: int) -> None:
 
 @pytest.mark.parametrize("law", LAWS)
 @pytest.mark.parametrize("with_rate", [True, False])
-def test_one_vehicle_steps_like_its_row_of_a_batch(law: LawName, with_rate: bool) -> None:
+@pytest.mark.parametrize("lag_s", [0.0, 0.8])
+def test_one_vehicle_steps_like_its_row_of_a_batch(
+    law: LawName, with_rate: bool, lag_s: float
+) -> None:
     """Ten steps of 24 vehicles: the actuator, the model's flown acceleration, the held
-    backup and the nominal's weight (its memory) carried from step to step in both paths."""
+    backup and the nominal's weight (its memory) carried from step to step in both paths;
+    with a lag, the backup law's lead on it reads the same flown acceleration in both."""
     rng = np.random.default_rng(13 + int(with_rate))
     size = 24
-    zones, target, params = SCENARIO.zones(), SCENARIO.target, SCENARIO.guidance
+    zones, target = SCENARIO.zones(), SCENARIO.target
+    params = dataclasses.replace(SCENARIO.guidance, response_lag_s=lag_s)
     bound = params.accel_max_m_s2
     start = rng.uniform(-0.9 * bound, 0.9 * bound, size)
     batch = GuidanceController(zones=zones, target=target, params=params, law=law)

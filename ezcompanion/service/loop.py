@@ -12,7 +12,7 @@ import math
 
 from ezcompanion.config import Scenario
 from ezcompanion.errors import ConfigError, PrecisionError
-from ezcompanion.guidance import GuidanceController, KinematicState, LawName
+from ezcompanion.guidance import GuidanceController, GuidanceParams, KinematicState, LawName
 from ezcompanion.guidance.abandon import abandon_gap
 from ezcompanion.guidance.single import (
     check_precision,
@@ -38,6 +38,8 @@ _LEAST_SPEED_FACTOR = 0.5
 # ... and a step at most this many periods long (a late tick's, however late), nor longer
 # than a revolution at the bound (``single.longest_step_s``).
 _LONGEST_STEP_PERIODS = 5.0
+# the law's lead on the lag as GuidanceParams gives it: a scenario's that differs is its own
+_DEFAULT_LEAD = GuidanceParams().intercept_lead_ratio
 
 
 class GuidanceLoop:
@@ -118,11 +120,14 @@ class GuidanceLoop:
 
     def assume_response_lag(self, lag_s: float, lead_ratio: float | None = None) -> None:
         """Give the law the vehicle's response lag ``lag_s`` (its autopilot's measured
-        default) and the lead on it ``lead_ratio`` (None: the scenario's) unless the scenario
-        states its own lag; keeps the actuator state."""
+        default) unless the scenario states its own, and the lead on it ``lead_ratio``
+        (None: the scenario's) unless the scenario states its own (``_with_assumed``); keeps
+        the actuator state."""
         if lag_s > 0.0:
             self._assumed["response_lag_s"] = lag_s
-            if lead_ratio is not None:
+            if lead_ratio is None:
+                self._assumed.pop("intercept_lead_ratio", None)
+            else:
                 self._assumed["intercept_lead_ratio"] = lead_ratio
             self.update_scenario(self.scenario)
 
@@ -195,12 +200,15 @@ class GuidanceLoop:
 
     def _with_assumed(self, scenario: Scenario) -> Scenario:
         """``scenario`` with what the vehicle was found to be (its lag, its abandon path)
-        where the scenario itself leaves them at 0: a scenario that arrives later (a zenoh
-        update, a placement) keeps them."""
+        where the scenario itself leaves them at 0, and the profile's lead on the lag
+        (``intercept_lead_ratio``: what the autopilot's loop is, whoever gives the lag)
+        where the scenario leaves it at its default: a scenario that arrives later (a
+        zenoh update, a placement) keeps them."""
         guidance = scenario.guidance
         changes = dict(self._assumed)
-        if guidance.response_lag_s > 0.0:  # its own lag, and its own lead on it
+        if guidance.response_lag_s > 0.0:
             changes.pop("response_lag_s", None)
+        if guidance.intercept_lead_ratio != _DEFAULT_LEAD:
             changes.pop("intercept_lead_ratio", None)
         if guidance.abandon_hold_s > 0.0:
             for name in ("abandon_turn_s", "abandon_hold_s", "abandon_brake_m_s2"):

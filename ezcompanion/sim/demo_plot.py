@@ -8,8 +8,8 @@ view beside it.
 - (d) the companion's a_c (a band), a_d and a, the vehicle's measured a and the bounds;
   below, alpha x a_max and a_b, a_T.
 
-Times count from the start of the engagement (the truth's, and the companion's first tick).
-The title is :meth:`~ezcompanion.sim.judge.Judgement.headline`, the summary's first line.
+Times count from the first setpoint (the truth's, where the companion's first tick saw the
+vehicle). The title is :meth:`~ezcompanion.sim.judge.Judgement.headline`, the summary's first line.
 """
 
 from __future__ import annotations
@@ -72,7 +72,7 @@ def demo_figure(track: TruthTrack, view: SimResult, judgement: Judgement) -> Fig
     ax = fig.add_subplot(grid[1, 1])
     ax.plot(t_view, np.degrees(view.lead_angle_target_rad), "g-")
     ax.set_ylabel("sigma_T (deg)")
-    ax.set_xlabel("t from engagement (s)")
+    ax.set_xlabel("t from the first setpoint (s)")
     ax.grid(True, alpha=0.3)
 
     ax = fig.add_subplot(grid[:, 2])
@@ -84,7 +84,7 @@ def demo_figure(track: TruthTrack, view: SimResult, judgement: Judgement) -> Fig
         names=track.zone_names,
         margin_m=scenario.guidance.margin_m,
     )
-    ax.set_xlabel("t from engagement (s)")
+    ax.set_xlabel("t from the first setpoint (s)")
     ax.set_title("(c) safety (truth): h and the true clearances")
 
     ax = fig.add_subplot(grid[0, 3])
@@ -104,7 +104,7 @@ def demo_figure(track: TruthTrack, view: SimResult, judgement: Judgement) -> Fig
     ax.plot(t_view, np.clip(view.accel_intercept_m_s2, -lim, lim), "b-", lw=0.9, label="a_T")
     ax.plot(t_view, view.alpha * amax, "k:", label="alpha x a_max")
     ax.set_ylim(-lim, lim)
-    ax.set_xlabel("t from engagement (s)")
+    ax.set_xlabel("t from the first setpoint (s)")
     ax.set_ylabel("m/s^2")
     ax.grid(True, alpha=0.3)
     ax.legend(loc="upper right", fontsize=8, ncol=3)

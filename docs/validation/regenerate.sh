@@ -101,6 +101,53 @@ for reserve in reserve no_reserve; do
     cp "$OUT-chatter-$reserve/tables.md" "$OUT-chatter-$reserve/summary.txt" \
         "docs/validation/chatter_100/$reserve/"
 done
+# the nominal's lead on a lag (docs/validation.md, "The nominal's lead"), off and on: the
+# lagged clear-target runs at five ratios, the near-target runs, seed 2026's 10,000 with
+# the exact course rate and with the service's measured one (~10 min in all)
+"$BIN/ezcompanion" validate --runs 2000 --seed 2040 --law backup \
+    --dist response_lag_s=1.0,1.4 --dist ideal_response_probability=0 \
+    --dist target_near_probability=0 --map-runs 0 --chatter-runs 0 --no-figures \
+    --set intercept_lead_ratio=0 --no-progress --out "$OUT-lead-clear-0"
+"$BIN/ezcompanion" validate --runs 2000 --seed 2040 --law backup \
+    --dist response_lag_s=1.0,1.4 --dist ideal_response_probability=0 \
+    --dist target_near_probability=0 --map-runs 0 --chatter-runs 0 --no-figures \
+    --set intercept_lead_ratio=0.25 --no-progress --out "$OUT-lead-clear-0.25"
+"$BIN/ezcompanion" validate --runs 2000 --seed 2040 --law backup \
+    --dist response_lag_s=1.0,1.4 --dist ideal_response_probability=0 \
+    --dist target_near_probability=0 --map-runs 0 --chatter-runs 0 --no-figures \
+    --set intercept_lead_ratio=0.5 --no-progress --out "$OUT-lead-clear-0.5"
+"$BIN/ezcompanion" validate --runs 2000 --seed 2040 --law backup \
+    --dist response_lag_s=1.0,1.4 --dist ideal_response_probability=0 \
+    --dist target_near_probability=0 --map-runs 0 --chatter-runs 0 --no-figures \
+    --set intercept_lead_ratio=0.75 --no-progress --out "$OUT-lead-clear-0.75"
+"$BIN/ezcompanion" validate --runs 2000 --seed 2040 --law backup \
+    --dist response_lag_s=1.0,1.4 --dist ideal_response_probability=0 \
+    --dist target_near_probability=0 --map-runs 0 --chatter-runs 0 --no-figures \
+    --set intercept_lead_ratio=1 --no-progress --out "$OUT-lead-clear-1"
+"$BIN/ezcompanion" validate --runs 2000 --seed 2042 --law backup \
+    --dist response_lag_s=0.2,1.4 --dist ideal_response_probability=0 \
+    --dist target_near_probability=1 --map-runs 0 --chatter-runs 0 --no-figures \
+    --set intercept_lead_ratio=0 --no-progress --out "$OUT-lead-near-0"
+"$BIN/ezcompanion" validate --runs 2000 --seed 2042 --law backup \
+    --dist response_lag_s=0.2,1.4 --dist ideal_response_probability=0 \
+    --dist target_near_probability=1 --map-runs 0 --chatter-runs 0 --no-figures \
+    --set intercept_lead_ratio=0.5 --no-progress --out "$OUT-lead-near-0.5"
+"$BIN/ezcompanion" validate --runs 10000 --seed 2026 --law backup --map-runs 2000 \
+    --chatter-runs 100 --no-figures --set intercept_lead_ratio=0 --no-progress \
+    --out "$OUT-lead-2026-0"
+"$BIN/ezcompanion" validate --runs 10000 --seed 2026 --law backup --map-runs 2000 \
+    --chatter-runs 100 --no-figures --set intercept_lead_ratio=0.5 --no-progress \
+    --out "$OUT-lead-2026-0.5"
+"$BIN/ezcompanion" validate --runs 10000 --seed 2026 --law backup --rate-filter 0.1 \
+    --map-runs 2000 --chatter-runs 0 --no-figures --set intercept_lead_ratio=0 --no-progress \
+    --out "$OUT-lead-rate-filter-0"
+"$BIN/ezcompanion" validate --runs 10000 --seed 2026 --law backup --rate-filter 0.1 \
+    --map-runs 2000 --chatter-runs 0 --no-figures --set intercept_lead_ratio=0.5 \
+    --no-progress --out "$OUT-lead-rate-filter-0.5"
+for run in clear-0 clear-0.25 clear-0.5 clear-0.75 clear-1 near-0 near-0.5 2026-0 2026-0.5 rate-filter-0 rate-filter-0.5; do
+    mkdir -p "docs/validation/lead/$run"
+    cp "$OUT-lead-$run/tables.md" "$OUT-lead-$run/summary.txt" "docs/validation/lead/$run/"
+done
 if [ -n "${FULL:-}" ]; then
     # shellcheck disable=SC2086
     "$BIN/ezcompanion" validate --runs 100000 --seed 2026 --law robust --map-runs 10000 \

@@ -52,6 +52,7 @@ def law_at(
     zones: ZoneSet = ZONES,
     speed_m_s: float = 1.0,
     params: GuidanceParams = PARAMS,
+    flown_m_s2: float | None = None,
 ) -> LawOutput:
     return evaluate_law(
         law,
@@ -64,6 +65,7 @@ def law_at(
         course_rad=course_rad,
         speed_m_s=speed_m_s,
         accel_m_s2=accel_m_s2,
+        flown_accel_m_s2=flown_m_s2,
     )
 
 
@@ -185,31 +187,61 @@ def test_interception_law_gives_sigma_dot_equal_minus_k_sigma(
 # --- exact d(a_d)/dt ---------------------------------------------------------------------
 
 
+def _rate_is_the_flows(
+    north: float, east: float, course: float, accel: float, speed: float, law: LawName,
+    flown: float = 0.0, tau: float = 0.0,
+) -> None:
+    """The kernel's d a_d / dt is the finite difference of a_d along the flow: the course
+    turning at a / v (the law's own kinematics) and, with a lag tau (the backup law's lead
+    on it), the flown a_v following a, a_v' = (a - a_v) / tau."""
+    params = dataclasses.replace(PARAMS, response_lag_s=tau)
+
+    def at(t: float) -> LawOutput:
+        n, e, c = flow(north, east, course, accel, speed, t)
+        av = accel + (flown - accel) * math.exp(-t / tau) if tau > 0.0 else flown
+        return law_at(n, e, c, accel, law=law, speed_m_s=speed, params=params, flown_m_s2=av)
+
+    out = at(0.0)
+    # a_T ~ 1 / r_T near the target (the engagement ends at 0.1 m), and a_T = -K v sigma_T
+    # jumps where the wrapped sigma_T crosses +-pi (target dead astern): no derivative there.
+    assume(float(out.range_to_target_m) > 0.3)
+    assume(abs(float(out.lead_angle_target_rad)) < math.pi - 0.01)
+    step = 1e-6
+    fd = (float(at(step).accel_desired_m_s2) - float(at(-step).accel_desired_m_s2)) / (2 * step)
+    scale = max(1.0, abs(fd))
+    # a_b = N / S is singular where S -> 0 (a hazard of the paper law; the robust law damps it)
+    assume(law is not LawName.PAPER or abs(float(out.safety_gradient_m)) > 1e-3)
+    assert float(out.accel_desired_rate_m_s3) == pytest.approx(fd, abs=1e-4 * scale)
+
+
+# states around the paper's zones, drawn: position, course and the actuator state
+DRAWN_STATE = {
+    "north": st.floats(-1.0, 9.0),
+    "east": st.floats(-7.0, 6.0),
+    "course": st.floats(-math.pi, math.pi),
+    "accel": st.floats(-0.95, 0.95),
+}
+
+
 @settings(max_examples=60, deadline=None)
 @given(
-    north=st.floats(-1.0, 9.0),
-    east=st.floats(-7.0, 6.0),
-    course=st.floats(-math.pi, math.pi),
-    accel=st.floats(-0.95, 0.95),
+    **DRAWN_STATE,
     speed=st.floats(0.5, 3.0),
     law=st.sampled_from([LawName.PAPER, LawName.ROBUST, LawName.BACKUP]),
 )
 def test_desired_rate_is_the_exact_derivative_along_the_flow(
     north: float, east: float, course: float, accel: float, speed: float, law: LawName
 ) -> None:
-    out = law_at(north, east, course, accel, law=law, speed_m_s=speed)
-    # a_T ~ 1 / r_T near the target (the engagement ends at 0.1 m), and a_T = -K v sigma_T
-    # jumps where the wrapped sigma_T crosses +-pi (target dead astern): no derivative there.
-    assume(float(out.range_to_target_m) > 0.3)
-    assume(abs(float(out.lead_angle_target_rad)) < math.pi - 0.01)
-    tau = 1e-6
-    plus = law_at(*flow(north, east, course, accel, speed, tau), accel, law=law, speed_m_s=speed)
-    minus = law_at(*flow(north, east, course, accel, speed, -tau), accel, law=law, speed_m_s=speed)
-    fd = (float(plus.accel_desired_m_s2) - float(minus.accel_desired_m_s2)) / (2 * tau)
-    scale = max(1.0, abs(fd))
-    # a_b = N / S is singular where S -> 0 (a hazard of the paper law; the robust law damps it)
-    assume(law is not LawName.PAPER or abs(float(out.safety_gradient_m)) > 1e-3)
-    assert float(out.accel_desired_rate_m_s3) == pytest.approx(fd, abs=1e-4 * scale)
+    _rate_is_the_flows(north, east, course, accel, speed, law)
+
+
+@settings(max_examples=60, deadline=None)
+@given(**DRAWN_STATE, flown=st.floats(-0.95, 0.95), tau=st.floats(0.1, 1.5))
+def test_the_leads_rate_is_exact_along_the_lag(
+    north: float, east: float, course: float, accel: float, flown: float, tau: float
+) -> None:
+    """The backup law with a lag: its lead's term of the rate too."""
+    _rate_is_the_flows(north, east, course, accel, 1.0, LawName.BACKUP, flown, tau)
 
 
 # --- log-sum-exp -------------------------------------------------------------------------
@@ -402,39 +434,6 @@ def test_the_lead_shifts_the_interception_law_by_its_share_of_the_lag() -> None:
     near, alpha = a_t(0.0, zones=ZONES, state=STATES[0], target=ahead)
     assert alpha == 0.0
     assert a_t(0.7, zones=ZONES, state=STATES[0], target=ahead) == (near, alpha)
-
-
-@settings(max_examples=60, deadline=None)
-@given(
-    north=st.floats(-1.0, 9.0),
-    east=st.floats(-7.0, 6.0),
-    course=st.floats(-math.pi, math.pi),
-    accel=st.floats(-0.95, 0.95),
-    flown=st.floats(-0.95, 0.95),
-    tau=st.floats(0.1, 1.5),
-)
-def test_the_leads_rate_is_exact_along_the_lag(
-    north: float, east: float, course: float, accel: float, flown: float, tau: float
-) -> None:
-    """The lead's term of the backup law's d a_d / dt is exact along the lag: with the
-    course turning at a / v (the law's own kinematics, for which the rest of its rate is
-    exact) and a_v following a with the lag, a_v' = (a - a_v) / tau, the kernel's rate is
-    the finite difference of a_d along that flow."""
-    params = GuidanceParams(response_lag_s=tau)
-
-    def at(t: float) -> LawOutput:
-        n, e, c = flow(north, east, course, accel, 1.0, t)
-        av = accel + (flown - accel) * math.exp(-t / tau)
-        return evaluate_law(LawName.BACKUP, params, ZONES, target_north_m=TARGET_N,
-                            target_east_m=TARGET_E, north_m=n, east_m=e, course_rad=c,
-                            speed_m_s=1.0, accel_m_s2=accel, flown_accel_m_s2=av)  # fmt: skip
-
-    out = at(0.0)
-    assume(float(out.range_to_target_m) > 0.3)
-    assume(abs(float(out.lead_angle_target_rad)) < math.pi - 0.01)
-    step = 1e-6
-    fd = (float(at(step).accel_desired_m_s2) - float(at(-step).accel_desired_m_s2)) / (2 * step)
-    assert float(out.accel_desired_rate_m_s3) == pytest.approx(fd, abs=1e-4 * max(1.0, abs(fd)))
 
 
 def test_a_lagging_vehicle_that_circled_the_target_intercepts_with_the_lead() -> None:

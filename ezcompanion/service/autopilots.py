@@ -155,15 +155,15 @@ PX4_COPTER = AutopilotProfile(
     abandon_brake_m_s2=3.0, timeout_parameter="COM_OF_LOSS_T", timeout_overshoot_s=0.15,
     tilt_limit_rad=math.radians(45.0),  # MPC_TILTMAX_AIR
 )  # fmt: skip
-# (no lead: the lead is the first-order lag's, which a plane's course loop is not, and the
-# loopback plane with it circled the target through paper scenario 1's 30 s, where without
-# it it intercepted at 26.8 s; docs/guidance.md, "The nominal's lead")
+# (no lead on the lag: the lead is made for a first-order lag, which a plane's course loop
+# is not, and the loopback plane with it circled the target through paper scenario 1's
+# 30 s, where without it it intercepted at 26.8 s; docs/guidance.md, "The nominal's lead")
 ARDUPLANE = AutopilotProfile(
     name="ArduPlane", response_lag_s=1.0, intercept_lead_ratio=0.0, turn_ratio=0.73,
-    abandon_turn_s=6.0, abandon_hold_s=4.0,
-    abandon_brake_m_s2=0.0, heading_roll_gain=GUIDED_P_DEFAULT_RAD_PER_RAD,
-    heading_gain_parameter="GUIDED_P", roll_limit_rad=math.radians(45.0),
-    roll_limit_parameter="ROLL_LIMIT_DEG", tilt_limit_rad=math.radians(45.0),
+    abandon_turn_s=6.0, abandon_hold_s=4.0, abandon_brake_m_s2=0.0,
+    heading_gain_parameter="GUIDED_P", heading_roll_gain=GUIDED_P_DEFAULT_RAD_PER_RAD,
+    roll_limit_rad=math.radians(45.0), roll_limit_parameter="ROLL_LIMIT_DEG",
+    tilt_limit_rad=math.radians(45.0),
     manoeuvre_margin=1.5,  # (ROLL_LIMIT_DEG's default)
 )  # fmt: skip
 

@@ -221,8 +221,8 @@ def test_the_backup_flying_alone_reads_safety_whatever_the_nominals_alpha(
     c.reset(np.zeros(1))  # a batch of one: the batch path, whose law can be replaced here
     run_law = GuidanceController._run_law
 
-    def broken_law(self: GuidanceController, rows: Any, state: Any) -> Any:
-        out, out_zone = run_law(self, rows, state)
+    def broken_law(self: GuidanceController, rows: Any, flown: Any) -> Any:
+        out, out_zone = run_law(self, rows, flown)
         out[:, O_AC] = math.nan
         out[:, O_ALPHA] = math.nan
         return out, out_zone

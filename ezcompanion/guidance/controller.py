@@ -248,7 +248,8 @@ class GuidanceController:
 
     def evaluate(self, state: KinematicState) -> LawOutput:
         """The law at ``state`` and the current actuator state, without advancing it."""
-        out, out_zone = self._run_law(self._state_rows(state), state)
+        rows = self._state_rows(state)
+        out, out_zone = self._run_law(rows, self._flown_now(state, rows[3]))
         return LawOutput(out, out_zone, self._shape)
 
     def step(self, state: KinematicState, dt_s: float) -> GuidanceStep:
@@ -267,14 +268,16 @@ class GuidanceController:
         """``step`` through the batch kernels (the law, the actuator, the shield), for any
         shape, one vehicle included."""
         rows = self._state_rows(state, least_speed_m_s(self.params.accel_max_m_s2, dt_s))
-        out, out_zone = self._run_law(rows, state)
+        flown = self._flown_now(state, rows[3])  # read by the law's lead and the shield
+        out, out_zone = self._run_law(rows, flown)
         accel = self._accel
         accel_next = np.empty_like(accel)
         mode = np.empty(accel.shape, dtype=np.int8)
         _advance_batch(self._packed, out, accel, dt_s, accel_next, mode)
         shape = self._shape
         if self.law is LawName.BACKUP:
-            backup, shield = self._shield_step(state, rows, out, dt_s, accel_next, mode)
+            assert flown is not None
+            backup, shield = self._shield_step(rows, flown, out, dt_s, accel_next, mode)
             views = _shield_views(backup, shield, shape)
         else:
             views = self._unshielded(accel.shape[0], shape)
@@ -395,17 +398,17 @@ class GuidanceController:
 
     def _shield_step(
         self,
-        state: KinematicState,
         rows: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
+        flown: FloatArray,
         out: FloatArray,
         dt_s: float,
         accel_next: FloatArray,
         mode: npt.NDArray[np.int8],
     ) -> tuple[npt.NDArray[np.int8], FloatArray]:
         """The backup law: the robust command through the shield, for every vehicle not yet
-        captured; overwrites ``accel_next`` and ``mode`` for those."""
+        captured (``flown``: their a_v, ``_flown_now``); overwrites ``accel_next`` and ``mode``
+        for those."""
         north, east, course, speed = rows
-        flown = self._flown_now(state, speed)
         active = mode != _CAPTURED
         shield = np.full((accel_next.shape[0], 6), math.nan)
         zones = self.zones
@@ -430,18 +433,20 @@ class GuidanceController:
         return backup, shield
 
     def _run_law(
-        self, rows: tuple[FloatArray, FloatArray, FloatArray, FloatArray], state: KinematicState
+        self, rows: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
+        flown: FloatArray | None,
     ) -> tuple[FloatArray, FloatArray]:
         north, east, course, speed = rows
-        flown = self._flown_now(state, speed) if self._shielded else None
         return run_kernel(
             self._packed, self.zones, self._target_n, self._target_e, north, east, course,
             speed, self._accel, flown,
         )  # fmt: skip
 
-    def _flown_now(self, state: KinematicState, speed: FloatArray) -> FloatArray:
-        """The flown lateral acceleration a_v (backup law): the measured course rate times
-        the speed, clipped to a_max, else the model's."""
+    def _flown_now(self, state: KinematicState, speed: FloatArray) -> FloatArray | None:
+        """The flown lateral acceleration a_v (backup law; other laws: None): the measured
+        course rate times the speed, clipped to a_max, else the model's."""
+        if not self._shielded:
+            return None
         if state.course_rate_rad_s is None:
             return self._flown
         rate = np.empty_like(speed)

@@ -1940,13 +1940,16 @@ _KEEP_CASES = [
 def test_an_abandon_check_keeps_a_backup_only_where_its_plain_certificate_holds(
     defenders: list[tuple[float, ...]], start: tuple[float, float, float, float], tau: float
 ) -> None:
-    """With ArduCopter's abandon path, from a plainly certified start, a nominal steering at
-    the nearest zone's centre at the command limit, 10 s at 20 ms: the shield keeps the
-    backup a step flew where nothing safe to abandon is left (the step with the path stands:
-    checked at each such step) only where its plain certificate holds, so the flight stays
-    out by the margin (+0.21 and +0.23 m). Kept where
-    ``backup_certificates``' plain value reached theta instead (an early stop's value, or
-    STRAIGHT's in a turn's slot), the same flights entered a zone (-0.04 and -0.07 m)."""
+    """With ArduCopter's abandon path, from a plainly certified start, a nominal
+    steering at the nearest zone's centre at the command limit, 10 s at 20 ms: where
+    nothing safe to abandon is left, the shield flies a single backup only where its plain
+    certificate holds: the backup the step with the path flew (that step stands), or the
+    plainly certified one safe to abandon soonest (``_abandon_soonest``); checked at each
+    such step (the first: 49 and 37 steps of the two flights, the second: 10 and 21). So
+    the flight stays out by the margin (+0.23 and +0.24 m).
+    Kept where ``backup_certificates``' plain value reached theta instead (an early stop's
+    value, or STRAIGHT's in a turn's slot), the same flights entered a zone (-0.04 and
+    -0.07 m)."""
     zones = zones_of(defenders)
     params = dataclasses.replace(PARAMS, response_lag_s=tau)
     dt = 0.02
@@ -1964,7 +1967,7 @@ def test_an_abandon_check_keeps_a_backup_only_where_its_plain_certificate_holds(
     current, weight = bk.BACKUP_NONE, math.nan
     plan = np.zeros(bk.PLAN_SIZE, dtype=np.int64)
     least = true_gap(zones, north, east, course)
-    kept = 0
+    kept = sooner = 0
     for _ in range(500):
         n, e, h, av = (float(x) for x in vehicle.x)
         gaps = np.hypot(zones.north_m[0] - n, zones.east_m[0] - e) - zones.reach_m[0]
@@ -1980,15 +1983,22 @@ def test_an_abandon_check_keeps_a_backup_only_where_its_plain_certificate_holds(
         keep = alone[0, 3] == 0.0 and alone[0, 4] < theta and bk._floor_certificate(
             plain, *z, int(alone[0, 2]), n, e, h, a, av, 1.0, dt, theta, room(z)) >= theta
         bk.shield_one(s, *z, n, e, h, a, av, 1.0, nominal, dt, current, weight, plan, out, 0)
-        if keep:  # the step with the path stands, its certificate the plain one
+        flies = int(out[0, 2])
+        if keep and flies == int(alone[0, 2]):  # the step with the path stands
             kept += 1
             assert np.array_equal(out[0, [0, 1, 2, 3, 5]], alone[0, [0, 1, 2, 3, 5]])
             assert out[0, 4] >= theta
+        elif alone[0, 3] == 0.0 and alone[0, 4] < theta and 0 <= flies < 3:
+            # another single backup, safe to abandon sooner: certified plainly, flown alone
+            sooner += 1
+            assert out[0, 3] == 0.0
+            assert out[0, 4] == bk._floor_certificate(plain, *z, flies, n, e, h, a, av, 1.0, dt,
+                                                      theta, room(z)) >= theta  # fmt: skip
         a_next, current, weight = float(out[0, 0]), int(out[0, 2]), float(out[0, 3])
         least = min(least, vehicle.fly(a, a_next, dt, zones))
         a = a_next
     assert least >= params.shield_margin_m - 1e-6
-    assert kept > 0
+    assert kept > 0 and sooner > 0
 
 
 def test_the_abandon_gap_bounds_a_slow_vehicle_whose_courses_spread_over_a_half_turn() -> None:

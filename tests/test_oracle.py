@@ -11,18 +11,24 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from ezcompanion.config import Scenario, VehicleStart
+from ezcompanion.errors import ConfigError
 from ezcompanion.guidance import Defender, GuidanceParams, Target
+from ezcompanion.guidance.abandon import ABANDON_PROFILES
 from ezcompanion.guidance.zones import ez_boundary_point
 from ezcompanion.validation import _oracle_search as ks
+from ezcompanion.validation.abandon import AbandonChecker
+from ezcompanion.validation.batch import simulate_batch
 from ezcompanion.validation.escape import escape_margin_m
 from ezcompanion.validation.fixed import from_scenarios
 from ezcompanion.validation.oracle import (
     OracleSettings,
     Verdict,
+    first_abandon_gap_m,
     replay_witness,
     run_oracle,
     witness,
 )
+from ezcompanion.validation.policies import make_policy
 from ezcompanion.validation.scenarios import ScenarioBatch, ScenarioDistribution, draw_scenarios
 
 PARAMS = GuidanceParams()
@@ -205,3 +211,58 @@ def test_random_witnesses_replay_safe_with_the_reference_kinematics() -> None:
         assert replay.min_clearance_m > 0.0, k
         checked += 1
     assert checked == 16
+
+
+# --- the first checked setpoint, safe to abandon? ---------------------------------------
+
+
+def _modes(code: int, depth: int = 5) -> list[int]:
+    """A sequence's modes from its number (base 3, the first segment first)."""
+    return [code // 3 ** (depth - 1 - i) % 3 for i in range(depth)]
+
+
+@pytest.mark.parametrize("lag_s", [0.0, 1.0])
+def test_the_first_abandon_search_turns_away_from_a_zone_on_either_side(lag_s: float) -> None:
+    """A zone ahead and to one side, PX4's profile (1.15 s straight on, then braking): the
+    best setpoint at 1 s turns away from it all the way (hard right from a zone on the
+    left), and the mirrored case gives the mirrored sequence and the same gap; with no
+    zone near, every setpoint is safe, straight on included, and the search keeps the
+    first best it meets (hard left throughout)."""
+    px4 = ABANDON_PROFILES["px4"]
+    zone = {"north_m": 3.5, **PAPER_DEFENDER}
+    gap_l, code_l = first_abandon_gap_m(
+        _batch((0.0, 0.0, 0.0), [Defender(east_m=-1.0, **zone)], lag_s=lag_s), PARAMS, px4
+    )
+    gap_r, code_r = first_abandon_gap_m(
+        _batch((0.0, 0.0, 0.0), [Defender(east_m=1.0, **zone)], lag_s=lag_s), PARAMS, px4
+    )
+    assert gap_l[0] >= 0.0
+    assert gap_r[0] == pytest.approx(gap_l[0], abs=1e-12)
+    assert _modes(int(code_l[0])) == [ks.RIGHT] * 5
+    assert _modes(int(code_r[0])) == [2 - m for m in _modes(int(code_l[0]))]
+    open_gap, open_code = first_abandon_gap_m(_batch((0.0, 0.0, 0.0), [FAR], lag_s=lag_s),
+                                              PARAMS, px4)  # fmt: skip
+    assert open_gap[0] > 100.0 and _modes(int(open_code[0])) == [ks.LEFT] * 5
+    with pytest.raises(ConfigError, match="segment_s"):
+        first_abandon_gap_m(_batch((0.0, 0.0, 0.0), [FAR]), PARAMS, px4, segment_s=0.3)
+
+
+def test_where_the_search_saves_the_first_setpoint_the_law_keeps_every_one_safe_to_abandon(
+) -> None:
+    """Seed 2030's runs 53, 96, 432 and 483 (docs/validation.md, "The abandon check
+    enforced"): starts where nothing is safe to abandon, each with a hard turn that makes
+    the setpoint at 1 s safe to abandon. The backup law given PX4's profile, flown by the
+    campaign's batch simulator and checked at every step from the first second, stays out
+    and sends no setpoint there that is not safe to abandon. Before the shield chose, where
+    nothing safe to abandon is left, the plainly certified backup safe to abandon soonest
+    (``backup._abandon_soonest``), it turned the other way and held 6, 14, 38 and 3."""
+    params = dataclasses.replace(PARAMS, abandon_hold_s=1.15, abandon_brake_m_s2=3.0)
+    runs = ScenarioBatch.concat([draw_scenarios(ScenarioDistribution(), 2030, r, r + 1)
+                                 for r in (53, 96, 432, 483)])  # fmt: skip
+    gap, _ = first_abandon_gap_m(runs, params, ABANDON_PROFILES["px4"])
+    assert (gap >= 0.0).all()
+    flown = simulate_batch(runs, make_policy("backup", runs, params),
+                           accel_max_m_s2=params.accel_max_m_s2, abandon=AbandonChecker("px4"),
+                           params=params)  # fmt: skip
+    assert not flown.entered.any()
+    assert flown.abandon_unsafe_steps.tolist() == [0, 0, 0, 0]

@@ -15,6 +15,8 @@ import pytest
 
 from ezcompanion.errors import ConfigError
 from ezcompanion.guidance import GuidanceParams, KinematicState, LawName
+from ezcompanion.guidance.abandon import ABANDON_PROFILES
+from ezcompanion.validation.abandon import AbandonChecker
 from ezcompanion.validation.batch import BatchSettings, StepResult, law_policy, simulate_batch
 from ezcompanion.validation.campaign import (
     CampaignSpec,
@@ -23,6 +25,7 @@ from ezcompanion.validation.campaign import (
     run_campaign,
 )
 from ezcompanion.validation.chatter import chattering
+from ezcompanion.validation.oracle import first_abandon_gap_m
 from ezcompanion.validation.output import write_outputs
 from ezcompanion.validation.policies import POLICIES
 from ezcompanion.validation.provenance import _sources_digest, mismatches, numerics
@@ -280,3 +283,41 @@ def test_the_abandon_hook_counts_the_setpoints_it_rejects() -> None:
     unchecked = simulate_batch(batch, law_policy(batch, PARAMS, LawName.ROBUST),
                                accel_max_m_s2=1.0, settings=settings)  # fmt: skip
     assert (unchecked.abandon_unsafe_steps == -1).all()
+
+
+def test_the_report_splits_the_setpoints_not_safe_to_abandon_by_the_oracles_search(
+    tmp_path: Path,
+) -> None:
+    """With PX4's abandon check the oracle also asks, per run, whether some manoeuvre makes
+    the first checked setpoint safe to abandon (``first_abandon_gap_m``, the same gap as
+    asked alone); the summary counts the runs holding a setpoint not safe to abandon both
+    ways, and report.json gives the rate where the search found one. Without the check the
+    gap is not asked (NaN) and no line is written."""
+    spec = CampaignSpec(
+        runs=8, seed=2030, policies=("robust",), map_runs=0, chatter_runs=0, workers=1,
+        settings=BatchSettings(duration_s=4.0), abandon=AbandonChecker("px4"),
+    )  # fmt: skip
+    result = run_campaign(spec)
+    assert result.oracle is not None
+    alone, _ = first_abandon_gap_m(result.scenarios, PARAMS, ABANDON_PROFILES["px4"])
+    np.testing.assert_array_equal(result.oracle.abandon_gap_m, alone)
+    m = result.metrics["robust"]
+    held = ~m.entered & (m.abandon_unsafe_steps > 0)
+    possible = int(np.count_nonzero(held & (alone >= 0.0)))
+    assert int(held.sum()) > 0  # the robust law does not check the path
+    write_outputs(result, tmp_path, figures=False)
+    summary = (tmp_path / "summary.txt").read_text(encoding="utf-8")
+    assert (f"Abandon check: robust: of {int((~m.entered).sum())} runs that stayed out, "
+            f"{int(held.sum())} hold a setpoint from the first second on that is not safe to "
+            f"abandon; {possible} of them from starts where") in summary  # fmt: skip
+    assert f"{int(held.sum()) - possible} where none of it does." in summary
+    row = json.loads((tmp_path / "report.json").read_text(encoding="utf-8"))["strata"][0]
+    checked = ~m.entered & (alone >= 0.0)
+    assert row["abandon_ok_where_possible"]["count"] == int(
+        np.count_nonzero(m.abandon_unsafe_steps[checked] == 0)
+    )
+    assert np.load(tmp_path / "runs.npz")["oracle_abandon_gap_m"].shape == (8,)
+    plain = run_campaign(dataclasses.replace(spec, abandon=None))
+    assert plain.oracle is not None and np.isnan(plain.oracle.abandon_gap_m).all()
+    write_outputs(plain, tmp_path / "plain", figures=False)
+    assert "Abandon check" not in (tmp_path / "plain" / "summary.txt").read_text(encoding="utf-8")

@@ -227,6 +227,10 @@ _NEAR_FEWEST = 8
 # before). (every_step True is the lower rungs' turn flown alone: ``_rung_turn`` flies all
 # of them at once, and the tests hold it to that.)
 _FLAGS = np.array([False, True])
+# Where nothing safe to abandon is left, how far ahead the single backups are flown to see
+# which leaves a setpoint safe to abandon soonest (``_abandon_soonest``), in turn times
+# v / a_max.
+_SOONEST_TURN_TIMES = 2.0
 
 
 def pack_shield(params: GuidanceParams, **abandon: float) -> FloatArray:
@@ -1702,6 +1706,15 @@ def shield_one(
         return
     plain = s.copy()
     plain[S_AB_HOLD] = 0.0
+    soonest, cert = _abandon_soonest(s, plain, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
+                                     dt, theta, flown, room)  # fmt: skip
+    if soonest >= 0:  # a plainly certified backup that leaves a setpoint safe to abandon soonest
+        _, _, _, _, a_next, av_next = _fly_step(s, zn, ze, zmur, zreach, kz, soonest, 0.0, n, e,
+                                                h, a, av, speed, dt)  # fmt: skip
+        out[k, 0], out[k, 1], out[k, 2], out[k, 4] = a_next, av_next, soonest, cert
+        for i in range(PLAN_SIZE):  # a plan the step advanced is not flown
+            plan[i] = kept[i]
+        return
     held = _floor_certificate(plain, zn, ze, zmur, zreach, kz, flown, n, e, h, a, av, speed, dt,
                               theta, room)  # fmt: skip
     if held >= theta:
@@ -1711,6 +1724,49 @@ def shield_one(
         plan[i] = kept[i]  # numba 1.5 s of the first run's compile)
     _shield_step(plain, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, nominal, dt, current,
                  weight_before, plan, out, k, room)  # fmt: skip
+
+
+@jit_borrow
+def _abandon_soonest(
+    s: FloatArray, plain: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray,
+    zreach: FloatArray, kz: int, n: float, e: float, h: float, a: float, av: float,
+    speed: float, dt: float, theta: float, flown: int, room: IntArray,
+) -> tuple[int, float]:
+    """Where nothing safe to abandon is left: of the single backups certified plainly
+    (``_floor_certificate`` with the settings ``plain`` >= theta), the one whose flight
+    (its command held, a turn at the bound, STRAIGHT straightening) is safe to abandon
+    soonest from then on (``_abandon`` with ``s``'s profile, asked every sample step) up
+    to ``_SOONEST_TURN_TIMES`` v / a_max (a turn may pass a safe state on its way to
+    unsafe ones: the last unsafe sample counts); ``flown`` (the backup the step flies)
+    where it is as soon. Returns it and its plain certificate, or (-1, -inf) where none
+    is safe at the end.
+    The certificates of the abandon path rank every backup by its least gap, which from
+    such a state is the present state's for all of them: they cannot tell which turn
+    leaves the unsafe setpoints soonest (docs/guidance.md, "Safe to abandon")."""
+    every = sample_ticks(s, speed, dt)
+    limit = math.ceil(_SOONEST_TURN_TIMES * speed / s[S_AMAX] / dt)
+    best, best_steps, best_cert = -1, limit + 1, -math.inf
+    for j in range(_N_BACKUPS + 1):  # the backup flown first, then the others
+        policy = flown if j == 0 else j - 1
+        if (j == 0 and not 0 <= flown < _N_BACKUPS) or (j > 0 and policy == flown):
+            continue
+        cert = _floor_certificate(plain, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av,
+                                  speed, dt, theta, room)  # fmt: skip
+        if cert < theta:
+            continue
+        n1, e1, h1, a1, av1 = n, e, h, a, av
+        safe_from = 0  # the step from which every sample so far is safe to abandon
+        for step in range(1, limit + 1):
+            _, n1, e1, h1, a1, av1 = _fly_step(s, zn, ze, zmur, zreach, kz, policy, 0.0, n1, e1,
+                                               h1, a1, av1, speed, dt)  # fmt: skip
+            if (step % every == 0 or step == limit) and _abandon(
+                    s, zn, ze, zmur, zreach, kz, n1, e1, h1, a1, av1, speed, math.inf) < 0.0:
+                safe_from = step + 1
+                if safe_from >= best_steps:
+                    break  # no sooner than the best so far
+        if safe_from < best_steps:
+            best, best_steps, best_cert = policy, safe_from, cert
+    return best, best_cert
 
 
 @jit_borrow

@@ -16,6 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ezcompanion.guidance._jit import jit, jit_parallel, prange
+from ezcompanion.guidance.abandon import abandon_gap
 from ezcompanion.guidance.actuator import advance_one
 
 FloatArray = npt.NDArray[np.float64]
@@ -298,6 +299,62 @@ def search_batch(
                 j += 1
         result = search(starts[k], z, settings[k], want_intercept, paths[k])
         verdict[k], depth[k], spent[k] = result
+
+
+@jit
+def first_abandon_gap(
+    start: FloatArray, z: FloatArray, g: FloatArray, depth: int, profile: FloatArray,
+    zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
+) -> tuple[float, int]:
+    """Every sequence of ``depth`` segments of LEFT, STRAIGHT and RIGHT (3^depth of them,
+    their common beginnings flown once): the largest abandon gap (``abandon_gap``, the
+    profile ``profile`` = turn, hold, brake, margin) of the setpoint at the end of a
+    sequence whose flight stays outside every zone (the samples' ``G_MARGIN``), and the
+    sequence, as a number in base 3 whose first digit is the first segment's mode (-inf
+    and -1 where every flight enters a zone). The setpoint is the state at the end: its
+    course, its actuator state a as the commanded acceleration and a_f as the flown one."""
+    states = np.empty((depth + 1, 6))
+    safe = np.ones(depth + 1, dtype=np.bool_)
+    digits = np.full(depth, -1, dtype=np.int64)
+    states[0] = start
+    best, best_code = -math.inf, -1
+    for code in range(3**depth):
+        rest = code
+        changed = depth
+        for level in range(depth - 1, -1, -1):  # the digits, the last segment's first
+            digit = rest % 3
+            rest //= 3
+            if digit != digits[level]:
+                digits[level] = digit
+                changed = level
+        for level in range(changed, depth):
+            states[level + 1] = states[level]
+            safe[level + 1] = safe[level]
+            if safe[level]:
+                ok, _, _ = _segment(states[level + 1], int(digits[level]), z, g, False)
+                safe[level + 1] = ok
+        if not safe[depth]:
+            continue
+        s = states[depth]
+        gap = abandon_gap(zn, ze, zmur, zreach, kz, s[0], s[1], s[2], s[3], s[4], g[G_V],
+                          g[G_TAU], profile[0], profile[1], profile[2], profile[3],
+                          math.inf)  # fmt: skip
+        if gap > best:
+            best, best_code = gap, code
+    return best, best_code
+
+
+@jit_parallel
+def first_abandon_gap_batch(
+    starts: FloatArray, zones: FloatArray, settings: FloatArray, depth: int, profile: FloatArray,
+    zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, gap: FloatArray,
+    code: IntArray,
+) -> None:
+    """``first_abandon_gap`` for every run (rows of ``starts``, ``zones`` (B, nz, 5) and
+    ``settings``; zone row k of ``zn`` ...)."""
+    for k in prange(starts.shape[0]):
+        gap[k], code[k] = first_abandon_gap(starts[k], zones[k], settings[k], depth, profile, zn,
+                                            ze, zmur, zreach, k)  # fmt: skip
 
 
 @jit

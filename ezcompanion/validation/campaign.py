@@ -30,6 +30,7 @@ import numpy.typing as npt
 from ezcompanion.config import load_scenario
 from ezcompanion.errors import ConfigError
 from ezcompanion.guidance import GuidanceParams
+from ezcompanion.validation.abandon import AbandonChecker
 from ezcompanion.validation.batch import AbandonCheck, BatchSettings, RunMetrics, simulate_batch
 from ezcompanion.validation.chatter import Chattering, chattering
 from ezcompanion.validation.escape import escape_margin_m
@@ -149,6 +150,7 @@ def _oracle(spec: CampaignSpec, scenarios: ScenarioBatch) -> OracleResult | None
         spec.params,
         settings=spec.oracle_settings,
         duration_s=spec.settings.duration_s,
+        abandon=spec.abandon.profile if isinstance(spec.abandon, AbandonChecker) else None,
     )
 
 

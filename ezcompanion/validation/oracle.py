@@ -64,6 +64,7 @@ import numpy.typing as npt
 
 from ezcompanion.errors import ConfigError
 from ezcompanion.guidance import GuidanceParams
+from ezcompanion.guidance.abandon import AbandonProfile
 from ezcompanion.guidance.actuator import advance_one
 from ezcompanion.guidance.zones import ez_boundary_point
 from ezcompanion.sim.kinematics import rk4_step
@@ -76,6 +77,7 @@ __all__ = [
     "Replay",
     "Verdict",
     "Witness",
+    "first_abandon_gap_m",
     "replay_witness",
     "run_oracle",
     "witness",
@@ -132,13 +134,16 @@ class OracleSettings:
 @dataclass(frozen=True, eq=False)
 class OracleResult:
     """Per run (arrays (B,)): the verdict of each question (``Verdict`` values), the
-    witness's number of segments and the steps the search flew."""
+    witness's number of segments, the steps the search flew, and where an abandon profile
+    was asked, the best abandon gap of the first checked setpoint
+    (``first_abandon_gap_m``; NaN where not asked)."""
 
     safe: IntArray
     intercept: IntArray
     safe_depth: IntArray
     intercept_depth: IntArray
     steps: IntArray
+    abandon_gap_m: FloatArray
 
     @property
     def safe_feasible(self) -> BoolArray:
@@ -156,7 +161,7 @@ class OracleResult:
     @classmethod
     def concat(cls, parts: list[OracleResult]) -> OracleResult:
         """Runs of several results, in order."""
-        names = ("safe", "intercept", "safe_depth", "intercept_depth", "steps")
+        names = ("safe", "intercept", "safe_depth", "intercept_depth", "steps", "abandon_gap_m")
         return cls(**{n: np.concatenate([getattr(p, n) for p in parts]) for n in names})
 
 
@@ -231,17 +236,61 @@ def run_oracle(
     *,
     settings: OracleSettings = OracleSettings(),
     duration_s: float = 40.0,
+    abandon: AbandonProfile | None = None,
 ) -> OracleResult:
-    """Both questions for every run of ``scenarios`` (intercepts within ``duration_s``)."""
+    """Both questions for every run of ``scenarios`` (intercepts within ``duration_s``),
+    and with ``abandon``, whether its first checked setpoint can be safe to abandon
+    (``first_abandon_gap_m``)."""
     safe, _, safe_depth, safe_spent = _search(scenarios, params, settings, duration_s, False)
     hit, _, hit_depth, hit_spent = _search(scenarios, params, settings, duration_s, True)
+    gap = np.full(len(scenarios), math.nan)
+    if abandon is not None:
+        gap, _ = first_abandon_gap_m(scenarios, params, abandon, settings=settings)
     return OracleResult(
         safe=safe,
         intercept=hit,
         safe_depth=safe_depth,
         intercept_depth=hit_depth,
         steps=safe_spent + hit_spent,
+        abandon_gap_m=gap,
     )
+
+
+def first_abandon_gap_m(
+    scenarios: ScenarioBatch,
+    params: GuidanceParams,
+    profile: AbandonProfile,
+    *,
+    at_s: float = 1.0,
+    segment_s: float = 0.2,
+    settings: OracleSettings = OracleSettings(),
+) -> tuple[FloatArray, IntArray]:
+    """Could some bounded manoeuvre make the setpoint at ``at_s`` safe to abandon?
+
+    The abandon check of a campaign (issue 9 item 2) asks it of every setpoint from the
+    first second on; before that the state is the start's. Per run, every sequence of
+    hard left, straight and hard right segments of ``segment_s`` up to ``at_s`` (3^5 at
+    the defaults; the oracle's model, step and sample margin) is flown from the start,
+    and the setpoint where it ends is given ``profile``'s abandon gap
+    (``guidance.abandon.abandon_gap``, the shield's margin subtracted). Returns the
+    largest gap of a flight that stays outside every zone (-inf if none does) and its
+    sequence (base 3, the first segment's mode first, 0 left, 1 straight, 2 right; -1 if
+    none). A gap >= 0 is sound, with its witness; below 0 proves nothing (finer switching
+    may do better), but it is the family's best: a law whose first checked setpoint is
+    not safe to abandon there did no worse than every manoeuvre of the family."""
+    depth = round(at_s / segment_s)
+    if depth < 1 or abs(depth * segment_s - at_s) > 1e-9:
+        raise ConfigError("segment_s", segment_s, f"must divide at_s {at_s} into whole segments")
+    bounded = OracleSettings(**{**vars(settings), "segment_s": segment_s})
+    starts, zones, g = _inputs(scenarios, params, bounded, math.inf, False)
+    packed = np.array([profile.turn_s, profile.hold_s, profile.brake_m_s2,
+                       params.shield_margin_m])  # fmt: skip
+    z = scenarios.zones()
+    gap = np.empty(len(scenarios))
+    code = np.empty(len(scenarios), dtype=np.int64)
+    ks.first_abandon_gap_batch(starts, zones, g, depth, packed, z.north_m, z.east_m,
+                               z.mu_range_m, z.reach_m, gap, code)  # fmt: skip
+    return gap, code
 
 
 @dataclass(frozen=True, eq=False)

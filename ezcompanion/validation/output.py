@@ -85,7 +85,31 @@ def summary_text(result: CampaignResult) -> str:
                  "layout\n" + format_tables(_map_rows(result), ("all",)))  # fmt: skip
     for chatter in result.chattering:
         text += "\n\nChattering: " + chatter.line()
+    for line in _abandon_lines(result):
+        text += "\n\nAbandon check: " + line
     return text + "\n"
+
+
+def _abandon_lines(result: CampaignResult) -> list[str]:
+    """Per policy, where the abandon check ran: the runs that stayed out with a setpoint
+    not safe to abandon, split by whether the oracle's search made the first checked
+    setpoint safe to abandon (``oracle.first_abandon_gap_m``)."""
+    if result.spec.abandon is None:
+        return []
+    gap = result.oracle.abandon_gap_m if result.oracle is not None else None
+    lines = []
+    for name, m in result.metrics.items():
+        out = ~m.entered
+        held = out & (m.abandon_unsafe_steps > 0)
+        line = (f"{name}: of {int(out.sum())} runs that stayed out, {int(held.sum())} hold a "
+                "setpoint from the first second on that is not safe to abandon")  # fmt: skip
+        if gap is not None and not np.isnan(gap).all():
+            possible = int(np.count_nonzero(held & (gap >= 0.0)))
+            line += (f"; {possible} of them from starts where a manoeuvre of the oracle's "
+                     "search makes the first checked setpoint safe to abandon, "
+                     f"{int(held.sum()) - possible} where none of it does")  # fmt: skip
+        lines.append(line + ".")
+    return lines
 
 
 def _oracle_line(result: CampaignResult) -> str:
@@ -115,6 +139,8 @@ def markdown_tables(result: CampaignResult) -> str:
         text += "\n**failure map**\n\n" + format_markdown(_map_rows(result), ("all",))
     for chatter in result.chattering:
         text += "\n- chattering, " + chatter.line() + "\n"
+    for line in _abandon_lines(result):
+        text += "\n- abandon check, " + line + "\n"
     return text
 
 
@@ -150,7 +176,8 @@ def write_outputs(result: CampaignResult, out_dir: Path, *, figures: bool = True
     }
     arrays["escape_margin_m"] = result.escape_margin_m
     if result.oracle is not None:
-        arrays |= {f"oracle_{k}": getattr(result.oracle, k) for k in ("safe", "intercept")}
+        arrays |= {f"oracle_{k}": getattr(result.oracle, k)
+                   for k in ("safe", "intercept", "abandon_gap_m")}  # fmt: skip
     for name, metrics in result.metrics.items():
         arrays |= {f"{name}_{k}": v for k, v in metrics.as_arrays().items()}
     np.savez_compressed(written[2], **arrays)

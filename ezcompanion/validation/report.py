@@ -72,6 +72,7 @@ class StratumSummary:
     oracle_intercept: Rate
     share_of_oracle_bound: float
     abandon_ok: Rate
+    abandon_ok_where_possible: Rate
     reached_bound: Rate
     depth_m: Spread
     time_inside_s: Spread
@@ -128,6 +129,7 @@ def _summary(
     m: RunMetrics,
     safe_ok: BoolArray,
     intercept_ok: BoolArray,
+    abandon_possible: BoolArray,
 ) -> StratumSummary:
     entered = m.entered
     safe_intercept = m.intercepted & ~entered
@@ -148,6 +150,9 @@ def _summary(
             float(np.count_nonzero(safe_intercept)) / bound if bound else math.nan
         ),
         abandon_ok=Rate.of(m.abandon_unsafe_steps[checked] == 0),
+        abandon_ok_where_possible=Rate.of(
+            m.abandon_unsafe_steps[checked & abandon_possible] == 0
+        ),
         reached_bound=Rate.of(m.time_at_bound_s > 0.0),
         depth_m=Spread.of(-m.min_clearance_m[entered]),
         time_inside_s=Spread.of(m.time_inside_s[entered]),
@@ -171,6 +176,8 @@ def summarise(
     size = len(next(iter(metrics.values())))
     safe_ok = oracle.safe_feasible if oracle is not None else np.zeros(size, dtype=bool)
     hit_ok = oracle.intercept_feasible if oracle is not None else np.zeros(size, dtype=bool)
+    # the first checked setpoint can be safe to abandon (NaN, not asked: False)
+    abandon_ok = oracle.abandon_gap_m >= 0.0 if oracle is not None else np.zeros(size, dtype=bool)
     for group in groups:
         if group not in labels:
             continue
@@ -179,7 +186,8 @@ def summarise(
             mask = label == level
             for policy, m in metrics.items():
                 rows.append(
-                    _summary(policy, group, level, m.subset(mask), safe_ok[mask], hit_ok[mask])
+                    _summary(policy, group, level, m.subset(mask), safe_ok[mask], hit_ok[mask],
+                             abandon_ok[mask])
                 )
     return rows
 

@@ -55,6 +55,10 @@ class AbandonProfile:
     hold_s: float
     brake_m_s2: float
 
+    def packed(self, margin_m: float) -> FloatArray:
+        """(turn, hold, brake, ``margin_m``): the settings ``abandon_gap`` takes."""
+        return np.array([self.turn_s, self.hold_s, self.brake_m_s2, margin_m])
+
 
 ABANDON_PROFILES = {
     # GUID_TIMEOUT 3 s, then its velocity shaping brakes: within v * 0.6 s + v^2 / (2 * 2.5)
@@ -87,8 +91,7 @@ def abandon_gap_m(
     acceleration (the turn a course setpoint goes on with), ``flown_accel_m_s2`` the flown
     one, whose lag a velocity setpoint leads (``lag_s`` per vehicle, or
     ``response_lag_s``)."""
-    packed = np.array([profile.turn_s, profile.hold_s, profile.brake_m_s2,
-                       params.shield_margin_m])  # fmt: skip
+    packed = profile.packed(params.shield_margin_m)
     shape = np.shape(north_m)
 
     def flat(value: FloatArray | float) -> FloatArray:

@@ -283,8 +283,7 @@ def first_abandon_gap_m(
         raise ConfigError("segment_s", segment_s, f"must divide at_s {at_s} into whole segments")
     bounded = OracleSettings(**{**vars(settings), "segment_s": segment_s})
     starts, zones, g = _inputs(scenarios, params, bounded, math.inf, False)
-    packed = np.array([profile.turn_s, profile.hold_s, profile.brake_m_s2,
-                       params.shield_margin_m])  # fmt: skip
+    packed = profile.packed(params.shield_margin_m)
     z = scenarios.zones()
     gap = np.empty(len(scenarios))
     code = np.empty(len(scenarios), dtype=np.int64)

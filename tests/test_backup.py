@@ -970,19 +970,25 @@ def test_along_its_own_flow_a_backup_certificate_never_drops_by_more_than_theta(
 def test_the_straightening_integral_bounds_the_actuator_as_flown(dt: float) -> None:
     """STRAIGHT's closed-form tail rests on bounds (lo, hi) on the integral of |a| still to
     come: the actuator as the service flies it (stepped by the integrator, linear between
-    control steps) must land between them, from near the turn's limit down to small a."""
+    control steps) must land between them, from near the turn's limit down to small a; and
+    the bound on its first moment, the integral of t |a| (the lag's screen), above that
+    moment as flown, within 4 times it (1.4 to 2.1 times at the service's 20 ms, 2.9 to
+    3.7 at 0.1 s, where the bound's dt I term is largest)."""
     s = settings_for(PARAMS)
     amax = PARAMS.accel_max_m_s2
     straightening = bk._straightening(s, dt)
     for a0 in (1e-4, 0.05, 0.3, 0.7, 0.9, 0.99, 0.995):
-        a, flown = a0 * amax, 0.0
-        for _ in range(int(20.0 / dt)):
+        a, flown, flown_moment = a0 * amax, 0.0, 0.0
+        for k in range(int(20.0 / dt)):
             a1 = bk._advance_straighten(a, PARAMS.actuator_n, straightening)
             flown += 0.5 * (a + a1) * dt
+            # the integral of t a over the step, a linear in it
+            flown_moment += dt * (k * dt * 0.5 * (a + a1) + dt * (a + 2.0 * a1) / 6.0)
             a = a1
-        lo, hi = bk._straighten_integral(s, a0 * amax, bk._trapezoid_excess(s, dt))
+        lo, hi, moment = bk._straighten_integral(s, a0 * amax, bk._trapezoid_excess(s, dt), dt)
         assert lo <= flown <= hi, (a0, lo, flown, hi)
         assert hi <= 1.35 * lo  # and tight: what lets the tail close early
+        assert flown_moment <= moment <= 4.0 * flown_moment, (a0, flown_moment, moment)
 
 
 @settings(max_examples=200, deadline=None)
@@ -1048,8 +1054,8 @@ def test_straights_closed_form_bounds_hold_along_its_flight(
     params = dataclasses.replace(PARAMS, response_lag_s=tau)
     s = settings_for(params)
     av0 = av0 if tau > 0.0 else a0
-    delta, mid, w, drift, eta = bk._straight_to_come(s, a0, av0, 1.0,
-                                                     bk._trapezoid_excess(s, dt))  # fmt: skip
+    to_come = bk._straight_to_come(s, a0, av0, 1.0, bk._trapezoid_excess(s, dt), dt)
+    delta, mid, w, drift, _, _ = to_come
     z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
     n, e, h, a, av = n0, e0, h0, a0, av0
     least = lk.lookahead_gap(*z[:4], n, e, h, PARAMS.shield_margin_m)
@@ -1067,7 +1073,7 @@ def test_straights_closed_form_bounds_hold_along_its_flight(
     by_index = lk.BY_INDEX
     lower, _ = bk._tube_gap(s, *z, n0, e0, *final, w, delta, drift, False, by_index, 0, -math.inf)
     upper, _ = bk._tube_gap(s, *z, n0, e0, *final, w, delta, drift, True, by_index, 0, -math.inf)
-    lag_upper, _ = bk._lag_flight_upper(s, *z, n0, e0, h0, av0, 1.0, eta, by_index, 0, -math.inf)
+    lag_upper, _ = bk._lag_flight_upper(s, *z, n0, e0, h0, 1.0, to_come, by_index, 0, -math.inf)
     assert lower <= least + 1e-6
     # (the flight is sampled at its control steps: its least gap may sit between them, up
     # to the look-ahead point's speed, at most 2 v, over half a step)
@@ -1182,12 +1188,13 @@ def test_the_lags_closed_form_bounds_the_flight_from_above_and_tighter_than_the_
     is sampled)."""
     tighter = lagged = 0
     for s, z, n, e, h, a, av in _random_states(120, 7):
-        if s[bk.S_TAU] <= 0.0 or abs(s[bk.S_TAU] * av) < bk._LAG_SCREEN_MIN_RAD:
+        trapezoid = bk._trapezoid_excess(s, 0.02)
+        to_come = bk._straight_to_come(s, a, av, 1.0, trapezoid, 0.02)
+        delta, mid, w, drift, _, _ = to_come
+        if s[bk.S_TAU] <= 0.0 or abs(mid) < bk._LAG_SCREEN_MIN_RAD:
             continue
         lagged += 1
-        trapezoid = bk._trapezoid_excess(s, 0.02)
-        delta, mid, w, drift, eta = bk._straight_to_come(s, a, av, 1.0, trapezoid)
-        upper, _ = bk._lag_flight_upper(s, *z, n, e, h, av, 1.0, eta, lk.BY_INDEX, 0, -math.inf)
+        upper, _ = bk._lag_flight_upper(s, *z, n, e, h, 1.0, to_come, lk.BY_INDEX, 0, -math.inf)
         tube, _ = bk._tube_gap(s, *z, n, e, math.cos(h + mid), math.sin(h + mid), w, delta, drift,
                                True, lk.BY_INDEX, 0, -math.inf)  # fmt: skip
         least = lk.lookahead_gap(*z[:4], n, e, h, PARAMS.shield_margin_m)
@@ -1216,21 +1223,21 @@ def test_the_lags_screen_skips_only_zones_that_cannot_come_below_its_level() -> 
     # and the same farther out (5x) with a_v up to 2.9 a_max: c = tau a_v / v up to 4
     drawn += [(s, z, 5.0 * n, 5.0 * e, h, a, 2.9 * av) for s, z, n, e, h, a, av in drawn]
     for s, z, n, e, h, a, av in drawn:
-        if s[bk.S_TAU] <= 0.0 or not (bk._LAG_SCREEN_MIN_RAD <= abs(s[bk.S_TAU] * av)
+        to_come = bk._straight_to_come(s, a, av, 1.0, bk._trapezoid_excess(s, 0.02), 0.02)
+        if s[bk.S_TAU] <= 0.0 or not (bk._LAG_SCREEN_MIN_RAD <= abs(to_come[1])
                                       <= bk._LAG_SCREEN_RAD):  # fmt: skip
             continue
-        eta = bk._straight_to_come(s, a, av, 1.0, bk._trapezoid_excess(s, 0.02))[4]
         zn, ze, zmur, zreach, kz = z
         alone = [
             bk._lag_flight_upper(s, zn[:, i:i + 1], ze[:, i:i + 1], zmur[:, i:i + 1],
-                                 zreach[:, i:i + 1], kz, n, e, h, av, 1.0, eta, lk.BY_INDEX,
+                                 zreach[:, i:i + 1], kz, n, e, h, 1.0, to_come, lk.BY_INDEX,
                                  0, -math.inf)[0]
             for i in range(zn.shape[1])
         ]  # fmt: skip
         least = min(alone)
         for delta in (-1.0, -1e-3, -1e-12, 0.0, 1e-12, 1e-3, 1.0, rng.uniform(-5.0, 5.0)):
             below = least + delta
-            value, position = bk._lag_flight_upper(s, *z, n, e, h, av, 1.0, eta, lk.BY_INDEX,
+            value, position = bk._lag_flight_upper(s, *z, n, e, h, 1.0, to_come, lk.BY_INDEX,
                                                    0, below)  # fmt: skip
             first = next((i for i, v in enumerate(alone) if v < below), None)
             if first is None:
@@ -1260,7 +1267,7 @@ def test_a_straight_flight_goes_on_without_its_rest_only_where_that_would_not_en
     trapezoid = bk._trapezoid_excess(s, 0.02)
     near = math.copysign(scale * bk._RESIDUAL_RAD * speed / tau, av)
     for rate in (near, av):
-        delta = bk._straight_to_come(s, a, rate, speed, trapezoid)[0]
+        delta = bk._straight_to_come(s, a, rate, speed, trapezoid, 0.02)[0]
         if bk._straight_goes_on(s, rate, speed):
             assert delta >= bk._RESIDUAL_RAD, (delta, a, rate, tau, speed)
     assert not bk._straight_goes_on(settings_for(PARAMS), av, speed)
@@ -1289,7 +1296,7 @@ def test_the_running_screen_refuses_only_exits_whose_certificate_is_below_the_le
             # the screen before the flight (a turn's exit: the tube, and with a lag the
             # lag's closed form)
             upper, _ = bk._straight_upper_bound(s, *z, n, e, h, math.cos(h), math.sin(h), a, av,
-                                                1.0, bk._trapezoid_excess(s, dt),
+                                                1.0, bk._trapezoid_excess(s, dt), dt,
                                                 lk.BY_INDEX, 0, level)  # fmt: skip
             if upper < level:
                 screened += 1
@@ -1562,8 +1569,9 @@ def test_a_screen_that_stops_at_the_first_zone_below_its_level_decides_as_the_fu
     position it names is that of a zone that gives the value it returns. The level is
     drawn among the zones' own values (2 to 6 zones), where stopping early matters."""
     s = settings_for(PARAMS)
-    delta, mid, w, drift, _ = bk._straight_to_come(s, a0, a0, 1.0,
-                                                   bk._trapezoid_excess(s, 0.02))  # fmt: skip
+    delta, mid, w, drift, _, _ = bk._straight_to_come(s, a0, a0, 1.0,
+                                                      bk._trapezoid_excess(s, 0.02),
+                                                      0.02)  # fmt: skip
     z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
     final = (math.cos(h0 + mid), math.sin(h0 + mid))
     args = (s, *z, n0, e0, *final, w, delta, drift, upper)

@@ -531,7 +531,9 @@ def _trapezoid_excess(s: FloatArray, dt: float) -> float:
 
 
 @jit_inline
-def _straighten_integral(s: FloatArray, a_abs: float, trapezoid: float) -> tuple[float, float]:
+def _straighten_integral(
+    s: FloatArray, a_abs: float, trapezoid: float, dt: float
+) -> tuple[float, float, float]:
     """Bounds (lo, hi) on the integral of |a| over STRAIGHT's flight from |a| = ``a_abs``,
     as flown: the actuator decays without changing sign under a_c = -(C / a_max) a, at the
     rate r(a) = k (1 - (a / a_max)^n) + p1 (k = C / a_max), so the integral is
@@ -542,22 +544,38 @@ def _straighten_integral(s: FloatArray, a_abs: float, trapezoid: float) -> tuple
     (``_trapezoid_excess``); each bound keeps 1% to spare, left from when the step was
     integrated (``_advance_straighten`` is exact now; tests/test_backup.py checks both
     against the flown sequence). Other n: the cruder
-    |a| / r(|a|), and |a| / (k + p1) below."""
+    |a| / r(|a|), and |a| / (k + p1) below.
+
+    Third, a bound on the first moment, the integral of t |a| (the lag's screen,
+    ``_lag_flight_upper``). With x = |a| falling from a0 = ``a_abs`` at x' = -x r(x), the
+    time to fall to x is T(x) = int_x^a0 dy / (y r(y)), and the moment is
+    int_0^a0 T(x) / r(x) dx. For n = 2, T(x) = (ln(a0 / x) + (1/2) ln((K - b x^2) /
+    (K - b a0^2))) / K <= (ln(a0 / x) + L0) / K (K = k + p1, b = k / a_max^2,
+    L0 = (1/2) ln(K / r(a0))), and since ln(a0 / x) falls and 1 / r(x) rises on (0, a0],
+    Chebyshev's inequality gives int ln(a0 / x) / r(x) dx <= (1 / a0) a0 I = I (I the
+    integral above): the moment is at most I (L0 + 1) / K. Other n: r >= r(a0) on the way,
+    so T(x) <= ln(a0 / x) / r(a0) and the moment is at most I / r(a0), I <= a0 / r(a0).
+    Flown linear between control steps, each step's part is at most ``trapezoid`` (and the
+    1%) times the integral of (t + dt) |a| over it."""
     amax, p1, nn = s[S_AMAX], s[S_P1], int(s[S_N])
     k = s[S_CMD] / amax
+    rate_at = k * (1.0 - (a_abs / amax) ** nn) + p1  # r(a0)
     if nn != 2:
-        return 0.99 * a_abs / (k + p1), trapezoid * a_abs / (k * (1.0 - (a_abs / amax) ** nn) + p1)
+        integral = a_abs / rate_at
+        return (0.99 * a_abs / (k + p1), trapezoid * integral,
+                (trapezoid + 0.01) * (integral / rate_at + dt * integral))
     c = amax * math.sqrt((k + p1) / k)
     exact = amax * amax / (2.0 * k * c) * math.log((c + a_abs) / (c - a_abs))
-    return 0.99 * exact, (trapezoid + 0.01) * exact
+    moment = exact * (0.5 * math.log((k + p1) / rate_at) + 1.0) / (k + p1)
+    return 0.99 * exact, (trapezoid + 0.01) * exact, (trapezoid + 0.01) * (moment + dt * exact)
 
 
 @jit_inline
 def _straight_to_come(
-    s: FloatArray, a: float, av: float, speed: float, trapezoid: float
-) -> tuple[float, float, float, float, float]:
+    s: FloatArray, a: float, av: float, speed: float, trapezoid: float, dt: float
+) -> tuple[float, float, float, float, float, float]:
     """What is left of the turn once STRAIGHT is flown from (a, a_v): (delta, mid, w, drift,
-    eta) (``trapezoid``: ``_trapezoid_excess`` at the control step).
+    eta, moment) (``trapezoid``: ``_trapezoid_excess`` at the control step ``dt``).
 
     The heading changes by the integral of a_v over v, and that integral is
     tau a_v + the integral of a (the lag keeps the area); with the integral of |a| within
@@ -567,15 +585,16 @@ def _straight_to_come(
     drift = tau^2 |a_v| + tau hi + hi^2 / |a| of the line from here along the final heading
     (the lateral drift is at most int (t' - t) |a_v(t')| dt', and the integral of t |a| is
     at most hi^2 / |a| because a decays faster the smaller it is); eta = hi / v bounds the
-    heading change the actuator alone still makes (``_lag_flight_upper``)."""
+    heading change the actuator alone still makes, and ``moment`` the integral of t |a|
+    still to come (``_straighten_integral``; both for ``_lag_flight_upper``)."""
     tau = s[S_TAU]
-    lo, hi = _straighten_integral(s, abs(a), trapezoid)
+    lo, hi, moment = _straighten_integral(s, abs(a), trapezoid, dt)
     sign = 1.0 if a >= 0.0 else -1.0
     delta = (tau * abs(av) + hi) / speed
     mid = (tau * av + sign * 0.5 * (lo + hi)) / speed
     w = 0.5 * (hi - lo) / speed
     drift = tau * tau * abs(av) + tau * hi + (hi * hi / abs(a) if a != 0.0 else 0.0)
-    return delta, mid, w, drift, hi / speed
+    return delta, mid, w, drift, hi / speed, moment
 
 
 @jit_inline
@@ -589,14 +608,14 @@ def _straight_goes_on(s: FloatArray, av: float, speed: float) -> bool:
 
 @jit_inline
 def _straight_to_come_once(
-    s: FloatArray, a: float, av: float, speed: float, trapezoid: float,
-    to_come: tuple[float, float, float, float, float], fresh: bool,
-) -> tuple[tuple[float, float, float, float, float], bool]:
+    s: FloatArray, a: float, av: float, speed: float, trapezoid: float, dt: float,
+    to_come: tuple[float, float, float, float, float, float], fresh: bool,
+) -> tuple[tuple[float, float, float, float, float, float], bool]:
     """``to_come`` where it is ``fresh`` (made for this state), else
     ``_straight_to_come`` made now; and True."""
     if fresh:
         return to_come, True
-    return _straight_to_come(s, a, av, speed, trapezoid), True
+    return _straight_to_come(s, a, av, speed, trapezoid, dt), True
 
 
 @jit_inline
@@ -717,10 +736,11 @@ def _si_cin(x: float) -> tuple[float, float, float, float]:
 _INVERSES = np.concatenate(([math.inf], 1.0 / np.arange(1.0, 32.0)))  # 1 / k at index k
 
 
-# The lag's closed-form screen is used where the heading still to come from a_v alone,
-# |tau a_v / v|, is within this (its series are exact to round-off there) and at least the
-# second (below, it is rarely below the tube's bound and costs more than it saves:
-# bench/bench_shield.py, 0.05 to 0.4 rad tried, docs/validation.md).
+# The lag's closed-form screen is used where the heading still to come, |mid| of
+# ``_straight_to_come`` (the lag's tau a_v / v and the actuator's), is within this (its
+# series are exact to round-off there) and at least the second (below, it is rarely
+# below the tube's bound and costs more than it saves: bench/bench_shield.py, 0.05 to
+# 0.4 rad tried, docs/validation.md).
 _LAG_SCREEN_RAD = 4.0
 _LAG_SCREEN_MIN_RAD = 0.2
 
@@ -728,29 +748,40 @@ _LAG_SCREEN_MIN_RAD = 0.2
 @jit_inline
 def _lag_flight_upper(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
-    kz: int, n: float, e: float, h: float, av: float, speed: float, eta: float,
-    order: IntArray, first: int, below: float,
+    kz: int, n: float, e: float, h: float, speed: float,
+    to_come: tuple[float, float, float, float, float, float], order: IntArray, first: int,
+    below: float,
 ) -> tuple[float, int]:
     """An upper bound on the least gap of STRAIGHT's flight from this state with a lag,
-    tight where the tube (``_tube_gap``) is not: once the actuator has died out the
-    lag's turn is known in closed form.
+    tight where the tube (``_tube_gap``) is not: the lag's turn is known in closed form.
 
-    With a = 0 from here, a_v = a_v0 e^(-t / tau), so the heading is h_f - c e^(-t / tau)
-    (c = tau a_v0 / v, h_f = h + c), and with x = c e^(-t / tau) the flight is, along u(h_f)
-    and its left normal, v t - v tau (Cin(c) - Cin(x)) and -v tau (Si(c) - Si(x)); its
-    look-ahead point adds mu R (cos x, -sin x). STRAIGHT's actuator moves the heading from
-    that by at most eta = (the integral of |a| to come) / v at every time (the lag keeps
-    the sign and the area of a, which decays without changing sign; ``_straight_to_come``
-    gives eta), so the look-ahead
-    point at time t lies within eta (v t + mu R) of that one. For each zone, at the time
-    the asymptote passes nearest it, that point's gap plus eta (v t + mu R) bounds the
-    flight's least gap from above. Returns the least over the zones and its zone's
-    position, from position ``first`` of ``order``, stopping at the first below ``below``
-    (as ``_tube_gap``); inf without a lag.
+    The model: the heading h + c (1 - e^(-t / tau)), c = ``mid`` of ``to_come`` (the lag's
+    tau a_v0 / v and the actuator's integral to come, (lo + hi) / 2v with its sign), as if
+    the actuator's part came at once. With h_f = h + c and x = c e^(-t / tau) the flight is,
+    along u(h_f) and its left normal, v t - v tau (Cin(c) - Cin(x)) and
+    -v tau (Si(c) - Si(x)); its look-ahead point adds mu R (cos x, -sin x).
+
+    The flight flown: the actuator's a decays without changing sign, and through the lag
+    it turns the heading by (1/v) int_0^t a(s) g(t - s) ds, g(t) = 1 - e^(-t / tau) (0 before
+    0), where the model has (A / v) g(t), A = int a. The difference D(t) = (1/v) int a(s)
+    (g(t) - g(t - s)) ds keeps the sign of a (g rises), is at most A / v <= eta, and its
+    integral over all t is (1/v) int s a(s) ds <= ``moment`` / v (each s shifts g by s);
+    A itself is within w v of the model's. So the flight's heading is within eta + w of
+    the model's at every t, its position within moment + w v t (|u(x) - u(y)| <= |x - y|),
+    and its look-ahead point within moment + w (v t + mu R) + eta mu R of the model's. For
+    each zone, at the time the asymptote passes nearest it, the model's gap there plus that
+    bounds the flight's least gap from above. (The actuator's turn was first bounded as
+    eta (v t + mu R): from a turn near the bound the actuator dies out over some 0.3 s, its
+    eta some 0.13 rad, and 20 turn radii away that is 2.7 m, where the model is within a
+    few centimetres: the screen then passed nearly every exit a turn inside a ring of zones
+    tried, and STRAIGHT's whole flight was sampled at each.) Returns the least over the
+    zones and its zone's position, from position ``first`` of ``order``, stopping at the
+    first below ``below`` (as ``_tube_gap``); inf without a lag, or where |c| is outside
+    the screen's range.
 
     For a caller that compares it with ``below`` (finite), a zone is skipped, before its
     exponential and its series, where a bound from below on its value already keeps it at
-    or above ``below``: the flight's point lies within reach_v (Cin(c) + |c|) +
+    or above ``below``: the model's point lies within reach_v (Cin(c) + |c|) +
     mu R (|c| + c^2 / 2) of the asymptote's point v t + mu R along u(h_f) (|Cin(c) -
     Cin(x)| <= Cin(c), |Si(c) - Si(x)| <= |x - c| <= |c|, 1 - cos x <= c^2 / 2 and
     |sin x| <= |c|, x between 0 and c), with a relative slack of 1e-9 for the rounding of
@@ -758,7 +789,7 @@ def _lag_flight_upper(
     only known to be at or above ``below`` and the position is one of the zones not
     skipped (``first`` if none)."""
     tau = s[S_TAU]
-    c = tau * av / speed
+    _, c, w, _, eta, moment = to_come
     if tau <= 0.0 or not _LAG_SCREEN_MIN_RAD <= abs(c) <= _LAG_SCREEN_RAD:
         return math.inf, first
     ch, sh = math.cos(h + c), math.sin(h + c)
@@ -778,12 +809,13 @@ def _lag_flight_upper(
         we = ze[kz, i] - e
         t = max(0.0, (wn * ch + we * sh - mur + reach_v * cin_c) / speed)
         along = speed * t + mur  # the asymptote's point, this far along u(h_f)
+        error = moment + w * along + eta * mur  # the flight's point from the model's
         if skip:
-            clear = below + zreach[kz, i] + s[S_EPS] + drift_v + mur * bend - eta * along
+            clear = below + zreach[kz, i] + s[S_EPS] + drift_v + mur * bend - error
             an = wn - along * ch
             ae = we - along * sh
             slack = 1e-9 * (abs(wn) + abs(we) + along + zreach[kz, i] + drift_v + mur * bend
-                            + eta * along + abs(below))  # fmt: skip
+                            + error + abs(below))  # fmt: skip
             if clear + slack <= 0.0 or an * an + ae * ae >= (clear + slack) ** 2:
                 continue  # its value is at or above ``below``: not below (not needed)
         x = c * math.exp(-t / tau)
@@ -792,8 +824,7 @@ def _lag_flight_upper(
         left = -reach_v * (si_c - si_x) - mur * sin_x
         dn = wn - (ahead * ch - left * sh)
         de = we - (ahead * sh + left * ch)
-        value = (math.sqrt(dn * dn + de * de) - zreach[kz, i] - s[S_EPS]
-                 + eta * along)  # fmt: skip
+        value = math.sqrt(dn * dn + de * de) - zreach[kz, i] - s[S_EPS] + error
         if value < best:
             best, which = value, p
             if best < below:
@@ -804,8 +835,8 @@ def _lag_flight_upper(
 @jit_inline
 def _rest_upper(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
-    kz: int, n: float, e: float, h: float, ch: float, sh: float, av: float, speed: float,
-    to_come: tuple[float, float, float, float, float], order: IntArray, first: int,
+    kz: int, n: float, e: float, h: float, ch: float, sh: float, speed: float,
+    to_come: tuple[float, float, float, float, float, float], order: IntArray, first: int,
     below: float,
 ) -> tuple[float, int]:
     """An upper bound on the least gap of STRAIGHT's flight from this state, the exit
@@ -815,12 +846,12 @@ def _rest_upper(
     lag's closed form (``_lag_flight_upper``; inf without a lag). From position ``first``
     of ``order``, stopping at the first zone below ``below``; returns the bound and that
     zone's position."""
-    delta, mid, w, drift, eta = to_come
+    delta, mid, w, drift, _, _ = to_come
     c_final, s_final = _turned(h, ch, sh, mid)
     upper, which = _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, c_final, s_final, w, delta,
                              drift, True, order, first, below)  # fmt: skip
     if upper >= below:
-        lag, lag_zone = _lag_flight_upper(s, zn, ze, zmur, zreach, kz, n, e, h, av, speed, eta,
+        lag, lag_zone = _lag_flight_upper(s, zn, ze, zmur, zreach, kz, n, e, h, speed, to_come,
                                           order, which, below)  # fmt: skip
         if lag < upper:
             upper, which = lag, lag_zone
@@ -831,7 +862,7 @@ def _rest_upper(
 def _straight_tail(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, ch: float, sh: float, speed: float,
-    to_come: tuple[float, float, float, float, float],
+    to_come: tuple[float, float, float, float, float, float],
 ) -> float:
     """The gap of all of STRAIGHT's flight from this state on, in closed form, from below
     (``ch``, ``sh``: the cosine and sine of ``h``; ``to_come``: ``_straight_to_come`` here):
@@ -841,7 +872,7 @@ def _straight_tail(
     heading (``_tube_gap``). The larger bound is taken. With an abandon profile, the cone
     alone and from min(mu R, v hold) ahead: the abandon paths from points of the line are
     parts of the line (used once the turn has died out)."""
-    delta, mid, w, drift, _ = to_come
+    delta, mid, w, drift, _, _ = to_come
     hold = s[S_AB_HOLD]
     start = speed * hold if hold > 0.0 else math.inf
     cone = segment_gap(zn, ze, zmur, zreach, kz, n, e, ch, sh, start, math.inf, True, s[S_EPS],
@@ -907,11 +938,12 @@ def _straight_flight(
     nn = int(s[S_N])
     # what is left of the turn, made for a sample's state only where it is asked (its
     # logarithm costs): ``fresh`` where made for this sample's
-    to_come = _straight_to_come(s, a, av, speed, trapezoid)
+    to_come = _straight_to_come(s, a, av, speed, trapezoid, dt)
     fresh = True
     for j in range(_MAX_SAMPLES):
         if early and j % _TAIL_EVERY == 0:
-            to_come, fresh = _straight_to_come_once(s, a, av, speed, trapezoid, to_come, fresh)
+            to_come, fresh = _straight_to_come_once(s, a, av, speed, trapezoid, dt, to_come,
+                                                    fresh)  # fmt: skip
             tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed, to_come)
             certified = max(certified, min(best, tail))
             if certified >= enough:
@@ -926,14 +958,16 @@ def _straight_flight(
         # delta < _RESIDUAL_RAD ends the sampling: made only where the lag's part alone
         # does not already keep it at or above that (``_straight_goes_on``)
         if fresh or not _straight_goes_on(s, av, speed):
-            to_come, fresh = _straight_to_come_once(s, a, av, speed, trapezoid, to_come, fresh)
+            to_come, fresh = _straight_to_come_once(s, a, av, speed, trapezoid, dt, to_come,
+                                                    fresh)  # fmt: skip
             if to_come[0] < _RESIDUAL_RAD:  # delta
                 break
         if j > 0 and screen > -math.inf and (j <= _SCREEN_EVERY or j % _SCREEN_EVERY == 0):
-            to_come, fresh = _straight_to_come_once(s, a, av, speed, trapezoid, to_come, fresh)
+            to_come, fresh = _straight_to_come_once(s, a, av, speed, trapezoid, dt, to_come,
+                                                    fresh)  # fmt: skip
             # the rest of the flight from here, from above: where even that is below the
             # level, so is every lower bound of the whole flight (the certificate)
-            upper, blocker = _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, av, speed,
+            upper, blocker = _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed,
                                          to_come, BY_INDEX, blocker, screen)  # fmt: skip
             if upper < screen:
                 return -math.inf
@@ -942,7 +976,8 @@ def _straight_flight(
             n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a, a1, av, speed, tau, dt, decays)
             a = a1
         fresh = False
-    to_come, fresh = _straight_to_come_once(s, a, av, speed, trapezoid, to_come, fresh)
+    to_come, fresh = _straight_to_come_once(s, a, av, speed, trapezoid, dt, to_come,
+                                            fresh)  # fmt: skip
     tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed, to_come)
     return max(certified, min(best, tail))
 
@@ -951,14 +986,14 @@ def _straight_flight(
 def _straight_upper_bound(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, ch: float, sh: float, a: float, av: float,
-    speed: float, trapezoid: float, order: IntArray, first: int, below: float,
+    speed: float, trapezoid: float, dt: float, order: IntArray, first: int, below: float,
 ) -> tuple[float, int]:
     """An upper bound on the least gap of STRAIGHT's flight from this state, so on its
     certificate (which is below that gap): cheap, to screen a turn's exits (``_rest_upper``).
     Stops below ``below``, from position ``first`` of ``order`` (``ch``, ``sh``: the cosine
-    and sine of ``h``; ``trapezoid``: ``_trapezoid_excess`` at the control step)."""
-    return _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, av, speed,
-                       _straight_to_come(s, a, av, speed, trapezoid), order, first,
+    and sine of ``h``; ``trapezoid``: ``_trapezoid_excess`` at the control step ``dt``)."""
+    return _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed,
+                       _straight_to_come(s, a, av, speed, trapezoid, dt), order, first,
                        below)  # fmt: skip
 
 
@@ -977,7 +1012,7 @@ def _exit_here(
     level). (``ch``, ``sh``: the turn's cosine and sine of ``h``; ``constants``:
     ``_flight_constants(s, dt)``, the turn's.)"""
     upper, blocker = _straight_upper_bound(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av,
-                                           speed, constants[0], order, blocker,
+                                           speed, constants[0], dt, order, blocker,
                                            screen_level)  # fmt: skip
     if upper < screen_level:
         return -math.inf, blocker

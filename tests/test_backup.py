@@ -1207,6 +1207,47 @@ def test_the_lags_closed_form_bounds_the_flight_from_above_and_tighter_than_the_
     assert lagged > 40 and tighter > 0.8 * lagged
 
 
+@pytest.mark.parametrize("tau", [0.5, 0.6, 1.0, 1.4])
+def test_the_lags_screen_refuses_the_exits_of_a_turn_at_the_bound_inside_a_far_ring(
+    tau: float,
+) -> None:
+    """A hard turn at the bound, converged, inside a ring of 300 zones 8 to 18 turn radii
+    away (``bench_law.py``'s ring): every STRAIGHT exit runs into the ring (certificate
+    about -1.9 m), and from 0.5 s of lag on the tube's screen gives up. The lag's screen
+    must still refuse them: its bound, taking the actuator's integral into the closed form
+    and its timing by the first moment, is below 0 at every converged sample and above the
+    exit's certificate. Bounded by the actuator's size instead, eta (v t + mu R), it was
+    +1.68 m at 0.6 s (above the level: each exit's whole flight was flown, 593 us a turn
+    certificate against 74)."""
+    angles = np.linspace(0.0, 2.0 * np.pi, 300, endpoint=False)
+    zones = ZoneSet.from_defenders([
+        Defender(north_m=float(18.0 * np.cos(t)), east_m=float(18.0 * np.sin(t)), range_m=1.5,
+                 capture_radius_m=0.5, speed_ratio=0.7)
+        for t in angles
+    ])  # fmt: skip
+    z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
+    s = settings_for(dataclasses.replace(PARAMS, response_lag_s=tau))
+    dt = 0.02
+    cmd, ticks, _, _, _ = bk._turn_setup(s, bk.BACKUP_LEFT, 1.0, dt)
+    trapezoid, decays, _ = bk._flight_constants(s, dt)
+    n, e, h, a, av = 8.0, -4.0, 2.55, 0.3, 0.0
+    ch, sh = math.cos(h), math.sin(h)
+    checked = 0
+    for j in range(400):
+        for _ in range(ticks):
+            n, e, h, a, av, ch, sh = bk._turn_step(s, cmd, n, e, h, a, av, ch, sh, 1.0, dt, 1.0,
+                                                   s[bk.S_P1], tau, decays)  # fmt: skip
+        if j < 150 or j % 25:
+            continue
+        to_come = bk._straight_to_come(s, a, av, 1.0, trapezoid, dt)
+        assert 2.0 * to_come[0] + to_come[2] >= 1.2  # the tube's screen gives up here
+        upper, _ = bk._lag_flight_upper(s, *z, n, e, h, 1.0, to_come, lk.BY_INDEX, 0, -math.inf)
+        full = bk.straight_certificate(s, *z, n, e, h, a, av, 1.0, dt, -math.inf, math.inf)
+        assert full <= upper < 0.0, (full, upper)
+        checked += 1
+    assert checked == 10
+
+
 def test_the_lags_screen_skips_only_zones_that_cannot_come_below_its_level() -> None:
     """Given a finite level, the lag's closed-form screen skips a zone where a bound from
     below on its value (from the asymptote's point, which the flight's lies within

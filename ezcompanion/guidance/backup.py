@@ -1747,9 +1747,7 @@ def shield_one(
         _, _, _, _, a_next, av_next = _fly_step(s, zn, ze, zmur, zreach, kz, soonest, 0.0, n, e,
                                                 h, a, av, speed, dt)  # fmt: skip
         out[k, 0], out[k, 1], out[k, 2], out[k, 4] = a_next, av_next, soonest, cert
-        for i in range(PLAN_SIZE):  # a plan the step advanced is not flown
-            plan[i] = kept[i]
-        return
+        return  # (the plan's search goes on from where the step left it, as where it stands)
     held = _floor_certificate(plain, zn, ze, zmur, zreach, kz, flown, n, e, h, a, av, speed, dt,
                               theta, room)  # fmt: skip
     if held >= theta:
@@ -1779,7 +1777,9 @@ def _abandon_soonest(
     such a state is the present state's for all of them: they cannot tell which turn
     leaves the unsafe setpoints soonest (docs/guidance.md, "Safe to abandon")."""
     every = sample_ticks(s, speed, dt)
-    limit = math.ceil(_SOONEST_TURN_TIMES * speed / s[S_AMAX] / dt)
+    amax, p1, nn, cmd, tau = s[S_AMAX], s[S_P1], int(s[S_N]), s[S_CMD], s[S_TAU]
+    _, decays, straightening = _flight_constants(s, dt)
+    limit = math.ceil(_SOONEST_TURN_TIMES * speed / amax / dt)
     best, best_steps, best_cert = -1, limit + 1, -math.inf
     for j in range(_N_BACKUPS + 1):  # the backup flown first, then the others
         policy = flown if j == 0 else j - 1
@@ -1790,10 +1790,17 @@ def _abandon_soonest(
         if cert < theta:
             continue
         n1, e1, h1, a1, av1 = n, e, h, a, av
+        ch, sh = math.cos(h), math.sin(h)
+        command = backup_command(s, policy, a)  # a turn's, held (STRAIGHT's follows a)
         safe_from = 0  # the step from which every sample so far is safe to abandon
         for step in range(1, limit + 1):
-            _, n1, e1, h1, a1, av1 = _fly_step(s, zn, ze, zmur, zreach, kz, policy, 0.0, n1, e1,
-                                               h1, a1, av1, speed, dt)  # fmt: skip
+            # the flight alone, as a turn's certificate flies it (no gaps: ``_fly_step``'s
+            # substeps and zones took most of this search's time)
+            a2 = (_advance_straighten(a1, nn, straightening) if policy == BACKUP_STRAIGHT
+                  else advance_one(a1, command, dt, amax, p1, nn, cmd))  # fmt: skip
+            n1, e1, h1, av1, ch, sh = _fly(n1, e1, h1, ch, sh, a1, a2, av1, speed, tau, dt,
+                                           decays)  # fmt: skip
+            a1 = a2
             if (step % every == 0 or step == limit) and _abandon(
                     s, zn, ze, zmur, zreach, kz, n1, e1, h1, a1, av1, speed, math.inf) < 0.0:
                 safe_from = step + 1

@@ -80,7 +80,8 @@ def add_validate_parser(subparsers: Any) -> None:
     p.add_argument(
         "--abandon", choices=sorted(ABANDON_PROFILES), default=None,
         help="check after the first second that every setpoint is safe to keep flying with "
-        "this autopilot's behaviour when the companion falls silent (default: not checked)",
+        "this autopilot's behaviour when the companion falls silent, and ask the oracle "
+        "whether some manoeuvre makes the first checked one safe (default: not checked)",
     )  # fmt: skip
     p.add_argument("--chunk-runs", type=int, default=2500, help="runs per seeded chunk")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")

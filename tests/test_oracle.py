@@ -4,20 +4,21 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ezcompanion.config import Scenario, VehicleStart
+from ezcompanion.config import Scenario, VehicleStart, load_scenario
 from ezcompanion.errors import ConfigError
 from ezcompanion.guidance import Defender, GuidanceParams, Target
 from ezcompanion.guidance.abandon import ABANDON_PROFILES
 from ezcompanion.guidance.zones import ez_boundary_point
 from ezcompanion.validation import _oracle_search as ks
 from ezcompanion.validation.abandon import AbandonChecker
-from ezcompanion.validation.batch import simulate_batch
+from ezcompanion.validation.batch import BatchSettings, simulate_batch
 from ezcompanion.validation.escape import escape_margin_m
 from ezcompanion.validation.fixed import from_scenarios
 from ezcompanion.validation.oracle import (
@@ -32,6 +33,7 @@ from ezcompanion.validation.policies import make_policy
 from ezcompanion.validation.scenarios import ScenarioBatch, ScenarioDistribution, draw_scenarios
 
 PARAMS = GuidanceParams()
+CONFIG = Path(__file__).resolve().parent.parent / "config"
 PAPER_DEFENDER = {"range_m": 1.5, "capture_radius_m": 0.5, "speed_ratio": 0.7}
 FAR = Defender(north_m=500.0, east_m=500.0, **PAPER_DEFENDER)
 
@@ -266,3 +268,33 @@ def test_where_the_search_saves_the_first_setpoint_the_law_keeps_every_one_safe_
                            params=params)  # fmt: skip
     assert not flown.entered.any()
     assert flown.abandon_unsafe_steps.tolist() == [0, 0, 0, 0]
+
+
+@pytest.mark.parametrize(("name", "lag_s"), [("arducopter", 0.6), ("px4", 0.3), ("px4", 1.2)])
+def test_the_paper_scenarios_keep_their_setpoints_safe_to_abandon_where_the_search_can(
+    name: str, lag_s: float
+) -> None:
+    """Issue 9 item 2 on the paper's own scenarios: the backup law given the autopilot's
+    profile (its hold and braking; the vehicle lagging as the profile says), 30 s flown by
+    the campaign's batch simulator and checked at every step from the first second.
+    ArduCopter's 0.6 s and PX4's 0.3 s: every such setpoint of both scenarios is safe to
+    abandon (without the profile the law holds 129 and 75 that are not with ArduCopter's),
+    and both stay out. PX4's at a 1.2 s lag, scenario 1: 13 are not, from a start where no
+    manoeuvre of the oracle's search makes the first checked setpoint safe to abandon
+    (best -0.015 m); scenario 2: none. (Interception is not asked: with ArduCopter's 3.6 s
+    path neither scenario intercepts in 30 s, docs/guidance.md, "Safe to abandon".)"""
+    profile = ABANDON_PROFILES[name]
+    scenarios = [load_scenario(CONFIG / f"paper_scenario{n}.yaml") for n in (1, 2)]
+    runs = dataclasses.replace(from_scenarios(scenarios), response_lag_s=np.full(2, lag_s))
+    params = dataclasses.replace(scenarios[0].guidance, abandon_hold_s=profile.hold_s,
+                                 abandon_brake_m_s2=profile.brake_m_s2)  # fmt: skip
+    flown = simulate_batch(runs, make_policy("backup", runs, params),
+                           accel_max_m_s2=params.accel_max_m_s2,
+                           settings=BatchSettings(duration_s=30.0),
+                           abandon=AbandonChecker(name), params=params)  # fmt: skip
+    assert (flown.min_clearance_m > 0.0).all()
+    gap, _ = first_abandon_gap_m(runs, scenarios[0].guidance, profile)
+    for k in range(2):
+        if gap[k] >= 0.0:
+            assert flown.abandon_unsafe_steps[k] == 0, (k, flown.abandon_unsafe_steps)
+    assert (gap < 0.0).tolist() == [lag_s == 1.2, False]

@@ -966,29 +966,37 @@ def test_along_its_own_flow_a_backup_certificate_never_drops_by_more_than_theta(
     assert min(flown.values()) > 20  # every policy was flown
 
 
-@pytest.mark.parametrize("dt", [0.002, 0.01, 0.02, 0.05, 0.1])
-def test_the_straightening_integral_bounds_the_actuator_as_flown(dt: float) -> None:
+@pytest.mark.parametrize("n", [2, 4, 6])
+@pytest.mark.parametrize("dt", [0.002, 0.01, 0.02, 0.05, 0.1, 0.15, 0.2, 0.5, 1.0])
+def test_the_straightening_integral_bounds_the_actuator_as_flown(dt: float, n: int) -> None:
     """STRAIGHT's closed-form tail rests on bounds (lo, hi) on the integral of |a| still to
     come: the actuator as the service flies it (stepped by the integrator, linear between
-    control steps) must land between them, from near the turn's limit down to small a; and
-    the bound on its first moment, the integral of t |a| (the lag's screen), above that
-    moment as flown, within 4 times it (1.4 to 2.1 times at the service's 20 ms, 2.9 to
-    3.7 at 0.1 s, where the bound's dt I term is largest)."""
-    s = settings_for(PARAMS)
-    amax = PARAMS.accel_max_m_s2
+    control steps) must land between them, from near the turn's limit down to small a, at
+    any step the service allows (down to 1 Hz: from 0.15 s on, near the limit, the
+    trapezoid falls short of 0.99 of the integral where the decay is concave, and lo
+    takes that shortfall off: a reviewer's case, 0.955 of it at 0.2 s); and the bound on
+    its first moment, the integral of t |a| (the lag's screen), above that moment as flown.
+    Up to 0.05 s with n = 2, both are tight: hi within 1.35 lo, the moment within 4 times
+    the flown one (1.4 to 2.1 times at the service's 20 ms; at 0.1 s, 2.9 to 3.7, and hi
+    1.43 lo from 0.9999 a_max, the shortfall's share of lo larger)."""
+    params = dataclasses.replace(PARAMS, actuator_n=n)
+    s = settings_for(params)
+    amax = params.accel_max_m_s2
     straightening = bk._straightening(s, dt)
-    for a0 in (1e-4, 0.05, 0.3, 0.7, 0.9, 0.99, 0.995):
+    for a0 in (1e-4, 0.05, 0.3, 0.7, 0.9, 0.99, 0.995, 0.9999):
         a, flown, flown_moment = a0 * amax, 0.0, 0.0
-        for k in range(int(20.0 / dt)):
-            a1 = bk._advance_straighten(a, PARAMS.actuator_n, straightening)
+        for k in range(int(20.0 / dt) + 1):
+            a1 = bk._advance_straighten(a, n, straightening)
             flown += 0.5 * (a + a1) * dt
             # the integral of t a over the step, a linear in it
             flown_moment += dt * (k * dt * 0.5 * (a + a1) + dt * (a + 2.0 * a1) / 6.0)
             a = a1
         lo, hi, moment = bk._straighten_integral(s, a0 * amax, bk._trapezoid_excess(s, dt), dt)
-        assert lo <= flown <= hi, (a0, lo, flown, hi)
-        assert hi <= 1.35 * lo  # and tight: what lets the tail close early
-        assert flown_moment <= moment <= 4.0 * flown_moment, (a0, flown_moment, moment)
+        assert lo <= flown <= hi * (1.0 + 1e-12), (a0, lo, flown, hi)
+        assert flown_moment <= moment * (1.0 + 1e-12), (a0, flown_moment, moment)
+        if n == 2 and dt <= 0.05:  # and tight: what lets the tail close early
+            assert hi <= 1.35 * lo
+            assert moment <= 4.0 * flown_moment, (a0, flown_moment, moment)
 
 
 @settings(max_examples=200, deadline=None)
@@ -1041,7 +1049,7 @@ def test_straights_actuator_step_takes_any_step() -> None:
     zones=layouts(),
     n0=st.floats(-8, 8), e0=st.floats(-8, 8), h0=st.floats(-math.pi, math.pi),
     a0=st.floats(-0.99, 0.99), av0=st.floats(-0.99, 0.99),
-    tau=st.sampled_from([0.0, 0.3, 0.5, 1.2]), dt=st.sampled_from([0.01, 0.02, 0.05]),
+    tau=st.sampled_from([0.0, 0.3, 0.5, 1.2]), dt=st.sampled_from([0.01, 0.02, 0.05, 0.2]),
 )  # fmt: skip
 def test_straights_closed_form_bounds_hold_along_its_flight(
     zones: ZoneSet, n0: float, e0: float, h0: float, a0: float, av0: float, tau: float,

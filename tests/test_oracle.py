@@ -247,6 +247,9 @@ def test_the_first_abandon_search_turns_away_from_a_zone_on_either_side(lag_s: f
     assert open_gap[0] > 100.0 and _modes(int(open_code[0])) == [ks.LEFT] * 5
     with pytest.raises(ConfigError, match="segment_s"):
         first_abandon_gap_m(_batch((0.0, 0.0, 0.0), [FAR]), PARAMS, px4, segment_s=0.3)
+    with pytest.raises(ConfigError, match=r"whole steps of dt_s 0\.03"):
+        first_abandon_gap_m(_batch((0.0, 0.0, 0.0), [FAR]), PARAMS, px4,
+                            settings=OracleSettings(dt_s=0.03))  # fmt: skip
 
 
 def test_where_the_search_saves_the_first_setpoint_the_law_keeps_every_one_safe_to_abandon(

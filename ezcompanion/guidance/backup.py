@@ -556,18 +556,32 @@ def _straighten_integral(
     integral above): the moment is at most I (L0 + 1) / K. Other n: r >= r(a0) on the way,
     so T(x) <= ln(a0 / x) / r(a0) and the moment is at most I / r(a0), I <= a0 / r(a0).
     Flown linear between control steps, each step's part is at most ``trapezoid`` (and the
-    1%) times the integral of (t + dt) |a| over it."""
+    1%) times the integral of (t + dt) |a| over it.
+
+    The trapezoid falls short of the integral where the decay is concave: from near a_max
+    it starts slowly (r(a) is small there) and steepens until |a| r(|a|) peaks, at
+    x* = a_max (K / (k (n + 1)))^(1/n), then it is convex. Over one step the shortfall is
+    (1/2) int s (dt - s) (-a'') ds <= (dt^2 / 8) int (-a'') over the step, and summed over
+    the concave part, (dt^2 / 8) (x* r(x*) - a0 r(a0)) (the slope's change there; none
+    where a0 <= x*): lo is at most the integral less that ("sag"). At the service's 20 ms
+    the 1% covers it; at a long step it does not (a reviewer found the flown integral 4.5%
+    under 0.99 times it at 0.2 s from a turn at the bound)."""
     amax, p1, nn = s[S_AMAX], s[S_P1], int(s[S_N])
     k = s[S_CMD] / amax
+    big = k + p1
     rate_at = k * (1.0 - (a_abs / amax) ** nn) + p1  # r(a0)
+    peak = amax * (big / (k * (nn + 1))) ** (1.0 / nn)  # x*, where |a| r(|a|) is largest
+    sag = 0.125 * dt * dt * (peak * big * nn / (nn + 1) - a_abs * rate_at) if a_abs > peak else 0.0
     if nn != 2:
         integral = a_abs / rate_at
-        return (0.99 * a_abs / (k + p1), trapezoid * integral,
+        lower = a_abs / big  # r <= K all the way
+        return (max(min(0.99 * lower, lower - sag), 0.0), trapezoid * integral,
                 (trapezoid + 0.01) * (integral / rate_at + dt * integral))
-    c = amax * math.sqrt((k + p1) / k)
+    c = amax * math.sqrt(big / k)
     exact = amax * amax / (2.0 * k * c) * math.log((c + a_abs) / (c - a_abs))
-    moment = exact * (0.5 * math.log((k + p1) / rate_at) + 1.0) / (k + p1)
-    return 0.99 * exact, (trapezoid + 0.01) * exact, (trapezoid + 0.01) * (moment + dt * exact)
+    moment = exact * (0.5 * math.log(big / rate_at) + 1.0) / big
+    return (max(min(0.99 * exact, exact - sag), 0.0), (trapezoid + 0.01) * exact,
+            (trapezoid + 0.01) * (moment + dt * exact))
 
 
 @jit_inline
@@ -1741,15 +1755,13 @@ def shield_one(
         return
     plain = s.copy()
     plain[S_AB_HOLD] = 0.0
-    soonest, cert = _abandon_soonest(s, plain, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
-                                     dt, theta, flown, room)  # fmt: skip
+    soonest, cert, held = _abandon_soonest(s, plain, zn, ze, zmur, zreach, kz, n, e, h, a, av,
+                                           speed, dt, theta, flown, room)  # fmt: skip
     if soonest >= 0:  # a plainly certified backup that leaves a setpoint safe to abandon soonest
         _, _, _, _, a_next, av_next = _fly_step(s, zn, ze, zmur, zreach, kz, soonest, 0.0, n, e,
                                                 h, a, av, speed, dt)  # fmt: skip
         out[k, 0], out[k, 1], out[k, 2], out[k, 4] = a_next, av_next, soonest, cert
         return  # (the plan's search goes on from where the step left it, as where it stands)
-    held = _floor_certificate(plain, zn, ze, zmur, zreach, kz, flown, n, e, h, a, av, speed, dt,
-                              theta, room)  # fmt: skip
     if held >= theta:
         out[k, 4] = held  # the backup flown keeps the plain claim: the step stands
         return
@@ -1764,7 +1776,7 @@ def _abandon_soonest(
     s: FloatArray, plain: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray,
     zreach: FloatArray, kz: int, n: float, e: float, h: float, a: float, av: float,
     speed: float, dt: float, theta: float, flown: int, room: IntArray,
-) -> tuple[int, float]:
+) -> tuple[int, float, float]:
     """Where nothing safe to abandon is left: of the single backups certified plainly
     (``_floor_certificate`` with the settings ``plain`` >= theta), the one whose flight
     (its command held, a turn at the bound, STRAIGHT straightening) is safe to abandon
@@ -1772,7 +1784,8 @@ def _abandon_soonest(
     to ``_SOONEST_TURN_TIMES`` v / a_max (a turn may pass a safe state on its way to
     unsafe ones: the last unsafe sample counts); ``flown`` (the backup the step flies)
     where it is as soon. Returns it and its plain certificate, or (-1, -inf) where none
-    is safe at the end.
+    is safe at the end; and ``flown``'s plain certificate (``_floor_certificate``: -inf
+    for a rung or a plan).
     The certificates of the abandon path rank every backup by its least gap, which from
     such a state is the present state's for all of them: they cannot tell which turn
     leaves the unsafe setpoints soonest (docs/guidance.md, "Safe to abandon")."""
@@ -1780,13 +1793,15 @@ def _abandon_soonest(
     amax, p1, nn, cmd, tau = s[S_AMAX], s[S_P1], int(s[S_N]), s[S_CMD], s[S_TAU]
     _, decays, straightening = _flight_constants(s, dt)
     limit = math.ceil(_SOONEST_TURN_TIMES * speed / amax / dt)
-    best, best_steps, best_cert = -1, limit + 1, -math.inf
+    best, best_steps, best_cert, flown_cert = -1, limit + 1, -math.inf, -math.inf
     for j in range(_N_BACKUPS + 1):  # the backup flown first, then the others
         policy = flown if j == 0 else j - 1
         if (j == 0 and not 0 <= flown < _N_BACKUPS) or (j > 0 and policy == flown):
             continue
         cert = _floor_certificate(plain, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av,
                                   speed, dt, theta, room)  # fmt: skip
+        if j == 0:
+            flown_cert = cert
         if cert < theta:
             continue
         n1, e1, h1, a1, av1 = n, e, h, a, av
@@ -1808,7 +1823,7 @@ def _abandon_soonest(
                     break  # no sooner than the best so far
         if safe_from < best_steps:
             best, best_steps, best_cert = policy, safe_from, cert
-    return best, best_cert
+    return best, best_cert, flown_cert
 
 
 @jit_borrow

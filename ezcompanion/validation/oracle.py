@@ -277,10 +277,15 @@ def first_abandon_gap_m(
     sequence (base 3, the first segment's mode first, 0 left, 1 straight, 2 right; -1 if
     none). A gap >= 0 is sound, with its witness; below 0 proves nothing (finer switching
     may do better), but it is the family's best: a law whose first checked setpoint is
-    not safe to abandon there did no worse than every manoeuvre of the family."""
+    not safe to abandon there did no worse than every manoeuvre of the family. (The
+    campaign checks the state at its step's start with a after the law's step; the
+    search's setpoint keeps the a it has at ``at_s``, which a law can hold.)"""
     depth = round(at_s / segment_s)
     if depth < 1 or abs(depth * segment_s - at_s) > 1e-9:
         raise ConfigError("segment_s", segment_s, f"must divide at_s {at_s} into whole segments")
+    steps = round(segment_s / settings.dt_s)
+    if abs(steps * settings.dt_s - segment_s) > 1e-9:
+        raise ConfigError("segment_s", segment_s, f"must be whole steps of dt_s {settings.dt_s}")
     bounded = OracleSettings(**{**vars(settings), "segment_s": segment_s})
     starts, zones, g = _inputs(scenarios, params, bounded, math.inf, False)
     packed = profile.packed(params.shield_margin_m)

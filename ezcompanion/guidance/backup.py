@@ -1723,11 +1723,13 @@ def shield_one(
     With an abandon profile every certificate also flies the abandon path of each of its
     states (``_abandon``); where that leaves the step flying a backup not certified so
     (nothing safe to abandon is left: the nominal refused and the held backup's
-    certificate below theta), the step stands if the single backup it flies is certified
-    by the plain certificates (``_floor_certificate`` >= theta, reported as the held
-    backup's certificate: its plain argument, stay out, holds for it); otherwise the step
-    is taken again without the profile, from the same plan. Either way the plain claim
-    holds, which does not need the abandon path. A state
+    certificate below theta), the step flies, of the single backups certified by the plain
+    certificates (``_floor_certificate`` >= theta, reported as the held backup's
+    certificate: its plain argument, stay out, holds for it), the one safe to abandon
+    soonest (``_abandon_soonest``); where none of them is safe to abandon within its
+    horizon, the step stands if the single backup it flies is certified plainly, and
+    otherwise it is taken again without the profile, from the same plan. Either way the
+    plain claim holds, which does not need the abandon path. A state
     certified with the path is certified plainly: every exit is taken at a STRAIGHT
     certificate >= theta with the path, so >= theta without it, and every sample is a least
     taken with one gap more. (Keeping the backup where its plain certificate *as

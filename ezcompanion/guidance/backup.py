@@ -570,8 +570,14 @@ def _straighten_integral(
     k = s[S_CMD] / amax
     big = k + p1
     rate_at = k * (1.0 - (a_abs / amax) ** nn) + p1  # r(a0)
-    peak = amax * (big / (k * (nn + 1))) ** (1.0 / nn)  # x*, where |a| r(|a|) is largest
-    sag = 0.125 * dt * dt * (peak * big * nn / (nn + 1) - a_abs * rate_at) if a_abs > peak else 0.0
+    # x*, where |a| r(|a|) is largest: (x* / a_max)^n = K / (k (n + 1)) (a square root for
+    # n = 2, asked only past it: this runs at every exit screen's sample, and a general
+    # power cost some 5% of a tick)
+    ratio = big / (k * (nn + 1))
+    sag = 0.0
+    if (big - rate_at) / k > ratio:  # (|a0| / a_max)^n, from r(a0) already made
+        peak = amax * (math.sqrt(ratio) if nn == 2 else ratio ** (1.0 / nn))
+        sag = 0.125 * dt * dt * (peak * big * nn / (nn + 1) - a_abs * rate_at)
     if nn != 2:
         integral = a_abs / rate_at
         lower = a_abs / big  # r <= K all the way

@@ -56,7 +56,7 @@ safe, is reported as not feasible, not as feasible.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import IntEnum
 
 import numpy as np
@@ -286,7 +286,7 @@ def first_abandon_gap_m(
     steps = round(segment_s / settings.dt_s)
     if abs(steps * settings.dt_s - segment_s) > 1e-9:
         raise ConfigError("segment_s", segment_s, f"must be whole steps of dt_s {settings.dt_s}")
-    bounded = OracleSettings(**{**vars(settings), "segment_s": segment_s})
+    bounded = replace(settings, segment_s=segment_s)
     starts, zones, g = _inputs(scenarios, params, bounded, math.inf, False)
     packed = profile.packed(params.shield_margin_m)
     z = scenarios.zones()

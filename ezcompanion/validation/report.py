@@ -177,7 +177,7 @@ def summarise(
     safe_ok = oracle.safe_feasible if oracle is not None else np.zeros(size, dtype=bool)
     hit_ok = oracle.intercept_feasible if oracle is not None else np.zeros(size, dtype=bool)
     # the first checked setpoint can be safe to abandon (NaN, not asked: False)
-    abandon_ok = oracle.abandon_gap_m >= 0.0 if oracle is not None else np.zeros(size, dtype=bool)
+    possible = oracle.abandon_gap_m >= 0.0 if oracle is not None else np.zeros(size, dtype=bool)
     for group in groups:
         if group not in labels:
             continue
@@ -187,7 +187,7 @@ def summarise(
             for policy, m in metrics.items():
                 rows.append(
                     _summary(policy, group, level, m.subset(mask), safe_ok[mask], hit_ok[mask],
-                             abandon_ok[mask])
+                             possible[mask])
                 )
     return rows
 

@@ -256,8 +256,9 @@ def test_the_near_zones_give_the_point_gap_within_their_radius(
 def test_a_steps_room_orders_the_zones_by_bearing(count: int, seed: int) -> None:
     """The exit screens look at the zones in the order ``_zone_room`` makes once a step: by
     index with ``_NEAR_FEWEST`` zones or fewer, else by bearing from the vehicle, round
-    from north through east (the pseudo-angle, against atan2 here). Either way each zone
-    once."""
+    from north through east, to within one of as many equal sectors of the pseudo-angle
+    as there are zones (a counting sort). The pseudo-angle is checked against atan2 here:
+    it orders the zones as their bearings do. Either way each zone once."""
     rng = np.random.default_rng(seed)
     zones = random_layout(rng, 30.0, count)
     n, e = rng.uniform(-10, 10, 2)
@@ -267,7 +268,16 @@ def test_a_steps_room_orders_the_zones_by_bearing(count: int, seed: int) -> None
         assert list(order) == list(range(count))
         return
     bearings = np.mod(np.arctan2(zones.east_m[0] - e, zones.north_m[0] - n), 2.0 * math.pi)
-    assert np.all(np.diff(bearings[order]) >= -1e-12), bearings[order]
+    dn, de = zones.north_m[0] - n, zones.east_m[0] - e
+    p = de / (np.abs(dn) + np.abs(de))
+    key = np.where(dn < 0.0, 2.0 - p, np.where(p < 0.0, 4.0 + p, p))  # the pseudo-angle
+    assert list(np.argsort(key)) == list(np.argsort(bearings))
+    sector = np.minimum(np.floor(0.25 * key * count), count - 1)
+    assert np.all(np.diff(sector[order]) >= 0), sector[order]  # by sector
+    within = np.diff(sector[order]) == 0
+    out_of_turn = np.diff(bearings[order]) < 0.0
+    assert not np.any(out_of_turn & ~within)  # out of turn only within a sector
+    assert np.all(np.diff(order)[within] > 0)  # and there by index
 
 
 def test_a_screen_looks_at_every_zone_once_from_any_position() -> None:
@@ -344,7 +354,7 @@ def test_the_lookahead_circle_gap_matches_dense_sampling(
 ) -> None:
     got = lk.annulus_gap(
         zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0, cn, ce, radius, -1.0,
-        0.0, 0.0, 0.0,
+        0.0, 0.0, 0.0, math.inf,
     )  # fmt: skip
     phase = np.linspace(0.0, 2.0 * math.pi, 20001)
     best = math.inf
@@ -537,7 +547,8 @@ def test_with_no_lag_a_nominal_that_leaves_nothing_certified_if_held_late_is_ref
         command = float(rng.uniform(-1.0, 1.0)) * PARAMS.command_limit_m_s3
         theta = bk.acceptance_level_m(s, z[2], z[3], 0, 1.0, dt)
         certs = np.full(bk.N_POLICIES, -math.inf)
-        one = bk._ahead(s, *z, command, n, e, h, a, av, 1.0, dt, dt, theta, theta, certs,
+        # (asked in full: asked up to theta, a value that reaches it is only known to)
+        one = bk._ahead(s, *z, command, n, e, h, a, av, 1.0, dt, dt, theta, math.inf, certs,
                         room(z))[0]
         a_end = advance_one(a, command, dt, PARAMS.accel_max_m_s2, PARAMS.actuator_p1_1_s,
                             PARAMS.actuator_n, PARAMS.command_limit_m_s3)  # fmt: skip
@@ -957,7 +968,8 @@ def test_along_its_own_flow_a_backup_certificate_never_drops_by_more_than_theta(
                 start = min(start, certs[policy])
             flown[policy] += 1
             a0 = a
-            _, n, e, h, a, av = bk._fly_step(s, *z, policy, 0.0, n, e, h, a, av, 1.0, dt)
+            _, n, e, h, a, av = bk._fly_step(s, *z, policy, 0.0, n, e, h, a, av, 1.0, dt,
+                                             -math.inf)  # fmt: skip
             least = min(least, vehicle.fly(a0, a, dt, zones))
             bk.backup_certificates(s, *z, n, e, h, a, av, 1.0, dt, math.inf, -math.inf, certs)
             floor = start if policy == bk.BACKUP_STRAIGHT else min(start, theta)
@@ -1069,7 +1081,8 @@ def test_straights_closed_form_bounds_hold_along_its_flight(
     least = lk.lookahead_gap(*z[:4], n, e, h, PARAMS.shield_margin_m)
     lateral = 0.0
     for _ in range(int((12.0 * tau + 30.0) / dt)):  # past every zone
-        _, n, e, h, a, av = bk._fly_step(s, *z, bk.BACKUP_STRAIGHT, 0.0, n, e, h, a, av, 1.0, dt)
+        _, n, e, h, a, av = bk._fly_step(s, *z, bk.BACKUP_STRAIGHT, 0.0, n, e, h, a, av, 1.0, dt,
+                                         -math.inf)  # fmt: skip
         assert abs(h - h0) <= delta + 1e-9
         least = min(least, lk.lookahead_gap(*z[:4], n, e, h, PARAMS.shield_margin_m))
         final = h0 + mid
@@ -1208,7 +1221,7 @@ def test_the_lags_closed_form_bounds_the_flight_from_above_and_tighter_than_the_
         least = lk.lookahead_gap(*z[:4], n, e, h, PARAMS.shield_margin_m)
         for _ in range(int((12.0 * s[bk.S_TAU] + 30.0) / 0.02)):
             _, n, e, h, a, av = bk._fly_step(s, *z, bk.BACKUP_STRAIGHT, 0.0, n, e, h, a, av,
-                                             1.0, 0.02)  # fmt: skip
+                                             1.0, 0.02, -math.inf)  # fmt: skip
             least = min(least, lk.lookahead_gap(*z[:4], n, e, h, PARAMS.shield_margin_m))
         assert least <= upper + 0.02, (least, upper)
         tighter += upper < tube - 1e-3
@@ -1243,8 +1256,9 @@ def test_the_lags_screen_refuses_the_exits_of_a_turn_at_the_bound_inside_a_far_r
     checked = 0
     for j in range(400):
         for _ in range(ticks):
-            n, e, h, a, av, ch, sh = bk._turn_step(s, cmd, n, e, h, a, av, ch, sh, 1.0, dt, 1.0,
-                                                   s[bk.S_P1], tau, decays)  # fmt: skip
+            n, e, h, a, av, ch, sh, _ = bk._turn_step(s, cmd, n, e, h, a, av, ch, sh, 1.0, dt,
+                                                      1.0, s[bk.S_P1], tau, decays,
+                                                      False)  # fmt: skip
         if j < 150 or j % 25:
             continue
         to_come = bk._straight_to_come(s, a, av, 1.0, trapezoid, dt)
@@ -1254,6 +1268,50 @@ def test_the_lags_screen_refuses_the_exits_of_a_turn_at_the_bound_inside_a_far_r
         assert full <= upper < 0.0, (full, upper)
         checked += 1
     assert checked == 10
+
+
+def test_a_step_flown_asks_its_gap_only_up_to_the_level_it_is_given() -> None:
+    """``_fly_step`` (the shield's step of a command or backup, in substeps) takes the
+    least gap along the step only up to ``below`` (the nominal's check asks it up to the
+    acceptance level, a plan's segment up to its floor, a step whose gap is not used not
+    at all): min(below, the gap asked in full), to the bit, and the same state after."""
+    dt = 0.02
+    rng = np.random.default_rng(89)
+    for s, z, n, e, h, a, av in _random_states(300, 97):
+        command = float(rng.uniform(-1.0, 1.0)) * PARAMS.command_limit_m_s3
+        policy = int(rng.choice([-1, bk.BACKUP_LEFT, bk.BACKUP_RIGHT, bk.BACKUP_STRAIGHT]))
+        full = bk._fly_step(s, *z, policy, command, n, e, h, a, av, 1.0, dt, math.inf)
+        for level in (full[0] - 0.01, full[0], full[0] + 0.01, 0.0):
+            capped = bk._fly_step(s, *z, policy, command, n, e, h, a, av, 1.0, dt, level)
+            assert capped == (min(level, full[0]), *full[1:]), (capped, full, level)
+        none = bk._fly_step(s, *z, policy, command, n, e, h, a, av, 1.0, dt, -math.inf)
+        assert none == (-math.inf, *full[1:])
+
+
+@pytest.mark.parametrize("tau", [0.0, 0.6, 1.4])
+def test_a_hard_turn_held_steady_flies_the_same_to_the_bit(tau: float) -> None:
+    """Once a control step leaves a hard turn's actuator where it was, to the bit, the turn
+    stops stepping it (``_turn_step``'s ``steady``: the same arithmetic on the same a gives
+    the same a): its flight, every state of 3,000 steps, must be the one stepped in full,
+    and the actuator must come to rest within them (else the shortcut is never taken)."""
+    s = settings_for(dataclasses.replace(PARAMS, response_lag_s=tau))
+    dt = 0.02
+    _, decays, _ = bk._flight_constants(s, dt)
+    for policy in (bk.BACKUP_LEFT, bk.BACKUP_RIGHT):
+        cmd = bk._turn_setup(s, policy, 1.0, dt)[0]
+        start = (1.0, -2.0, 0.4, 0.3, 0.1 if tau > 0.0 else 0.3, math.cos(0.4), math.sin(0.4))
+        full, short = start, start
+        steady = False
+        rested = -1
+        for k in range(3000):
+            *full, _ = bk._turn_step(s, cmd, *full[:5], *full[5:], 1.0, dt, 1.0, s[bk.S_P1],
+                                     tau, decays, False)  # fmt: skip
+            *short, steady = bk._turn_step(s, cmd, *short[:5], *short[5:], 1.0, dt, 1.0,
+                                           s[bk.S_P1], tau, decays, steady)  # fmt: skip
+            assert short == full, (k, short, full)
+            if steady and rested < 0:
+                rested = k
+        assert 0 <= rested < 500, rested
 
 
 def test_the_lags_screen_skips_only_zones_that_cannot_come_below_its_level() -> None:
@@ -1344,9 +1402,9 @@ def test_the_running_screen_refuses_only_exits_whose_certificate_is_below_the_le
                 assert full < level, (full, level)
             # the screen before the flight (a turn's exit: the tube, and with a lag the
             # lag's closed form)
-            upper, _ = bk._straight_upper_bound(s, *z, n, e, h, math.cos(h), math.sin(h), a, av,
-                                                1.0, bk._trapezoid_excess(s, dt), dt,
-                                                lk.BY_INDEX, 0, level)  # fmt: skip
+            to_come = bk._straight_to_come(s, a, av, 1.0, bk._trapezoid_excess(s, dt), dt)
+            upper, _ = bk._rest_upper(s, *z, n, e, h, math.cos(h), math.sin(h), 1.0, to_come,
+                                      lk.BY_INDEX, 0, level)  # fmt: skip
             if upper < level:
                 screened += 1
                 assert full < level, (full, level, upper)
@@ -1388,6 +1446,62 @@ def test_certificates_asked_from_a_level_up_are_exact_there_and_below_it_below()
             assert value == exact if max(value, exact) >= level else value < level, (
                 value, exact, level)  # fmt: skip
     assert stopped > 100
+
+
+def _ring(count: int, radius_m: float) -> ZoneSet:
+    """``count`` zones round the origin (``bench_law.py``'s ring): from inside, no straight
+    line leaves, so every hard turn flies its half revolution and the circle after it."""
+    angles = np.linspace(0.0, 2.0 * np.pi, count, endpoint=False)
+    return ZoneSet.from_defenders([
+        Defender(north_m=float(radius_m * np.cos(t)), east_m=float(radius_m * np.sin(t)),
+                 range_m=1.5, capture_radius_m=0.5, speed_ratio=0.7)
+        for t in angles
+    ])  # fmt: skip
+
+
+def test_a_converged_turn_asked_up_to_a_level_stops_sampling_only_where_no_sample_can_matter(
+) -> None:
+    """A hard turn asked only up to a level (``enough``, ``stop_below``: the nominal's
+    check, its preview, the abandon check) stops asking its samples for their gaps once it
+    has converged where the circle's closed form, less the widest dip a sample can take
+    off, keeps every later sample at or above the level (``backup._circle_floor``); its
+    exit search goes on. So against the same turn asked with no level (the shield's rule):
+    a value below the level is the same to the bit, and one at or above it is no higher
+    than the rule's (a lower bound on the flight's gap, as ``backup_certificates`` asked
+    with a finite ``enough`` must give: the test above). Drawn inside rings of 30 and 300
+    zones, where the turns never leave (the samples are skipped there), with and without
+    a lag, and among 1 to 3 zones, where they mostly do; the skip must fire in the rings."""
+    dt = 0.02
+    rng = np.random.default_rng(83)
+    states = list(_random_states(300, 79))
+    for count, radius in ((30, 4.5), (300, 18.0)):
+        zones = _ring(count, radius)
+        z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
+        for _ in range(40):
+            tau = float(rng.choice([0.0, 0.6]))
+            s = settings_for(dataclasses.replace(PARAMS, response_lag_s=tau))
+            r, bearing = rng.uniform(0.0, 0.3 * radius), rng.uniform(-math.pi, math.pi)
+            a = rng.uniform(-0.99, 0.99)
+            av = rng.uniform(-0.99, 0.99) if tau > 0.0 else a
+            states.append((s, z, r * math.cos(bearing), r * math.sin(bearing),
+                           rng.uniform(-4, 4), a, av))  # fmt: skip
+    skipped = 0
+    for s, z, n, e, h, a, av in states:
+        theta = bk.acceptance_level_m(s, z[2], z[3], 0, 1.0, dt)
+        straight = bk.straight_certificate(s, *z, n, e, h, a, av, 1.0, dt, theta, math.inf)
+        for policy in (bk.BACKUP_LEFT, bk.BACKUP_RIGHT):
+            exact = bk.turn_certificate(s, *z, policy, n, e, h, a, av, 1.0, dt, straight, theta,
+                                        -math.inf, math.inf, False)  # fmt: skip
+            for level in (theta, theta + 0.03, exact - 1e-9, exact + 1e-9):
+                value = bk.turn_certificate(s, *z, policy, n, e, h, a, av, 1.0, dt, straight,
+                                            theta, level, level, False)  # fmt: skip
+                if value < level or exact < level:
+                    assert value == exact or (value < level and exact < level), (
+                        value, exact, level)  # fmt: skip
+                else:
+                    assert level <= value <= exact, (value, exact, level)
+                    skipped += value != exact
+    assert skipped > 40
 
 
 def test_a_certificate_that_reaches_what_was_asked_is_one_the_flown_rule_finds_too() -> None:

@@ -93,7 +93,6 @@ from ezcompanion.guidance.lookahead import (
     dip,
     near_zones,
     near_zones_among,
-    point_gap,
     point_gap_among,
     point_gap_below,
     segment_gap,
@@ -231,6 +230,9 @@ _FLAGS = np.array([False, True])
 # which leaves a setpoint safe to abandon soonest (``_abandon_soonest``), in turn times
 # v / a_max.
 _SOONEST_TURN_TIMES = 2.0
+
+# no ``_straight_to_come`` made yet (``_exit_to_come``: made for a and a_v NaN)
+_NO_TO_COME = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 
 def pack_shield(params: GuidanceParams, **abandon: float) -> FloatArray:
@@ -883,7 +885,7 @@ def _straight_tail(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, ch: float, sh: float, speed: float,
     to_come: tuple[float, float, float, float, float, float],
-) -> float:
+) -> tuple[float, int]:
     """The gap of all of STRAIGHT's flight from this state on, in closed form, from below
     (``ch``, ``sh``: the cosine and sine of ``h``; ``to_come``: ``_straight_to_come`` here):
     its headings stay within delta of h (``_straight_to_come``), so its look-ahead points
@@ -891,18 +893,20 @@ def _straight_tail(
     widens for; and (no abandon profile) within the tube about the ray along the final
     heading (``_tube_gap``). The larger bound is taken. With an abandon profile, the cone
     alone and from min(mu R, v hold) ahead: the abandon paths from points of the line are
-    parts of the line (used once the turn has died out)."""
+    parts of the line (used once the turn has died out). Second, the zone (by index) that
+    gave the tube its least value (0 without it): where the flight's screen
+    (``_rest_upper``) should look first."""
     delta, mid, w, drift, _, _ = to_come
     hold = s[S_AB_HOLD]
     start = speed * hold if hold > 0.0 else math.inf
     cone = segment_gap(zn, ze, zmur, zreach, kz, n, e, ch, sh, start, math.inf, True, s[S_EPS],
                        delta)  # fmt: skip
     if hold > 0.0:
-        return cone
+        return cone, 0
     c_final, s_final = _turned(h, ch, sh, mid)
-    tube, _ = _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, c_final, s_final, w, delta, drift,
-                        False, BY_INDEX, 0, -math.inf)  # fmt: skip
-    return max(cone, tube)
+    tube, which = _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, c_final, s_final, w, delta, drift,
+                            False, BY_INDEX, 0, -math.inf)  # fmt: skip
+    return max(cone, tube), which
 
 
 @jit_inline
@@ -964,7 +968,9 @@ def _straight_flight(
         if early and j % _TAIL_EVERY == 0:
             to_come, fresh = _straight_to_come_once(s, a, av, speed, trapezoid, dt, to_come,
                                                     fresh)  # fmt: skip
-            tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed, to_come)
+            # (the screen below looks first at the zone the tail's tube found least)
+            tail, blocker = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed,
+                                           to_come)  # fmt: skip
             certified = max(certified, min(best, tail))
             if certified >= enough:
                 return certified
@@ -998,23 +1004,24 @@ def _straight_flight(
         fresh = False
     to_come, fresh = _straight_to_come_once(s, a, av, speed, trapezoid, dt, to_come,
                                             fresh)  # fmt: skip
-    tail = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed, to_come)
+    tail, _ = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed, to_come)
     return max(certified, min(best, tail))
 
 
 @jit_inline
-def _straight_upper_bound(
-    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
-    kz: int, n: float, e: float, h: float, ch: float, sh: float, a: float, av: float,
-    speed: float, trapezoid: float, dt: float, order: IntArray, first: int, below: float,
-) -> tuple[float, int]:
-    """An upper bound on the least gap of STRAIGHT's flight from this state, so on its
-    certificate (which is below that gap): cheap, to screen a turn's exits (``_rest_upper``).
-    Stops below ``below``, from position ``first`` of ``order`` (``ch``, ``sh``: the cosine
-    and sine of ``h``; ``trapezoid``: ``_trapezoid_excess`` at the control step ``dt``)."""
-    return _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed,
-                       _straight_to_come(s, a, av, speed, trapezoid, dt), order, first,
-                       below)  # fmt: skip
+def _exit_to_come(
+    s: FloatArray, a: float, av: float, speed: float, dt: float,
+    constants: tuple[float, tuple[float, float], tuple[float, float]],
+    made: tuple[tuple[float, float, float, float, float, float], float, float],
+) -> tuple[tuple[float, float, float, float, float, float], float, float]:
+    """``_straight_to_come`` at a turn's exit (a, a_v), with the (a, a_v) it was made for:
+    ``made`` where that was for the same pair, else made now. A turn that has converged
+    holds a and a_v to the bit (ArduCopter's or no lag: from some 50 control steps on), and
+    its exit screens then take it from there rather than make its logarithms at each one.
+    (``constants``: ``_flight_constants(s, dt)``, the turn's.)"""
+    if made[1] == a and made[2] == av:
+        return made
+    return _straight_to_come(s, a, av, speed, constants[0], dt), a, av
 
 
 @jit_borrow  # on its own, not inlined: two inlined copies took most of its callers' compile
@@ -1024,21 +1031,23 @@ def _exit_here(
     speed: float, dt: float, order: IntArray, blocker: int, screen_level: float,
     exit_level: float, enough: float,
     constants: tuple[float, tuple[float, float], tuple[float, float]],
-) -> tuple[float, int]:
+    made: tuple[tuple[float, float, float, float, float, float], float, float],
+) -> tuple[float, int, tuple[tuple[float, float, float, float, float, float], float, float]]:
     """STRAIGHT's certificate here, as a turn's exit (exact up to ``enough``), and the
-    position in ``order`` of the zone that stopped the screen (``_rest_upper``); -inf where
-    the screen, an upper bound on it, is below ``screen_level`` (any subset of the exits
-    keeps the argument; the screen drops only exits whose certificate is surely below the
-    level). (``ch``, ``sh``: the turn's cosine and sine of ``h``; ``constants``:
-    ``_flight_constants(s, dt)``, the turn's.)"""
-    upper, blocker = _straight_upper_bound(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av,
-                                           speed, constants[0], dt, order, blocker,
-                                           screen_level)  # fmt: skip
+    position in ``order`` of the zone that stopped the screen (``_rest_upper``, an upper
+    bound on STRAIGHT's least gap, so on its certificate); -inf where the screen is below
+    ``screen_level`` (any subset of the exits keeps the argument; the screen drops only
+    exits whose certificate is surely below the level). Third, what is left of the turn
+    here, for the next exit (``_exit_to_come``, from ``made``). (``ch``, ``sh``: the turn's
+    cosine and sine of ``h``; ``constants``: ``_flight_constants(s, dt)``, the turn's.)"""
+    made = _exit_to_come(s, a, av, speed, dt, constants, made)
+    upper, blocker = _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed, made[0],
+                                 order, blocker, screen_level)  # fmt: skip
     if upper < screen_level:
-        return -math.inf, blocker
+        return -math.inf, blocker, made
     leave = _straight_flight(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av, speed, dt,
                              exit_level, max(exit_level, enough), constants)  # fmt: skip
-    return leave, blocker
+    return leave, blocker, made
 
 
 @jit_inline
@@ -1067,16 +1076,18 @@ def _circled(s: FloatArray, a: float, av: float, limit: float, speed: float, con
 def _turn_step(
     s: FloatArray, cmd: float, n: float, e: float, h: float, a: float, av: float, ch: float,
     sh: float, speed: float, dt: float, amax: float, p1: float, tau: float,
-    decays: tuple[float, float],
-) -> tuple[float, float, float, float, float, float, float]:
+    decays: tuple[float, float], steady: bool,
+) -> tuple[float, float, float, float, float, float, float, bool]:
     """One control step of a hard turn (the actuator command ``cmd`` held): the state after
-    it (n, e, h, a, a_v, cos h, sin h). (``amax``, ``p1``, ``tau``: ``s``'s, read once by
+    it (n, e, h, a, a_v, cos h, sin h), and whether the actuator is ``steady``: a step left
+    a where it was, to the bit, so every later one does too (the same arithmetic on the
+    same a), and is not computed again. (``amax``, ``p1``, ``tau``: ``s``'s, read once by
     the caller: read from ``s`` here, in a loop that writes to an array, they were read
     again at every step, some 5% of the bench's straight-track tick; ``decays``:
     ``_decays(tau, dt)``.)"""
-    a1 = advance_one(a, cmd, dt, amax, p1, int(s[S_N]), s[S_CMD])
+    a1 = a if steady else advance_one(a, cmd, dt, amax, p1, int(s[S_N]), s[S_CMD])
     n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a, a1, av, speed, tau, dt, decays)
-    return n, e, h, a1, av, ch, sh
+    return n, e, h, a1, av, ch, sh, a1 == a
 
 
 @jit  # not borrowing: it makes its room
@@ -1107,7 +1118,11 @@ def _turn_certificate(
     certificate is exact up to ``enough`` (the caller needs no more). With ``every_step``
     the exit is looked for at every control step, not only at the samples: the first one
     the flown rule can take, wherever the samples fall (each sample's dip covers the steps
-    up to the next). ``room``: the step's (``_zone_room``; its lists are this flight's
+    up to the next). Asked only up to a level (``enough`` or ``stop_below`` finite), the
+    samples' gaps are no longer asked from a sample where the circle's closed form shows
+    that none of them can take the value below it (``_circle_floor``): a value below the
+    level is then the same to the bit, one at or above it a lower bound no higher than the
+    full one. ``room``: the step's (``_zone_room``; its lists are this flight's
     scratch: no other flight may use the same room while it runs)."""  # fmt: skip
     amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
     cmd, ticks, step, rate, limit = _turn_setup(s, policy, speed, dt)
@@ -1123,48 +1138,101 @@ def _turn_certificate(
     order = room[zn.shape[1]:2 * zn.shape[1]]  # the zones by bearing (``_zone_room``)
     ch, sh = math.cos(h), math.sin(h)
     made = (-1, 0.0, 0.0, -1, 0.0, 0.0)  # no lists of near zones yet (``_sample_gap``)
+    made_to_come = (_NO_TO_COME, math.nan, math.nan)  # none yet (``_exit_to_come``)
+    steady = False  # the actuator held where it is (``_turn_step``)
+    sampling = True  # whether the samples' gaps can still change the answer (``_circle_floor``)
     for j in range(_MAX_SAMPLES):
-        best, made = _sample_gap(zn, ze, zmur, zreach, kz, n, e, ch, sh, eps, speed, amax, rate,
-                                 step, best, room, made)  # fmt: skip
-        best = _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, best)
-        if best < stop_below:
-            return best
+        if sampling:
+            best, made = _sample_gap(zn, ze, zmur, zreach, kz, n, e, ch, sh, eps, speed, amax,
+                                     rate, step, best, room, made)  # fmt: skip
+            best = _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, best)
+            if best < stop_below:
+                return best
         leave = -math.inf
         if j == 0:
             leave = exit_now
         elif j % _EXIT_EVERY == 0:
-            leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av,
-                                        speed, dt, order, blocker, screen_level, exit_level,
-                                        enough, constants)  # fmt: skip
+            leave, blocker, made_to_come = _exit_here(
+                s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av, speed, dt, order, blocker,
+                screen_level, exit_level, enough, constants, made_to_come)  # fmt: skip
         if leave >= exit_level:
             return min(best, leave)
+        was_converged = converged
         circled, converged = _circled(s, a, av, limit, speed, converged, turned)
         if circled:
             break
+        # the floor tried at samples 4, 8, 16, ... and where the turn converges (with a lag
+        # it converges slowly, and the circle's widening falls long before)
+        if sampling and ((converged and not was_converged) or (j >= 4 and j & (j - 1) == 0)):
+            best, sampling = _circle_floor(s, zn, ze, zmur, zreach, kz, n, e, a, av, speed, ch,
+                                           sh, limit, step, best, max(enough, stop_below))
         h0 = h
         for tick in range(ticks):
-            n, e, h, a, av, ch, sh = _turn_step(s, cmd, n, e, h, a, av, ch, sh, speed, dt, amax,
-                                                p1, tau, decays)  # fmt: skip
+            n, e, h, a, av, ch, sh, steady = _turn_step(
+                s, cmd, n, e, h, a, av, ch, sh, speed, dt, amax, p1, tau, decays,
+                steady)  # fmt: skip
             if every_step and tick < ticks - 1:
-                leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av,
-                                            speed, dt, order, blocker, screen_level, exit_level,
-                                            enough, constants)  # fmt: skip
+                leave, blocker, made_to_come = _exit_here(
+                    s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av, speed, dt, order,
+                    blocker, screen_level, exit_level, enough, constants,
+                    made_to_come)  # fmt: skip
                 if leave >= exit_level:
                     return min(best, leave)
         if converged:
             turned += abs(h - h0)
-    return min(best, _circle_tail(s, zn, ze, zmur, zreach, kz, n, e, a, av, speed, ch, sh, limit))
+    return _circle_tail(s, zn, ze, zmur, zreach, kz, n, e, a, av, speed, ch, sh, limit, best)
+
+
+@jit_inline
+def _circle_floor(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, n: float, e: float, a: float, av: float, speed: float, ch: float, sh: float,
+    limit: float, step: float, best: float, floor: float,
+) -> tuple[float, bool]:
+    """Whether a hard turn's samples' gaps still matter, from this sample on, to a caller
+    that needs its certificate exact only up to ``floor`` (``max(enough, stop_below)``).
+
+    Every later sample lies on the flight that ``_circle_tail`` bounds from here (from any
+    state: the turn's centre of curvature at the circle's radius R = v^2 / |a*| moves at
+    v |a* - a_v| / |a*|, so by at most R times the turn still to come, which its widening
+    exceeds), and a
+    sample's term of ``point_gap_below`` is its distance term less a dip of at most
+    (v + mu R a_max / v) step / 2 (``dip``): so each is at least that tail less the widest
+    such dip, T. Where min(best, T) reaches ``floor`` no later sample can take the least gap
+    below it, nor below ``stop_below``: the samples are then not flown against the zones,
+    and the least gap is taken as min(best, T). The exit search goes on as before: an exit
+    below ``floor`` returns the exit's certificate exactly as the flight sampled to it
+    would (its least gap is at least min(best, T), above it); one at or above, and the
+    circle at the end, a value at or above ``floor``, a lower bound on the flight's gap, as
+    the caller needs. (With an abandon profile every sample also asks its abandon path,
+    which that tail does not bound: sampled on. So is a caller that needs it exact,
+    ``floor`` inf.) Returns the least gap and whether to sample on."""
+    if s[S_AB_HOLD] > 0.0 or not floor < math.inf:
+        return best, True
+    widest = 0.0
+    for i in range(zmur.shape[1]):
+        widest = max(widest, zmur[kz, i])
+    amax = s[S_AMAX]
+    dip_most = 0.5 * (speed + widest * amax / speed) * step + _SCREEN_SLACK * speed * speed / amax
+    # min(best, tail - dip_most), the tail's zones that cannot come below it passed over
+    tail = _circle_tail(s, zn, ze, zmur, zreach, kz, n, e, a, av, speed, ch, sh, limit,
+                        best + dip_most)  # fmt: skip
+    least = min(best, tail - dip_most)
+    if least >= floor:
+        return least, False
+    return best, True
 
 
 @jit_borrow  # on its own: its two callers each compile one call, not a copy
 def _circle_tail(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, a: float, av: float, speed: float, ch: float, sh: float,
-    limit: float,
+    limit: float, below: float,
 ) -> float:
     """A turn's flight after its sampled part, in closed form: the circle it converges to
     about a*, widened by the residual heading change, and with an abandon profile the
-    abandon paths from it."""
+    abandon paths from it; min(``below``, that) (``annulus_gap``: the zones that cannot
+    come below it passed over)."""
     p1, tau, eps = s[S_P1], s[S_TAU], s[S_EPS]
     # the circle: the residual heading change after the sampled part, about a*
     widen = _residual_turn_rad(s, a, av, limit, speed)
@@ -1179,13 +1247,13 @@ def _circle_tail(
     for i in range(zmur.shape[1]):
         widest = max(widest, zmur[kz, i])
     tail = annulus_gap(zn, ze, zmur, zreach, kz, cn, ce, radius, -1.0, 0.0, eps,
-                        shift + widen * widest)  # fmt: skip
+                        shift + widen * widest, below)  # fmt: skip
     hold = s[S_AB_HOLD]
     if hold > 0.0:
         brake = s[S_AB_BRAKE]
         stop = speed * hold + (0.5 * speed * speed / brake if brake > 0.0 else 0.0)
         tail = min(tail, annulus_gap(zn, ze, zmur, zreach, kz, cn, ce, radius, speed * hold,
-                                      stop, eps, shift + widen * stop))  # fmt: skip
+                                      stop, eps, shift + widen * stop, tail))  # fmt: skip
     return float(tail)
 
 
@@ -1294,6 +1362,8 @@ def _rung_turn(
     order = room[zn.shape[1]:2 * zn.shape[1]]  # the zones by bearing (``_zone_room``)
     ch, sh = math.cos(h), math.sin(h)
     made = (-1, 0.0, 0.0, -1, 0.0, 0.0)  # no lists of near zones yet (``_sample_gap``)
+    made_to_come = (_NO_TO_COME, math.nan, math.nan)  # none yet (``_exit_to_come``)
+    steady = False  # the actuator held where it is (``_turn_step``)
     j = 0
     for j in range(_MAX_SAMPLES):
         best, made = _sample_gap(zn, ze, zmur, zreach, kz, n, e, ch, sh, eps, speed, amax, rate,
@@ -1307,9 +1377,9 @@ def _rung_turn(
             leave = exit_now
         elif j % _EXIT_EVERY == 0:
             low = levels[waiting - 1]
-            leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av,
-                                        speed, dt, order, blocker, low - slack, low, math.inf,
-                                        constants)  # fmt: skip
+            leave, blocker, made_to_come = _exit_here(
+                s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av, speed, dt, order, blocker,
+                low - slack, low, math.inf, constants, made_to_come)  # fmt: skip
         while waiting > 0 and leave >= levels[waiting - 1]:
             waiting -= 1
             exit_at[waiting], exit_value[waiting] = j, leave
@@ -1320,13 +1390,14 @@ def _rung_turn(
             break
         h0 = h
         for tick in range(ticks):
-            n, e, h, a, av, ch, sh = _turn_step(s, cmd, n, e, h, a, av, ch, sh, speed, dt, amax,
-                                                p1, tau, decays)  # fmt: skip
+            n, e, h, a, av, ch, sh, steady = _turn_step(
+                s, cmd, n, e, h, a, av, ch, sh, speed, dt, amax, p1, tau, decays,
+                steady)  # fmt: skip
             if tick < ticks - 1:
                 low = levels[waiting - 1]
-                leave, blocker = _exit_here(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av,
-                                            speed, dt, order, blocker, low - slack, low, math.inf,
-                                            constants)  # fmt: skip
+                leave, blocker, made_to_come = _exit_here(
+                    s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av, speed, dt, order,
+                    blocker, low - slack, low, math.inf, constants, made_to_come)  # fmt: skip
                 while waiting > 0 and leave >= levels[waiting - 1]:
                     waiting -= 1
                     exit_at[waiting], exit_value[waiting] = j, leave
@@ -1334,7 +1405,8 @@ def _rung_turn(
                     return j + 1, -math.inf
         if converged:
             turned += abs(h - h0)
-    return j + 1, _circle_tail(s, zn, ze, zmur, zreach, kz, n, e, a, av, speed, ch, sh, limit)
+    return j + 1, _circle_tail(s, zn, ze, zmur, zreach, kz, n, e, a, av, speed, ch, sh, limit,
+                               math.inf)  # fmt: skip
 
 
 @jit_inline
@@ -1416,11 +1488,11 @@ def rung_certificates(
 def _fly_step(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, policy: int, command: float, n: float, e: float, h: float, a: float, av: float,
-    speed: float, dt: float,
+    speed: float, dt: float, below: float,
 ) -> tuple[float, float, float, float, float, float]:
     """One control step of ``policy`` (or, with policy -1, ``command`` held), in substeps
-    within the sample step, with the least gap along it; returns the gap and the state
-    after."""
+    within the sample step, with min(``below``, the least gap along it) (``_fly_ramp``);
+    returns that and the state after."""
     amax, p1, nn, cmd = s[S_AMAX], s[S_P1], int(s[S_N]), s[S_CMD]
     side = turn_side(policy)  # -1 (the command held) stays -1
     if side == BACKUP_LEFT:
@@ -1431,7 +1503,7 @@ def _fly_step(
         advance_one(a, command, dt, amax, p1, nn, cmd)
     )
     best, n, e, h, av = _fly_ramp(s, zn, ze, zmur, zreach, kz, n, e, h, a, a_end, av, speed,
-                                  dt)  # fmt: skip
+                                  dt, below)  # fmt: skip
     return best, n, e, h, a_end, av
 
 
@@ -1439,24 +1511,28 @@ def _fly_step(
 def _fly_ramp(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, a: float, a_end: float, av: float, speed: float,
-    fly_s: float,
+    fly_s: float, below: float,
 ) -> tuple[float, float, float, float, float]:
     """The vehicle's flight while the actuator moves linearly from ``a`` to ``a_end`` over
-    ``fly_s``, in substeps within the sample step, with the least gap along it; returns
-    the gap and the state after (north, east, course, a_v)."""
+    ``fly_s``, in substeps within the sample step, with min(``below``, the least gap along
+    it): the zones that cannot come below it passed over (``point_gap_below``); a caller
+    that needs the gap exact only up to a level passes that level, one that needs none
+    -inf (no gap is then asked: -inf). Returns that and the state after (north, east,
+    course, a_v)."""
     steps = max(1, math.ceil(fly_s / (s[S_PRED_RATIO] * speed / s[S_AMAX]) - 1e-9))
     sub = fly_s / steps
     amax = s[S_AMAX]
     rate = _av_rate_bound(s)
-    best = math.inf
+    best = below
     ch, sh = math.cos(h), math.sin(h)
     decays = _decays(s[S_TAU], sub)
     for i in range(steps):
         a0 = a + (a_end - a) * i / steps
         a1 = a + (a_end - a) * (i + 1) / steps
         n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a0, a1, av, speed, s[S_TAU], sub, decays)
-        best = min(best, point_gap(zn, ze, zmur, zreach, kz, n, e, ch, sh, s[S_EPS], speed,
-                                    amax, rate, sub))  # fmt: skip
+        if best > -math.inf:
+            best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, ch, sh, s[S_EPS], speed,
+                                   amax, rate, sub, best)  # fmt: skip
     return best, n, e, h, av
 
 
@@ -1473,7 +1549,7 @@ def _ahead(
     step the certificates align with (``room``: the step's, ``_zone_room``)."""
     held = int(np.int64(-1))  # the command held (not the literal -1: one compile of _fly_step)
     gap, n1, e1, h1, a1, av1 = _fly_step(s, zn, ze, zmur, zreach, kz, held, command, n, e, h, a,
-                                         av, speed, fly_s)  # fmt: skip
+                                         av, speed, fly_s, enough)  # fmt: skip
     value, which = _best_after(s, zn, ze, zmur, zreach, kz, gap, n1, e1, h1, a1, av1, speed, dt,
                                accept, enough, certs, room)  # fmt: skip
     return value, which, a1, av1
@@ -1519,7 +1595,7 @@ def _ahead_held(
                                    dt, dt, accept, accept, certs, room)  # fmt: skip
     if ahead >= accept and s[S_TAU] == 0.0:
         gap, n2, e2, h2, av2 = _fly_ramp(s, zn, ze, zmur, zreach, kz, n, e, h, a, a1, av, speed,
-                                         LATE_HOLD_STEPS * dt)  # fmt: skip
+                                         LATE_HOLD_STEPS * dt, accept)  # fmt: skip
         late, _ = _best_after(s, zn, ze, zmur, zreach, kz, gap, n2, e2, h2, a1, av2, speed, dt,
                               accept, accept, certs, room)  # fmt: skip
         ahead = min(ahead, late)
@@ -1571,7 +1647,7 @@ def _plan_segment(
     stops once that is below ``stop_below``. Returns the floor and the state after."""
     for _ in range(steps):
         gap, n, e, h, a, av = _fly_step(s, zn, ze, zmur, zreach, kz, policy, 0.0, n, e, h, a,
-                                        av, speed, dt)  # fmt: skip
+                                        av, speed, dt, floor)  # fmt: skip
         floor = min(floor, _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, gap))
         if floor < stop_below:
             break
@@ -1767,7 +1843,7 @@ def shield_one(
                                            speed, dt, theta, flown, room)  # fmt: skip
     if soonest >= 0:  # a plainly certified backup that leaves a setpoint safe to abandon soonest
         _, _, _, _, a_next, av_next = _fly_step(s, zn, ze, zmur, zreach, kz, soonest, 0.0, n, e,
-                                                h, a, av, speed, dt)  # fmt: skip
+                                                h, a, av, speed, dt, -math.inf)  # fmt: skip
         out[k, 0], out[k, 1], out[k, 2], out[k, 4] = a_next, av_next, soonest, cert
         return  # (the plan's search goes on from where the step left it, as where it stands)
     if held >= theta:
@@ -1950,7 +2026,8 @@ def _shield_step(
             weight = 0.0
             which = current
             _, _, _, _, a_next, av_next = _fly_step(s, zn, ze, zmur, zreach, kz, flies, 0.0, n,
-                                                    e, h, a, av, speed, dt)  # fmt: skip
+                                                    e, h, a, av, speed, dt,
+                                                    -math.inf)  # fmt: skip
             if current == BACKUP_PLAN:
                 _plan_advance(plan)
     out[k, 0] = a_next

@@ -128,9 +128,12 @@ class GuidanceStep:
     above its own), the best one; with an abandon profile, its certificate with the abandon path,
     or where that leaves nothing safe to abandon its plain one) and
     ``certificate_ahead_m`` (the best one step ahead on the nominal, and with no lag the
-    least of that and the best after the step's setpoint held 3/2 of a step: exact where it
-    reaches the acceptance level, theta and with a lag the reserve; below it, a value
-    below it, since nothing short of it is flown); NaN for other laws.
+    least of that and the best after the step's setpoint held 3/2 of a step, asked only
+    whether it reaches the acceptance level, theta and with a lag the reserve: where it
+    does, a certificate at least that level and no higher than the one asked in full (the
+    step's own flight is asked only up to the level, and a hard turn's samples stop once
+    none can take it below it); below it, a value below it, since nothing short of it is
+    flown); NaN for other laws.
     """
 
     law: LawOutput

@@ -1161,9 +1161,9 @@ def _turn_certificate(
         circled, converged = _circled(s, a, av, limit, speed, converged, turned)
         if circled:
             break
-        # the floor tried at samples 4, 8, 16, ... and where the turn converges (with a lag
+        # the floor tried at samples 1, 2, 4, 8, ... and where the turn converges (with a lag
         # it converges slowly, and the circle's widening falls long before)
-        if sampling and ((converged and not was_converged) or (j >= 4 and j & (j - 1) == 0)):
+        if sampling and ((converged and not was_converged) or (j >= 1 and j & (j - 1) == 0)):
             best, sampling = _circle_floor(s, zn, ze, zmur, zreach, kz, n, e, a, av, speed, ch,
                                            sh, limit, step, best, max(enough, stop_below))
         h0 = h
@@ -1181,6 +1181,15 @@ def _turn_certificate(
         if converged:
             turned += abs(h - h0)
     return _circle_tail(s, zn, ze, zmur, zreach, kz, n, e, a, av, speed, ch, sh, limit, best)
+
+
+@jit_inline
+def _widest_lookahead(zmur: FloatArray, kz: int) -> float:
+    """The largest mu R of the zones (a loop: no array made; -inf with none)."""
+    widest = -math.inf
+    for i in range(zmur.shape[1]):
+        widest = max(widest, zmur[kz, i])
+    return widest
 
 
 @jit_inline
@@ -1209,9 +1218,7 @@ def _circle_floor(
     ``floor`` inf.) Returns the least gap and whether to sample on."""
     if s[S_AB_HOLD] > 0.0 or not floor < math.inf:
         return best, True
-    widest = 0.0
-    for i in range(zmur.shape[1]):
-        widest = max(widest, zmur[kz, i])
+    widest = _widest_lookahead(zmur, kz)
     amax = s[S_AMAX]
     dip_most = 0.5 * (speed + widest * amax / speed) * step + _SCREEN_SLACK * speed * speed / amax
     # min(best, tail - dip_most), the tail's zones that cannot come below it passed over
@@ -1243,9 +1250,7 @@ def _circle_tail(
     shift = widen * (2.0 * radius + speed * (tau + 1.0 / p1)) + speed * speed * abs(
         a - limit
     ) / (limit * limit)
-    widest = -math.inf  # the largest mu R (a loop: no array made)
-    for i in range(zmur.shape[1]):
-        widest = max(widest, zmur[kz, i])
+    widest = _widest_lookahead(zmur, kz)
     tail = annulus_gap(zn, ze, zmur, zreach, kz, cn, ce, radius, -1.0, 0.0, eps,
                         shift + widen * widest, below)  # fmt: skip
     hold = s[S_AB_HOLD]

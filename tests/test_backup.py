@@ -1504,6 +1504,29 @@ def test_a_converged_turn_asked_up_to_a_level_stops_sampling_only_where_no_sampl
     assert skipped > 40
 
 
+def test_at_a_crawl_a_turn_asked_up_to_a_level_answers_as_in_full() -> None:
+    """A reviewer's state (p1 = 1, one zone, 0.02 m/s at a 0.1 s step: a control step
+    turns a radian): the samples, Simpson's rule's, lay 1e-4 m inside the circle's closed
+    form, and asked up to a level 1e-6 m above its full value the turn answered at or
+    above it. The floor is not tried where a step turns more than ``_ROTATE_RAD``, nor
+    with the actuator on the other side of 0 from a* (where the closed form's widening is
+    not shown to hold): the same value as in full."""
+    s = settings_for(dataclasses.replace(PARAMS, actuator_p1_1_s=1.0))
+    z = (np.array([[-0.0016730391699805803]]), np.array([[0.001422472937902639]]),
+         np.array([[0.5133232463182098]]), np.array([[2.2082205491874443]]), 0)
+    n, e, h = 0.0016574093174975962, -0.0019582927376710383, -0.8716324260598807
+    a = av = -0.4149663315705189
+    speed, dt = 0.02, 0.1
+    theta = bk.acceptance_level_m(s, z[2], z[3], 0, speed, dt)
+    straight = bk.straight_certificate(s, *z, n, e, h, a, av, speed, dt, theta, math.inf)
+    full = bk.turn_certificate(s, *z, bk.BACKUP_RIGHT, n, e, h, a, av, speed, dt, straight,
+                               theta, -math.inf, math.inf, False)  # fmt: skip
+    for level in (full + 1e-6, full - 1e-6):
+        value = bk.turn_certificate(s, *z, bk.BACKUP_RIGHT, n, e, h, a, av, speed, dt,
+                                    straight, theta, level, level, False)  # fmt: skip
+        assert (value >= level) == (full >= level), (value, full, level)
+
+
 def test_a_certificate_that_reaches_what_was_asked_is_one_the_flown_rule_finds_too() -> None:
     """The nominal's one-step check and the abandon check ask the certificates with a finite
     ``enough`` (they need only know that theta, or the acceptance level, is reached); the

@@ -203,6 +203,12 @@ _SCREEN_SLACK = 1e-6
 # costliest 300 of 120,000 campaign steps, 95% did by the 4th sample; a long flight paid
 # for one at every sample (bench/bench_shield.py, docs/service.md, "Cost").
 _SCREEN_EVERY = 4
+
+# Taken off the circle's closed form where it lets a turn's samples go unasked
+# (``_circle_floor``), in v^2 / a_max: Simpson's rule's drift from the exact path and
+# round-off, with room to spare.
+_FLOOR_SLACK = 1e-3
+
 # A flight's heading moves by at most a_max dt / v in a control step (0.02 rad at the
 # paper's scale and 50 Hz, 0.008 for the plane at 25 Hz); up to this much, the cosine and
 # sine of the next heading are the last ones rotated by it (``_fly``), not computed afresh
@@ -1100,7 +1106,7 @@ def turn_certificate(
     """``_turn_certificate``, with a room of its own (``_zone_room``)."""
     return _turn_certificate(s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av, speed, dt,
                              exit_now, exit_level, stop_below, enough, every_step,
-                             _zone_room(zn, ze, kz, n, e))  # fmt: skip
+                             max(enough, stop_below), _zone_room(zn, ze, kz, n, e))  # fmt: skip
 
 
 @jit_borrow
@@ -1108,7 +1114,7 @@ def _turn_certificate(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, policy: int, n: float, e: float, h: float, a: float, av: float, speed: float,
     dt: float, exit_now: float, exit_level: float, stop_below: float, enough: float,
-    every_step: bool, room: IntArray,
+    every_step: bool, skip_from: float, room: IntArray,
 ) -> float:
     """Certificate of LEFT or RIGHT: turn hard (a_c = -+C held) until a sample where the
     STRAIGHT certificate is at least ``exit_level``, then STRAIGHT; with no such sample
@@ -1118,11 +1124,12 @@ def _turn_certificate(
     certificate is exact up to ``enough`` (the caller needs no more). With ``every_step``
     the exit is looked for at every control step, not only at the samples: the first one
     the flown rule can take, wherever the samples fall (each sample's dip covers the steps
-    up to the next). Asked only up to a level (``enough`` or ``stop_below`` finite), the
-    samples' gaps are no longer asked from a sample where the circle's closed form shows
-    that none of them can take the value below it (``_circle_floor``): a value below the
-    level is then the same to the bit, one at or above it a lower bound no higher than the
-    full one. ``room``: the step's (``_zone_room``; its lists are this flight's
+    up to the next). ``skip_from``: a level, at least ``enough`` and ``stop_below``, from
+    which the caller needs the value only as at least that level (inf: exact all the way):
+    the samples' gaps are no longer asked from a sample where the circle's closed form shows
+    that none of them can take the value below it (``_circle_floor``); a value below it is
+    then the same to the bit, one at or above it a lower bound no higher than the full one.
+    ``room``: the step's (``_zone_room``; its lists are this flight's
     scratch: no other flight may use the same room while it runs)."""  # fmt: skip
     amax, p1, tau, eps = s[S_AMAX], s[S_P1], s[S_TAU], s[S_EPS]
     cmd, ticks, step, rate, limit = _turn_setup(s, policy, speed, dt)
@@ -1165,7 +1172,7 @@ def _turn_certificate(
         # it converges slowly, and the circle's widening falls long before)
         if sampling and ((converged and not was_converged) or (j >= 1 and j & (j - 1) == 0)):
             best, sampling = _circle_floor(s, zn, ze, zmur, zreach, kz, n, e, a, av, speed, ch,
-                                           sh, limit, step, best, max(enough, stop_below))
+                                           sh, limit, dt, step, best, skip_from)  # fmt: skip
         h0 = h
         for tick in range(ticks):
             n, e, h, a, av, ch, sh, steady = _turn_step(
@@ -1196,31 +1203,42 @@ def _widest_lookahead(zmur: FloatArray, kz: int) -> float:
 def _circle_floor(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, a: float, av: float, speed: float, ch: float, sh: float,
-    limit: float, step: float, best: float, floor: float,
+    limit: float, dt: float, step: float, best: float, floor: float,
 ) -> tuple[float, bool]:
     """Whether a hard turn's samples' gaps still matter, from this sample on, to a caller
-    that needs its certificate exact only up to ``floor`` (``max(enough, stop_below)``).
+    that needs its certificate only as at least ``floor`` at or above that level
+    (``_turn_certificate``'s ``skip_from``).
 
-    Every later sample lies on the flight that ``_circle_tail`` bounds from here (from any
-    state: the turn's centre of curvature at the circle's radius R = v^2 / |a*| moves at
-    v |a* - a_v| / |a*|, so by at most R times the turn still to come, which its widening
-    exceeds), and a
+    Every later sample lies on the flight that ``_circle_tail`` bounds from here, where the
+    actuator is on a*'s side of 0 (a a* > 0): the turn's centre of curvature at the
+    circle's radius R = v^2 / |a*| moves at v |a* - a_v| / |a*|, so by at most R times the
+    integral of |a_v - a*| / v still to come, which the tail's widening exceeds
+    (``_residual_turn_rad`` bounds that integral there: |a - a*| decays at least at its
+    rate; from the other side of 0 it decays slower, and the floor is not tried). A
     sample's term of ``point_gap_below`` is its distance term less a dip of at most
-    (v + mu R a_max / v) step / 2 (``dip``): so each is at least that tail less the widest
-    such dip, T. Where min(best, T) reaches ``floor`` no later sample can take the least gap
-    below it, nor below ``stop_below``: the samples are then not flown against the zones,
-    and the least gap is taken as min(best, T). The exit search goes on as before: an exit
-    below ``floor`` returns the exit's certificate exactly as the flight sampled to it
-    would (its least gap is at least min(best, T), above it); one at or above, and the
-    circle at the end, a value at or above ``floor``, a lower bound on the flight's gap, as
-    the caller needs. (With an abandon profile every sample also asks its abandon path,
-    which that tail does not bound: sampled on. So is a caller that needs it exact,
-    ``floor`` inf.) Returns the least gap and whether to sample on."""
-    if s[S_AB_HOLD] > 0.0 or not floor < math.inf:
+    (v + mu R a_max / v) step / 2 (``dip``), and its position is Simpson's rule's, within
+    (a_max dt / v)^4 v dt / 2880 a control step of the exact path for a steady turn: where
+    a step turns at most ``_ROTATE_RAD`` (else the floor is not tried), 3.5e-9 v^2 / a_max
+    a step and under 4e-5 of it over the longest flight (``_MAX_SAMPLES`` samples of at
+    most 0.25 v / a_max), within the ``_FLOOR_SLACK`` v^2 / a_max taken off too, with room
+    for a turn still converging, whose actuator adds terms to those derivatives for a few
+    tenths of a second (a reviewer found the samples 1e-4 m off the closed form at a crawl,
+    one step turning a radian). So each later sample is at least
+    that tail less the widest dip and the slack, T. Where min(best, T) reaches ``floor``
+    no later sample can take the least gap below it, nor below ``stop_below``: the samples
+    are then not flown against the zones, and the least gap is taken as min(best, T). The
+    exit search goes on as before: an exit below ``floor`` returns the exit's certificate
+    exactly as the flight sampled to it would (its least gap is at least min(best, T),
+    above it); one at or above, and the circle at the end, a value at or above ``floor``,
+    a lower bound no higher than the full one. (With an abandon profile every sample also
+    asks its abandon path, which that tail does not bound: sampled on. So is a caller that
+    needs it exact, ``floor`` inf.) Returns the least gap and whether to sample on."""
+    amax = s[S_AMAX]
+    if (s[S_AB_HOLD] > 0.0 or not floor < math.inf or not a * limit > 0.0
+            or amax * dt > _ROTATE_RAD * speed):
         return best, True
     widest = _widest_lookahead(zmur, kz)
-    amax = s[S_AMAX]
-    dip_most = 0.5 * (speed + widest * amax / speed) * step + _SCREEN_SLACK * speed * speed / amax
+    dip_most = 0.5 * (speed + widest * amax / speed) * step + _FLOOR_SLACK * speed * speed / amax
     # min(best, tail - dip_most), the tail's zones that cannot come below it passed over
     tail = _circle_tail(s, zn, ze, zmur, zreach, kz, n, e, a, av, speed, ch, sh, limit,
                         best + dip_most)  # fmt: skip
@@ -1301,7 +1319,7 @@ def _backup_certificates(
             continue
         out[policy] = _or_none(_turn_certificate(
             s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av, speed, dt, straight, theta,
-            max(best, below), enough, _FLAGS[0], room))  # fmt: skip
+            max(best, below), enough, _FLAGS[0], max(best, below, enough), room))  # fmt: skip
         best = max(best, out[policy])
 
 
@@ -1937,8 +1955,10 @@ def _floor_certificate(
         return straight
     if straight >= theta:
         return -math.inf
+    # (every sample asked: the shield's hysteresis compares this value, above theta, with
+    # another's, and the abandon check reports it as the held backup's)
     return _or_none(_turn_certificate(s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av, speed,
-                                      dt, straight, theta, theta, theta, _FLAGS[0],
+                                      dt, straight, theta, theta, theta, _FLAGS[0], math.inf,
                                       room))  # fmt: skip
 
 

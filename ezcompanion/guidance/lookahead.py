@@ -204,7 +204,9 @@ def bearing_order(
         size = abs(dn) + abs(de)
         p = de / size if size > 0.0 else 0.0  # sin-like, in [-1, 1]
         key = 2.0 - p if dn < 0.0 else (4.0 + p if p < 0.0 else p)  # in [0, 4]
-        k = min(int(0.25 * key * count), count - 1)
+        x = 0.25 * key * count
+        # (a key not a number, from a position not a number, goes first: never out of bounds)
+        k = int(x) if 0.0 <= x < count else (count - 1 if x >= count else 0)
         sector[i] = k
         first[k + 1] += 1
     for k in range(count):

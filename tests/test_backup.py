@@ -1504,6 +1504,41 @@ def test_a_converged_turn_asked_up_to_a_level_stops_sampling_only_where_no_sampl
     assert skipped > 40
 
 
+def test_the_turn_the_shields_hysteresis_compares_is_asked_at_every_sample() -> None:
+    """The shield's hysteresis keeps a held RIGHT against a LEFT better by less than 2
+    theta, comparing RIGHT's value above theta (``_floor_certificate``), and the abandon
+    check reports that value as the held backup's: so it must be the turn's value with
+    every sample asked, not one the circle's floor let stop at theta (``_circle_floor``;
+    the first version of it switched the held backup in 695 of 29,983 drawn states in
+    that band, a reviewer found). Inside closed rings, where no exit is ever certified (so
+    an exit's own level cannot matter), it must equal the turn asked in full wherever
+    that reaches theta."""
+    dt = 0.02
+    rng = np.random.default_rng(101)
+    compared = 0
+    for count, radius in ((30, 4.5), (300, 18.0)):
+        zones = _ring(count, radius)
+        z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
+        for _ in range(25):
+            tau = float(rng.choice([0.0, 0.6]))
+            s = settings_for(dataclasses.replace(PARAMS, response_lag_s=tau))
+            r, bearing = rng.uniform(0.0, 0.3 * radius), rng.uniform(-math.pi, math.pi)
+            n, e, h = r * math.cos(bearing), r * math.sin(bearing), rng.uniform(-4, 4)
+            a = rng.uniform(-0.99, 0.99)
+            av = rng.uniform(-0.99, 0.99) if tau > 0.0 else a
+            theta = bk.acceptance_level_m(s, z[2], z[3], 0, 1.0, dt)
+            straight = bk.straight_certificate(s, *z, n, e, h, a, av, 1.0, dt, theta, math.inf)
+            for policy in (bk.BACKUP_LEFT, bk.BACKUP_RIGHT):
+                full = bk.turn_certificate(s, *z, policy, n, e, h, a, av, 1.0, dt, straight,
+                                           theta, -math.inf, math.inf, False)  # fmt: skip
+                floor = bk._floor_certificate(s, *z, policy, n, e, h, a, av, 1.0, dt, theta,
+                                              room(z))  # fmt: skip
+                if full >= theta and straight < theta:
+                    assert floor == full, (floor, full, theta)
+                    compared += 1
+    assert compared > 60
+
+
 def test_at_a_crawl_a_turn_asked_up_to_a_level_answers_as_in_full() -> None:
     """A reviewer's state (p1 = 1, one zone, 0.02 m/s at a 0.1 s step: a control step
     turns a radian): the samples, Simpson's rule's, lay 1e-4 m inside the circle's closed

@@ -1459,6 +1459,28 @@ def _ring(count: int, radius_m: float) -> ZoneSet:
     ])  # fmt: skip
 
 
+def _ring_states(
+    per_ring: int, seed: int
+) -> list[tuple[FloatArray, tuple[FloatArray, FloatArray, FloatArray, FloatArray, int],
+                float, float, float, float, float]]:  # fmt: skip
+    """``per_ring`` states (as ``_random_states``) inside each of the rings of 30 zones at
+    4.5 m and 300 at 18 m (``_ring``: closed, no exit certified), with no lag or 0.6 s."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for count, radius in ((30, 4.5), (300, 18.0)):
+        zones = _ring(count, radius)
+        z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
+        for _ in range(per_ring):
+            tau = float(rng.choice([0.0, 0.6]))
+            s = settings_for(dataclasses.replace(PARAMS, response_lag_s=tau))
+            r, bearing = rng.uniform(0.0, 0.3 * radius), rng.uniform(-math.pi, math.pi)
+            a = rng.uniform(-0.99, 0.99)
+            av = rng.uniform(-0.99, 0.99) if tau > 0.0 else a
+            out.append((s, z, r * math.cos(bearing), r * math.sin(bearing),
+                        rng.uniform(-4, 4), a, av))  # fmt: skip
+    return out
+
+
 def test_a_converged_turn_asked_up_to_a_level_stops_sampling_only_where_no_sample_can_matter(
 ) -> None:
     """A hard turn asked only up to a level (``enough``, ``stop_below``: the nominal's
@@ -1472,21 +1494,8 @@ def test_a_converged_turn_asked_up_to_a_level_stops_sampling_only_where_no_sampl
     zones, where the turns never leave (the samples are skipped there), with and without
     a lag, and among 1 to 3 zones, where they mostly do; the skip must fire in the rings."""
     dt = 0.02
-    rng = np.random.default_rng(83)
-    states = list(_random_states(300, 79))
-    for count, radius in ((30, 4.5), (300, 18.0)):
-        zones = _ring(count, radius)
-        z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
-        for _ in range(40):
-            tau = float(rng.choice([0.0, 0.6]))
-            s = settings_for(dataclasses.replace(PARAMS, response_lag_s=tau))
-            r, bearing = rng.uniform(0.0, 0.3 * radius), rng.uniform(-math.pi, math.pi)
-            a = rng.uniform(-0.99, 0.99)
-            av = rng.uniform(-0.99, 0.99) if tau > 0.0 else a
-            states.append((s, z, r * math.cos(bearing), r * math.sin(bearing),
-                           rng.uniform(-4, 4), a, av))  # fmt: skip
     skipped = 0
-    for s, z, n, e, h, a, av in states:
+    for s, z, n, e, h, a, av in [*_random_states(300, 79), *_ring_states(40, 83)]:
         theta = bk.acceptance_level_m(s, z[2], z[3], 0, 1.0, dt)
         straight = bk.straight_certificate(s, *z, n, e, h, a, av, 1.0, dt, theta, math.inf)
         for policy in (bk.BACKUP_LEFT, bk.BACKUP_RIGHT):
@@ -1514,28 +1523,18 @@ def test_the_turn_the_shields_hysteresis_compares_is_asked_at_every_sample() -> 
     an exit's own level cannot matter), it must equal the turn asked in full wherever
     that reaches theta."""
     dt = 0.02
-    rng = np.random.default_rng(101)
     compared = 0
-    for count, radius in ((30, 4.5), (300, 18.0)):
-        zones = _ring(count, radius)
-        z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
-        for _ in range(25):
-            tau = float(rng.choice([0.0, 0.6]))
-            s = settings_for(dataclasses.replace(PARAMS, response_lag_s=tau))
-            r, bearing = rng.uniform(0.0, 0.3 * radius), rng.uniform(-math.pi, math.pi)
-            n, e, h = r * math.cos(bearing), r * math.sin(bearing), rng.uniform(-4, 4)
-            a = rng.uniform(-0.99, 0.99)
-            av = rng.uniform(-0.99, 0.99) if tau > 0.0 else a
-            theta = bk.acceptance_level_m(s, z[2], z[3], 0, 1.0, dt)
-            straight = bk.straight_certificate(s, *z, n, e, h, a, av, 1.0, dt, theta, math.inf)
-            for policy in (bk.BACKUP_LEFT, bk.BACKUP_RIGHT):
-                full = bk.turn_certificate(s, *z, policy, n, e, h, a, av, 1.0, dt, straight,
-                                           theta, -math.inf, math.inf, False)  # fmt: skip
-                floor = bk._floor_certificate(s, *z, policy, n, e, h, a, av, 1.0, dt, theta,
-                                              room(z))  # fmt: skip
-                if full >= theta and straight < theta:
-                    assert floor == full, (floor, full, theta)
-                    compared += 1
+    for s, z, n, e, h, a, av in _ring_states(25, 101):
+        theta = bk.acceptance_level_m(s, z[2], z[3], 0, 1.0, dt)
+        straight = bk.straight_certificate(s, *z, n, e, h, a, av, 1.0, dt, theta, math.inf)
+        for policy in (bk.BACKUP_LEFT, bk.BACKUP_RIGHT):
+            full = bk.turn_certificate(s, *z, policy, n, e, h, a, av, 1.0, dt, straight, theta,
+                                       -math.inf, math.inf, False)  # fmt: skip
+            floor = bk._floor_certificate(s, *z, policy, n, e, h, a, av, 1.0, dt, theta,
+                                          room(z))  # fmt: skip
+            if full >= theta and straight < theta:
+                assert floor == full, (floor, full, theta)
+                compared += 1
     assert compared > 60
 
 

@@ -1817,6 +1817,100 @@ def test_a_screen_that_stops_at_the_first_zone_below_its_level_decides_as_the_fu
                 assert alone(int(order[which]) if len(order) else which) == value
 
 
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    zones=st.lists(
+        st.builds(Defender, north_m=st.floats(-6, 6), east_m=st.floats(-6, 6),
+                  range_m=st.floats(0.3, 2.0), capture_radius_m=st.floats(0, 0.5),
+                  speed_ratio=st.floats(0.2, 0.95)),
+        min_size=2, max_size=6,
+    ).map(ZoneSet.from_defenders),
+    n0=st.floats(-8, 8), e0=st.floats(-8, 8), h0=st.floats(-math.pi, math.pi),
+    a0=st.floats(-0.99, 0.99), av0=st.floats(-0.99, 0.99), tau=st.sampled_from([0.0, 0.6, 1.4]),
+    rank=st.floats(0.0, 1.0), shuffle=st.integers(0, 2**32 - 1),
+)  # fmt: skip
+def test_a_tail_that_stops_once_below_its_level_is_exact_from_the_level_up(
+    zones: ZoneSet, n0: float, e0: float, h0: float, a0: float, av0: float, tau: float,
+    rank: float, shuffle: int,
+) -> None:
+    """STRAIGHT's closed-form tail takes the cone's and the tube's least gaps in one pass
+    (``_tail_gap``): run to the end, it is the larger of ``segment_gap``'s cone and
+    ``_tube_gap``'s lower bound, to the bit; asked from a level, in any order of the zones
+    from any position, it is that same value wherever either reaches the level, and below
+    the level wherever the full one is (it stops once both are below: a caller asking
+    from that level then decides as with the full one). The level is drawn among the
+    zones' own values, where stopping early matters; with a lag up to 1.4 s the tube may
+    not hold (its bound -inf: the cone alone)."""
+    s = settings_for(dataclasses.replace(PARAMS, response_lag_s=tau))
+    to_come = bk._straight_to_come(s, a0, av0 if tau > 0.0 else a0, 1.0,
+                                   bk._trapezoid_excess(s, 0.02), 0.02)  # fmt: skip
+    delta, mid, w, drift, _, _ = to_come
+    z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0)
+    ch, sh = math.cos(h0), math.sin(h0)
+    cone = lk.segment_gap(*z, n0, e0, ch, sh, math.inf, math.inf, True, s[bk.S_EPS], delta)
+    final = bk._turned(h0, ch, sh, mid)  # the final heading's cosine and sine, as the tail's
+    tube, _ = bk._tube_gap(s, *z, n0, e0, *final, w, delta, drift, False, lk.BY_INDEX, 0,
+                           -math.inf)  # fmt: skip
+    tail = (s, *z, n0, e0, h0, ch, sh, 1.0, to_come)
+    full, _ = bk._straight_tail(*tail, lk.BY_INDEX, 0, -math.inf)
+    assert full == max(cone, tube), (full, cone, tube)
+    values = [cone, full] + [
+        bk._straight_tail(s, *(x[:, i : i + 1] for x in z[:4]), 0, n0, e0, h0, ch, sh, 1.0,
+                          to_come, lk.BY_INDEX, 0, -math.inf)[0]
+        for i in range(len(zones))
+    ]  # fmt: skip
+    finite = [v for v in values if math.isfinite(v)]
+    assume(finite)
+    low, high = min(finite), max(finite)
+    level = low - 0.1 + rank * (high - low + 0.2)
+    drawn = np.random.default_rng(shuffle).permutation(len(zones)).astype(np.int64)
+    for order in (lk.BY_INDEX, drawn):
+        for first in range(len(zones)):
+            value, _ = bk._straight_tail(*tail, order, first, level)
+            if max(value, full) >= level:
+                assert value == full, (value, full, level)
+            else:
+                assert value < level, (value, full, level)
+
+
+def test_the_position_by_bearing_is_a_zone_at_about_that_bearing() -> None:
+    """``bearing_position`` names, in the zones by bearing (``bearing_order``), a zone
+    whose bearing from the point is within the nearest zone's of the heading asked plus
+    twice the widest angle between zones next to each other by bearing (the order is
+    sorted to within a sector; the empty side of zones all to one side not counted): from
+    the centre of the 300-zone ring and from points off it, of a smaller ring and of a
+    cluster of zones to one side (there for headings within 45 degrees of a zone); with
+    the order made about a point a step away, as the shield asks it."""
+    rng = np.random.default_rng(71)
+    cluster = ZoneSet.from_defenders([
+        Defender(north_m=float(20 + rng.uniform(-5, 5)), east_m=float(rng.uniform(-8, 8)),
+                 range_m=1.0, capture_radius_m=0.3, speed_ratio=0.7)
+        for _ in range(40)
+    ])  # fmt: skip
+    for zones, origins in ((_ring(300, 18.0), [(0.0, 0.0), (5.0, -3.0), (-9.0, 4.0)]),
+                           (_ring(30, 4.5), [(0.0, 0.0), (1.5, 1.0)]),
+                           (cluster, [(0.0, 0.0), (3.0, 2.0)])):  # fmt: skip
+        count = zones.north_m.shape[1]
+        for n, e in origins:
+            order = np.empty(count, dtype=np.int64)
+            lk.bearing_order(zones.north_m, zones.east_m, 0, n + 0.02, e - 0.01, order)
+            assert sorted(order.tolist()) == list(range(count))
+            bearings = np.arctan2(zones.east_m[0] - e, zones.north_m[0] - n)
+            ranked = np.sort(np.mod(bearings, 2.0 * math.pi))
+            gaps = np.sort(np.diff(np.append(ranked, ranked[0] + 2.0 * math.pi)))
+            widest = float(gaps[-1] if gaps[-1] < math.pi else gaps[-2])
+            asked = 0
+            for h in rng.uniform(-math.pi, math.pi, 300):
+                p = lk.bearing_position(zones.north_m, zones.east_m, 0, n, e, order,
+                                        math.cos(h), math.sin(h))  # fmt: skip
+                assert 0 <= p < count
+                off = np.abs(np.remainder(bearings - h + math.pi, 2.0 * math.pi) - math.pi)
+                if off.min() <= math.pi / 4:
+                    asked += 1
+                    assert off[order[p]] <= off.min() + 2.0 * widest, (off[order[p]], h)
+            assert asked >= 50
+
+
 # a lag and an abandon path with a lag: a reviewer found the latter's sampling set by a
 # fixed length (1 mm), the paths 3% of a turn radius apart at L = 1/128
 _LAGGED = {"response_lag_s": 0.5}

@@ -90,12 +90,14 @@ from ezcompanion.guidance.lookahead import (
     BY_INDEX,
     annulus_gap,
     bearing_order,
+    bearing_position,
     dip,
     near_zones,
     near_zones_among,
     point_gap_among,
     point_gap_below,
     segment_gap,
+    segment_zone_gap,
 )
 from ezcompanion.guidance.params import SHIELD_PLAN_DEPTH_MAX, SHIELD_RUNGS_MAX, GuidanceParams
 
@@ -704,37 +706,61 @@ def _tube_gap(
     alone keeps its value at or above ``below`` (rho_i >= 0): where no zone is below, the
     value returned is then only known to be at or above ``below`` (the least over the
     zones not skipped, inf if none), and the position one of theirs (``first`` if none)."""
-    if 2.0 * delta + w >= 1.2:
+    if not _tube_holds(delta, w):
         return (math.inf if upper else -math.inf), first
-    if w <= _ROTATE_RAD:  # (w >= 0) the usual case, a few mrad: no libm tan
-        cos_w, sin_w = _small_cos_sin(w)
-        slope = sin_w / cos_w
-    else:
-        slope = math.tan(w)
+    slope = _tube_slope(w)
     best = math.inf
     which = first
     count = zn.shape[1]
     for j in range(count):
         p, i = _zone_round(order, first, j, count)
-        mur = zmur[kz, i]
-        wn = zn[kz, i] - n
-        we = ze[kz, i] - e
-        along = max(wn * ch + we * sh, mur)
-        dn = wn - along * ch
-        de = we - along * sh
-        d2 = dn * dn + de * de
-        clear = below + zreach[kz, i] + s[S_EPS]
-        if upper and clear > 0.0 and d2 >= clear * clear:
-            continue  # g >= below, so g + rho too: not below (its value is not needed)
-        g = math.sqrt(d2) - zreach[kz, i] - s[S_EPS]
-        rho = drift + (math.sqrt(wn * wn + we * we) + zreach[kz, i] + mur + drift) * slope
-        rho += 2.0 * mur * delta
-        value = g + rho if upper else g - rho
+        value = _tube_zone(s, zn, ze, zmur, zreach, kz, i, n, e, ch, sh, slope, delta, drift,
+                           upper, below)  # fmt: skip
         if value < best:
             best, which = value, p
             if best < below:
                 break
     return best, which
+
+
+@jit_inline
+def _tube_holds(delta: float, w: float) -> bool:
+    """Whether the tube's bound holds (``_tube_gap``): the headings stay within a right
+    angle of the ray (with room)."""
+    return 2.0 * delta + w < 1.2
+
+
+@jit_inline
+def _tube_slope(w: float) -> float:
+    """tan(w), for the tube's widening (``_tube_gap``)."""
+    if w <= _ROTATE_RAD:  # (w >= 0) the usual case, a few mrad: no libm tan
+        cos_w, sin_w = _small_cos_sin(w)
+        return sin_w / cos_w
+    return math.tan(w)
+
+
+@jit_inline
+def _tube_zone(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, i: int, n: float, e: float, ch: float, sh: float, slope: float, delta: float,
+    drift: float, upper: bool, below: float,
+) -> float:
+    """Zone i's term of ``_tube_gap`` (``slope``: ``_tube_slope(w)``); with ``upper``, inf
+    where its distance from the ray alone keeps it at or above ``below``."""
+    mur = zmur[kz, i]
+    wn = zn[kz, i] - n
+    we = ze[kz, i] - e
+    along = max(wn * ch + we * sh, mur)
+    dn = wn - along * ch
+    de = we - along * sh
+    d2 = dn * dn + de * de
+    clear = below + zreach[kz, i] + s[S_EPS]
+    if upper and clear > 0.0 and d2 >= clear * clear:
+        return math.inf  # g >= below, so g + rho too: not below (its value is not needed)
+    g: float = math.sqrt(d2) - zreach[kz, i] - s[S_EPS]
+    rho: float = drift + (math.sqrt(wn * wn + we * we) + zreach[kz, i] + mur + drift) * slope
+    rho += 2.0 * mur * delta
+    return g + rho if upper else g - rho
 
 
 @jit_inline
@@ -890,28 +916,66 @@ def _rest_upper(
 def _straight_tail(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, ch: float, sh: float, speed: float,
-    to_come: tuple[float, float, float, float, float, float],
+    to_come: tuple[float, float, float, float, float, float], order: IntArray, first: int,
+    below: float,
 ) -> tuple[float, int]:
     """The gap of all of STRAIGHT's flight from this state on, in closed form, from below
     (``ch``, ``sh``: the cosine and sine of ``h``; ``to_come``: ``_straight_to_come`` here):
     its headings stay within delta of h (``_straight_to_come``), so its look-ahead points
     lie in the cone of that half-angle about the ray from here, which ``segment_gap``
     widens for; and (no abandon profile) within the tube about the ray along the final
-    heading (``_tube_gap``). The larger bound is taken. With an abandon profile, the cone
-    alone and from min(mu R, v hold) ahead: the abandon paths from points of the line are
-    parts of the line (used once the turn has died out). Second, the zone (by index) that
-    gave the tube its least value (0 without it): where the flight's screen
-    (``_rest_upper``) should look first."""
+    heading (``_tube_gap``). The larger bound is taken (``_tail_gap``, one pass over the
+    zones from position ``first`` of ``order``, ``_zone_round``): exact wherever it is at
+    least ``below``, else only known to be below it (-inf: exact however low). With an
+    abandon profile, the cone alone and from min(mu R, v hold) ahead, exact: the abandon
+    paths from points of the line are parts of the line (used once the turn has died
+    out). Second, the position in ``order`` of the zone that gave the tube its least value
+    of those asked (``first`` without it): where the flight's screen (``_rest_upper``)
+    should look first."""
     delta, mid, w, drift, _, _ = to_come
     hold = s[S_AB_HOLD]
-    start = speed * hold if hold > 0.0 else math.inf
-    cone = segment_gap(zn, ze, zmur, zreach, kz, n, e, ch, sh, start, math.inf, True, s[S_EPS],
-                       delta)  # fmt: skip
     if hold > 0.0:
-        return cone, 0
+        return segment_gap(zn, ze, zmur, zreach, kz, n, e, ch, sh, speed * hold, math.inf, True,
+                           s[S_EPS], delta), first  # fmt: skip
     c_final, s_final = _turned(h, ch, sh, mid)
-    tube, which = _tube_gap(s, zn, ze, zmur, zreach, kz, n, e, c_final, s_final, w, delta, drift,
-                            False, BY_INDEX, 0, -math.inf)  # fmt: skip
+    return _tail_gap(s, zn, ze, zmur, zreach, kz, n, e, ch, sh, c_final, s_final, delta, w,
+                     drift, order, first, below)  # fmt: skip
+
+
+@jit_inline
+def _tail_gap(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, n: float, e: float, ch: float, sh: float, c_final: float, s_final: float,
+    delta: float, w: float, drift: float, order: IntArray, first: int, below: float,
+) -> tuple[float, int]:
+    """max(the cone's least gap, ``segment_gap`` from mu R ahead widened by delta along
+    (``ch``, ``sh``); the tube's lower bound, ``_tube_gap`` along (``c_final``,
+    ``s_final``), -inf where it does not hold), both in one pass over the zones from
+    position ``first`` of ``order`` (``_zone_round``; ``BY_INDEX``: by index), each zone's
+    terms as theirs. The pass stops once both least values so far are below ``below``: the
+    maximum of the two full least values is then below it too, and the value returned is
+    only known to be below it; where the pass runs to the end, the value is the same to
+    the bit as the two passes' apart (a least of the same terms). Second, the position of
+    the zone that gave the tube its least value of those asked (``first`` if none)."""
+    eps = s[S_EPS]
+    spread = math.sin(min(delta, 1.5))  # (``segment_gap``'s)
+    tube_holds = _tube_holds(delta, w)
+    slope = _tube_slope(w) if tube_holds else 0.0
+    cone = math.inf
+    tube = math.inf if tube_holds else -math.inf
+    which = first
+    count = zn.shape[1]
+    for j in range(count):
+        p, i = _zone_round(order, first, j, count)
+        cone = min(cone, segment_zone_gap(zn, ze, zmur, zreach, kz, i, n, e, ch, sh, math.inf,
+                                          math.inf, True, eps, delta, spread))  # fmt: skip
+        if tube_holds:
+            value = _tube_zone(s, zn, ze, zmur, zreach, kz, i, n, e, c_final, s_final, slope,
+                               delta, drift, False, -math.inf)  # fmt: skip
+            if value < tube:
+                tube, which = value, p
+        if cone < below and tube < below:
+            break
     return max(cone, tube), which
 
 
@@ -922,10 +986,29 @@ def straight_certificate(
     stop_below: float, enough: float,
 ) -> float:
     """Certificate of STRAIGHT from this state (``_straight_flight``, with the cosine and
-    sine of ``h`` and the flight's constants computed here)."""
+    sine of ``h`` and the flight's constants computed here, the zones asked by index)."""
     return _straight_flight(s, zn, ze, zmur, zreach, kz, n, e, h, math.cos(h), math.sin(h), a,
-                            av, speed, dt, stop_below, enough,
-                            _flight_constants(s, dt))  # fmt: skip
+                            av, speed, dt, stop_below, enough, _flight_constants(s, dt),
+                            BY_INDEX, 0)  # fmt: skip
+
+
+@jit_inline
+def _straight_in_room(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
+    stop_below: float, enough: float, room: IntArray,
+) -> float:
+    """``straight_certificate``, the zones asked in the step's order by bearing
+    (``_zone_room``), from the zone at about the bearing of h (``bearing_position``): where
+    the line ahead meets a zone, its closed-form tail stops at that zone, if it is below
+    the level (``_tail_gap``). The same value wherever it is at least ``stop_below``."""
+    count = zn.shape[1]
+    order = room[count:2 * count]  # the zones by bearing (``_zone_room``)
+    ch, sh = math.cos(h), math.sin(h)
+    first = bearing_position(zn, ze, kz, n, e, order, ch, sh) if count > _NEAR_FEWEST else 0
+    return _straight_flight(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av, speed, dt,
+                            stop_below, enough, _flight_constants(s, dt), order,
+                            first)  # fmt: skip
 
 
 @jit_borrow
@@ -933,7 +1016,8 @@ def _straight_flight(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
     kz: int, n: float, e: float, h: float, ch: float, sh: float, a: float, av: float,
     speed: float, dt: float, stop_below: float, enough: float,
-    constants: tuple[float, tuple[float, float], tuple[float, float]],
+    constants: tuple[float, tuple[float, float], tuple[float, float]], order: IntArray,
+    first: int,
 ) -> float:
     """Certificate of STRAIGHT from this state: the turn dies out under a_c = -(C / a_max) a,
     then a straight line for ever. Flown control step by control step (``dt``, the actuator
@@ -953,8 +1037,13 @@ def _straight_flight(
     whole flight's gap, the certificate included, is below it too, so a caller that only
     asks whether the certificate reaches ``stop_below`` (a turn's exit) gets the same
     answer without flying the rest. With an abandon profile the tail is only taken at the
-    end (the abandon paths of a turning flight are not in its cone). (``ch``, ``sh``: the
-    cosine and sine of ``h``; ``constants``: ``_flight_constants(s, dt)``.)"""  # fmt: skip
+    end (the abandon paths of a turning flight are not in its cone). Each tail is exact
+    only from min(``stop_below``, ``enough``) up, below that a value below it
+    (``_straight_tail``): from there a tail decides nothing, by the rules above. The tails
+    and the screens ask the zones in ``order`` (``BY_INDEX``: by index) from position
+    ``first`` on, then from the zone that gave the last tail's tube its least value.
+    (``ch``, ``sh``: the cosine and sine of ``h``; ``constants``:
+    ``_flight_constants(s, dt)``.)"""  # fmt: skip
     amax, tau, eps = s[S_AMAX], s[S_TAU], s[S_EPS]
     rate = _av_rate_bound(s)
     ticks = sample_ticks(s, speed, dt)
@@ -963,7 +1052,8 @@ def _straight_flight(
     best = math.inf
     certified = -math.inf
     screen = stop_below - _SCREEN_SLACK * speed * speed / amax  # -inf: no screen
-    blocker = 0
+    level = min(stop_below, enough)  # the tails' (``_straight_tail``)
+    blocker = first
     trapezoid, decays, straightening = constants
     nn = int(s[S_N])
     # what is left of the turn, made for a sample's state only where it is asked (its
@@ -976,7 +1066,7 @@ def _straight_flight(
                                                     fresh)  # fmt: skip
             # (the screen below looks first at the zone the tail's tube found least)
             tail, blocker = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed,
-                                           to_come)  # fmt: skip
+                                           to_come, order, blocker, level)  # fmt: skip
             certified = max(certified, min(best, tail))
             if certified >= enough:
                 return certified
@@ -1000,7 +1090,7 @@ def _straight_flight(
             # the rest of the flight from here, from above: where even that is below the
             # level, so is every lower bound of the whole flight (the certificate)
             upper, blocker = _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed,
-                                         to_come, BY_INDEX, blocker, screen)  # fmt: skip
+                                         to_come, order, blocker, screen)  # fmt: skip
             if upper < screen:
                 return -math.inf
         for _ in range(ticks):
@@ -1010,7 +1100,8 @@ def _straight_flight(
         fresh = False
     to_come, fresh = _straight_to_come_once(s, a, av, speed, trapezoid, dt, to_come,
                                             fresh)  # fmt: skip
-    tail, _ = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed, to_come)
+    tail, _ = _straight_tail(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed, to_come,
+                             order, blocker, level)  # fmt: skip
     return max(certified, min(best, tail))
 
 
@@ -1052,7 +1143,8 @@ def _exit_here(
     if upper < screen_level:
         return -math.inf, blocker, made
     leave = _straight_flight(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av, speed, dt,
-                             exit_level, max(exit_level, enough), constants)  # fmt: skip
+                             exit_level, max(exit_level, enough), constants, order,
+                             blocker)  # fmt: skip
     return leave, blocker, made
 
 
@@ -1306,8 +1398,8 @@ def _backup_certificates(
     is exact from theta up whatever ``below`` is: whether it reaches theta decides where
     the turns leave (at once where it does). ``room``: the step's (``_zone_room``)."""
     theta = acceptance_level_m(s, zmur, zreach, kz, speed, dt)
-    straight = _or_none(straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
-                                             dt, min(below, theta), enough))  # fmt: skip
+    straight = _or_none(_straight_in_room(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
+                                          dt, min(below, theta), enough, room))  # fmt: skip
     out[BACKUP_STRAIGHT] = straight
     if straight >= theta:  # both turns leave at once: they are STRAIGHT
         out[BACKUP_LEFT] = out[BACKUP_RIGHT] = straight
@@ -1949,8 +2041,8 @@ def _floor_certificate(
     the flight's. (``room``: the step's, ``_zone_room``.)"""
     if not 0 <= policy < _N_BACKUPS:  # a rung or a plan
         return -math.inf
-    straight = _or_none(straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
-                                             dt, theta, theta))  # fmt: skip
+    straight = _or_none(_straight_in_room(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed,
+                                          dt, theta, theta, room))  # fmt: skip
     if policy == BACKUP_STRAIGHT:
         return straight
     if straight >= theta:

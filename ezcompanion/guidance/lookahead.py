@@ -21,8 +21,9 @@ import numpy.typing as npt
 from ezcompanion.guidance._jit import jit_borrow, jit_inline
 
 __all__ = [
-    "BY_INDEX", "annulus_gap", "arc_end", "bearing_order", "dip", "lookahead_gap", "near_zones",
-    "near_zones_among", "point_gap", "point_gap_among", "point_gap_below", "segment_gap",
+    "BY_INDEX", "annulus_gap", "arc_end", "bearing_order", "bearing_position", "dip",
+    "lookahead_gap", "near_zones", "near_zones_among", "point_gap", "point_gap_among",
+    "point_gap_below", "segment_gap", "segment_zone_gap",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -184,6 +185,15 @@ def near_zones_among(
 
 
 @jit_inline
+def _pseudo_angle(dn: float, de: float) -> float:
+    """A key in [0, 4] monotonic in the bearing of (dn, de), round from north through east,
+    without trigonometry (0 for (0, 0))."""
+    size = abs(dn) + abs(de)
+    p = de / size if size > 0.0 else 0.0  # sin-like, in [-1, 1]
+    return 2.0 - p if dn < 0.0 else (4.0 + p if p < 0.0 else p)
+
+
+@jit_inline
 def bearing_order(
     zn: FloatArray, ze: FloatArray, kz: int, n: float, e: float, order: IntArray
 ) -> None:
@@ -199,12 +209,7 @@ def bearing_order(
     sector = np.empty(count, dtype=np.int64)
     first = np.zeros(count + 1, dtype=np.int64)  # where each sector starts in ``order``
     for i in range(count):
-        dn = zn[kz, i] - n
-        de = ze[kz, i] - e
-        size = abs(dn) + abs(de)
-        p = de / size if size > 0.0 else 0.0  # sin-like, in [-1, 1]
-        key = 2.0 - p if dn < 0.0 else (4.0 + p if p < 0.0 else p)  # in [0, 4]
-        x = 0.25 * key * count
+        x = 0.25 * _pseudo_angle(zn[kz, i] - n, ze[kz, i] - e) * count
         # (a key not a number, from a position not a number, goes first: never out of bounds)
         k = int(x) if 0.0 <= x < count else (count - 1 if x >= count else 0)
         sector[i] = k
@@ -215,6 +220,38 @@ def bearing_order(
         k = sector[i]
         order[first[k]] = i
         first[k] += 1
+
+
+@jit_inline
+def bearing_position(
+    zn: FloatArray, ze: FloatArray, kz: int, n: float, e: float, order: IntArray,
+    cos_h: float, sin_h: float,
+) -> int:
+    """A position in ``order`` (``bearing_order`` about a point near (n, e)) of a zone at
+    about the bearing (cos_h, sin_h) from (n, e): a bisection on the zones' pseudo-angles
+    from (n, e), in an order sorted by them to within a sector, then of the zones either
+    side of where the heading falls, the nearer round the circle. Where a ray on that
+    heading meets a zone, that zone is at about this bearing, so a pass over the zones for
+    a least gap along the ray that may stop at the first below a level (``_zone_round``)
+    looks here first. Any position gives such a pass the same answer: this only decides
+    which zone comes first (0 for no zones)."""
+    count: int = order.shape[0]
+    if count == 0:
+        return 0
+    key = _pseudo_angle(cos_h, sin_h)
+    lo, hi = 0, count
+    while lo < hi:
+        mid = (lo + hi) // 2
+        i = order[mid]
+        if _pseudo_angle(zn[kz, i] - n, ze[kz, i] - e) < key:
+            lo = mid + 1
+        else:
+            hi = mid
+    after = lo % count
+    before = (lo - 1) % count
+    past = (_pseudo_angle(zn[kz, order[after]] - n, ze[kz, order[after]] - e) - key) % 4.0
+    short = (key - _pseudo_angle(zn[kz, order[before]] - n, ze[kz, order[before]] - e)) % 4.0
+    return after if past <= short else before
 
 
 @jit_borrow  # on its own: inlined at six places of the service kernel it cost 0.6 s to compile
@@ -230,20 +267,32 @@ def segment_gap(
     best = math.inf
     spread = math.sin(min(widen, 1.5))  # once, not once a zone
     for i in range(zn.shape[1]):
-        mur = zmur[kz, i]
-        s0 = min(mur, start_m) if lookahead_start else start_m
-        s1 = stop_m + mur
-        wn = zn[kz, i] - n
-        we = ze[kz, i] - e
-        along = wn * cos_h + we * sin_h
-        s = min(max(along, s0), s1)
-        dn = wn - s * cos_h
-        de = we - s * sin_h
-        g = math.sqrt(dn * dn + de * de) - zreach[kz, i] - eps
-        if widen > 0.0:
-            g -= (math.sqrt(wn * wn + we * we) + zreach[kz, i] + mur) * spread
-        best = min(best, g)
+        best = min(best, segment_zone_gap(zn, ze, zmur, zreach, kz, i, n, e, cos_h, sin_h,
+                                          start_m, stop_m, lookahead_start, eps, widen,
+                                          spread))  # fmt: skip
     return best
+
+
+@jit_inline
+def segment_zone_gap(
+    zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int, i: int,
+    n: float, e: float, cos_h: float, sin_h: float, start_m: float, stop_m: float,
+    lookahead_start: bool, eps: float, widen: float, spread: float,
+) -> float:
+    """Zone i's term of ``segment_gap`` (``spread``: sin(min(widen, 1.5)))."""
+    mur = zmur[kz, i]
+    s0 = min(mur, start_m) if lookahead_start else start_m
+    s1 = stop_m + mur
+    wn = zn[kz, i] - n
+    we = ze[kz, i] - e
+    along = wn * cos_h + we * sin_h
+    s = min(max(along, s0), s1)
+    dn = wn - s * cos_h
+    de = we - s * sin_h
+    g: float = math.sqrt(dn * dn + de * de) - zreach[kz, i] - eps
+    if widen > 0.0:
+        g -= (math.sqrt(wn * wn + we * we) + zreach[kz, i] + mur) * spread
+    return g
 
 
 @jit_borrow

@@ -989,7 +989,7 @@ def straight_certificate(
     sine of ``h`` and the flight's constants computed here, the zones asked by index)."""
     return _straight_flight(s, zn, ze, zmur, zreach, kz, n, e, h, math.cos(h), math.sin(h), a,
                             av, speed, dt, stop_below, enough, _flight_constants(s, dt),
-                            BY_INDEX, 0)  # fmt: skip
+                            BY_INDEX, 0, False)  # fmt: skip
 
 
 @jit_inline
@@ -1007,8 +1007,8 @@ def _straight_in_room(
     ch, sh = math.cos(h), math.sin(h)
     first = bearing_position(zn, ze, kz, n, e, order, ch, sh) if count > _NEAR_FEWEST else 0
     return _straight_flight(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av, speed, dt,
-                            stop_below, enough, _flight_constants(s, dt), order,
-                            first)  # fmt: skip
+                            stop_below, enough, _flight_constants(s, dt), order, first,
+                            False)  # fmt: skip
 
 
 @jit_borrow
@@ -1017,7 +1017,7 @@ def _straight_flight(
     kz: int, n: float, e: float, h: float, ch: float, sh: float, a: float, av: float,
     speed: float, dt: float, stop_below: float, enough: float,
     constants: tuple[float, tuple[float, float], tuple[float, float]], order: IntArray,
-    first: int,
+    first: int, screened: bool,
 ) -> float:
     """Certificate of STRAIGHT from this state: the turn dies out under a_c = -(C / a_max) a,
     then a straight line for ever. Flown control step by control step (``dt``, the actuator
@@ -1032,13 +1032,15 @@ def _straight_flight(
     (a turn's exit too: its search takes an exit where a tail reached the exit level though
     the samples then dip below it, as the turn, flown, does, its rule asking STRAIGHT with
     no level); and, returning -inf, once an
-    upper bound on the least gap of the flight still to come (``_rest_upper``, from the
-    second sample on) is below ``stop_below`` (less round-off): every lower bound of the
-    whole flight's gap, the certificate included, is below it too, so a caller that only
-    asks whether the certificate reaches ``stop_below`` (a turn's exit) gets the same
-    answer without flying the rest. With an abandon profile the tail is only taken at the
-    end (the abandon paths of a turning flight are not in its cone). Each tail is exact
-    only from min(``stop_below``, ``enough``) up, below that a value below it
+    upper bound on the least gap of the flight still to come (``_rest_upper``, asked
+    before the sample at samples 0 to ``_SCREEN_EVERY`` and every ``_SCREEN_EVERY``-th,
+    from the first sample on where ``screened``: the caller asked it here with the same
+    level) is below ``stop_below`` (less round-off): every lower bound of the whole
+    flight's gap, the certificate included, is below it too, so a caller that only asks
+    whether the certificate reaches ``stop_below`` (a turn's exit, the nominal's checks)
+    gets the same answer without flying the rest. With an abandon profile the tail is only
+    taken at the end (the abandon paths of a turning flight are not in its cone). Each tail
+    is exact only from min(``stop_below``, ``enough``) up, below that a value below it
     (``_straight_tail``): from there a tail decides nothing, by the rules above. The tails
     and the screens ask the zones in ``order`` (``BY_INDEX``: by index) from position
     ``first`` on, then from the zone that gave the last tail's tube its least value.
@@ -1070,6 +1072,17 @@ def _straight_flight(
             certified = max(certified, min(best, tail))
             if certified >= enough:
                 return certified
+        if (j > 0 or not screened) and screen > -math.inf and (
+                j <= _SCREEN_EVERY or j % _SCREEN_EVERY == 0):  # fmt: skip
+            to_come, fresh = _straight_to_come_once(s, a, av, speed, trapezoid, dt, to_come,
+                                                    fresh)  # fmt: skip
+            # the rest of the flight from here, from above: where even that is below the
+            # level, so is every lower bound of the whole flight (the certificate), and
+            # this sample is not needed
+            upper, blocker = _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed,
+                                         to_come, order, blocker, screen)  # fmt: skip
+            if upper < screen:
+                return -math.inf
         best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, ch, sh, eps, speed, amax, rate,
                                step, best)  # fmt: skip
         best = _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, best)
@@ -1084,15 +1097,6 @@ def _straight_flight(
                                                     fresh)  # fmt: skip
             if to_come[0] < _RESIDUAL_RAD:  # delta
                 break
-        if j > 0 and screen > -math.inf and (j <= _SCREEN_EVERY or j % _SCREEN_EVERY == 0):
-            to_come, fresh = _straight_to_come_once(s, a, av, speed, trapezoid, dt, to_come,
-                                                    fresh)  # fmt: skip
-            # the rest of the flight from here, from above: where even that is below the
-            # level, so is every lower bound of the whole flight (the certificate)
-            upper, blocker = _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed,
-                                         to_come, order, blocker, screen)  # fmt: skip
-            if upper < screen:
-                return -math.inf
         for _ in range(ticks):
             a1 = _advance_straighten(a, nn, straightening)
             n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a, a1, av, speed, tau, dt, decays)
@@ -1144,7 +1148,7 @@ def _exit_here(
         return -math.inf, blocker, made
     leave = _straight_flight(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av, speed, dt,
                              exit_level, max(exit_level, enough), constants, order,
-                             blocker)  # fmt: skip
+                             blocker, True)  # fmt: skip
     return leave, blocker, made
 
 

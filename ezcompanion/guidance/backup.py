@@ -1032,10 +1032,11 @@ def _straight_flight(
     (a turn's exit too: its search takes an exit where a tail reached the exit level though
     the samples then dip below it, as the turn, flown, does, its rule asking STRAIGHT with
     no level); and, returning -inf, once an
-    upper bound on the least gap of the flight still to come (``_rest_upper``, asked
-    before the sample at samples 0 to ``_SCREEN_EVERY`` and every ``_SCREEN_EVERY``-th,
-    from the first sample on where ``screened``: the caller asked it here with the same
-    level) is below ``stop_below`` (less round-off): every lower bound of the whole
+    upper bound on the least gap of the flight still to come (``_rest_upper``: before the
+    first sample unless ``screened``, where the caller asked it here with the same level;
+    after samples 1 to ``_SCREEN_EVERY`` and every ``_SCREEN_EVERY``-th; not before the
+    later samples, whose own tests end most exits' flights sooner) is below
+    ``stop_below`` (less round-off): every lower bound of the whole
     flight's gap, the certificate included, is below it too, so a caller that only asks
     whether the certificate reaches ``stop_below`` (a turn's exit, the nominal's checks)
     gets the same answer without flying the rest. With an abandon profile the tail is only
@@ -1072,13 +1073,8 @@ def _straight_flight(
             certified = max(certified, min(best, tail))
             if certified >= enough:
                 return certified
-        if (j > 0 or not screened) and screen > -math.inf and (
-                j <= _SCREEN_EVERY or j % _SCREEN_EVERY == 0):  # fmt: skip
-            to_come, fresh = _straight_to_come_once(s, a, av, speed, trapezoid, dt, to_come,
-                                                    fresh)  # fmt: skip
-            # the rest of the flight from here, from above: where even that is below the
-            # level, so is every lower bound of the whole flight (the certificate), and
-            # this sample is not needed
+        if j == 0 and not screened and screen > -math.inf:
+            # the whole flight from above before its first sample (``_rest_upper``)
             upper, blocker = _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed,
                                          to_come, order, blocker, screen)  # fmt: skip
             if upper < screen:
@@ -1097,6 +1093,15 @@ def _straight_flight(
                                                     fresh)  # fmt: skip
             if to_come[0] < _RESIDUAL_RAD:  # delta
                 break
+        if j > 0 and screen > -math.inf and (j <= _SCREEN_EVERY or j % _SCREEN_EVERY == 0):
+            to_come, fresh = _straight_to_come_once(s, a, av, speed, trapezoid, dt, to_come,
+                                                    fresh)  # fmt: skip
+            # the rest of the flight from here, from above: where even that is below the
+            # level, so is every lower bound of the whole flight (the certificate)
+            upper, blocker = _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed,
+                                         to_come, order, blocker, screen)  # fmt: skip
+            if upper < screen:
+                return -math.inf
         for _ in range(ticks):
             a1 = _advance_straighten(a, nn, straightening)
             n, e, h, av, ch, sh = _fly(n, e, h, ch, sh, a, a1, av, speed, tau, dt, decays)

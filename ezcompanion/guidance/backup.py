@@ -987,9 +987,26 @@ def straight_certificate(
 ) -> float:
     """Certificate of STRAIGHT from this state (``_straight_flight``, with the cosine and
     sine of ``h`` and the flight's constants computed here, the zones asked by index)."""
+    return _straight_by_index(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
+                              stop_below, enough, BY_INDEX)  # fmt: skip
+
+
+@jit_inline
+def _straight_by_index(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
+    stop_below: float, enough: float, none: IntArray,
+) -> float:
+    """``straight_certificate`` with ``none``, an empty list of zones (the zones then asked
+    by index): in a kernel, an empty slice of an array of its own rather than the constant
+    ``BY_INDEX``, which numba types apart from the room's order (read-only) and would
+    compile the whole flight for once more. (Likewise the flags are ``_FLAGS``' and the
+    first position a run-time 0: numba compiles a function once for each literal it is
+    passed. Three copies of ``_straight_flight`` took the service kernel's cold compile
+    from 39-43 s to 73 s; with one, 45-50 s.)"""
     return _straight_flight(s, zn, ze, zmur, zreach, kz, n, e, h, math.cos(h), math.sin(h), a,
-                            av, speed, dt, stop_below, enough, _flight_constants(s, dt),
-                            BY_INDEX, 0, False)  # fmt: skip
+                            av, speed, dt, stop_below, enough, _flight_constants(s, dt), none,
+                            int(np.int64(0)), _FLAGS[0])  # fmt: skip
 
 
 @jit_inline
@@ -1008,7 +1025,7 @@ def _straight_in_room(
     first = bearing_position(zn, ze, kz, n, e, order, ch, sh) if count > _NEAR_FEWEST else 0
     return _straight_flight(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av, speed, dt,
                             stop_below, enough, _flight_constants(s, dt), order, first,
-                            False)  # fmt: skip
+                            _FLAGS[0])  # fmt: skip
 
 
 @jit_borrow
@@ -1153,7 +1170,7 @@ def _exit_here(
         return -math.inf, blocker, made
     leave = _straight_flight(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, a, av, speed, dt,
                              exit_level, max(exit_level, enough), constants, order,
-                             blocker, True)  # fmt: skip
+                             blocker, _FLAGS[1])  # fmt: skip
     return leave, blocker, made
 
 
@@ -1794,8 +1811,8 @@ def plan_value(
         floor, n, e, h, a, av = _plan_segment(s, zn, ze, zmur, zreach, kz,
                                               int(plan[PLAN_POLICIES + j]), left, n, e, h, a,
                                               av, speed, dt, floor, -math.inf)  # fmt: skip
-    straight = straight_certificate(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
-                                    -math.inf, math.inf)  # fmt: skip
+    straight = _straight_by_index(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
+                                  -math.inf, math.inf, plan[:0])  # fmt: skip
     return min(floor, straight)
 
 
@@ -1838,8 +1855,8 @@ def plan_search(
         taken[level] += 1
         n0, e0, h0 = nodes[level, c, 0], nodes[level, c, 1], nodes[level, c, 2]
         a0, av0, floor = nodes[level, c, 3], nodes[level, c, 4], nodes[level, c, 5]
-        terminal = straight_certificate(s, zn, ze, zmur, zreach, kz, n0, e0, h0, a0, av0,
-                                        speed, dt, need, need)  # fmt: skip
+        terminal = _straight_by_index(s, zn, ze, zmur, zreach, kz, n0, e0, h0, a0, av0,
+                                      speed, dt, need, need, path[:0])  # fmt: skip
         if min(floor, terminal) >= need:
             plan[PLAN_COUNT], plan[PLAN_SEGMENT], plan[PLAN_DONE] = level, 0, 0
             for j in range(level):

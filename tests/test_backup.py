@@ -1448,6 +1448,44 @@ def test_certificates_asked_from_a_level_up_are_exact_there_and_below_it_below()
     assert stopped > 100
 
 
+def test_with_an_abandon_profile_certificates_asked_from_a_level_are_exact_from_it_up() -> None:
+    """With an abandon profile (ArduCopter's 3.6 s hold and PX4's 1.15 s, lags 0 to 1.4 s)
+    a certificate asked from a level skips the abandon path of a sample whose own gap is
+    already below the level (the path can only take the least lower): STRAIGHT's and each
+    hard turn's value is the one computed with no level wherever either reaches the level,
+    and below the level wherever the full one is. Drawn among 1 to 3 zones, where samples
+    fall below the level and exits are found and refused alike; the early stop must
+    happen in some."""
+    dt = 0.02
+    stopped = 0
+    rng = np.random.default_rng(73)
+    for s, z, n, e, h, a, av in _random_states(150, 71):
+        hold, brake = ((3.6, 2.5), (1.15, 3.0))[int(rng.integers(2))]
+        s = s.copy()
+        s[bk.S_AB_HOLD], s[bk.S_AB_BRAKE] = hold, brake
+        theta = bk.acceptance_level_m(s, z[2], z[3], 0, 1.0, dt)
+        exact = bk.straight_certificate(s, *z, n, e, h, a, av, 1.0, dt, -math.inf, math.inf)
+        turns = [bk.turn_certificate(s, *z, policy, n, e, h, a, av, 1.0, dt, exact, theta,
+                                     -math.inf, math.inf, False)
+                 for policy in (bk.BACKUP_LEFT, bk.BACKUP_RIGHT)]  # fmt: skip
+        for level in (theta, theta + 0.05, exact - 1e-9, exact + 0.02):
+            value = bk.straight_certificate(s, *z, n, e, h, a, av, 1.0, dt, level, math.inf)
+            if max(value, exact) >= level:
+                assert value == exact, (value, exact, level)
+            else:
+                assert value < level, (value, exact, level)
+                stopped += value != exact
+            for policy, full in zip((bk.BACKUP_LEFT, bk.BACKUP_RIGHT), turns, strict=True):
+                value = bk.turn_certificate(s, *z, policy, n, e, h, a, av, 1.0, dt, exact,
+                                            theta, level, math.inf, False)  # fmt: skip
+                if max(value, full) >= level:
+                    assert value == full, (policy, value, full, level)
+                else:
+                    assert value < level, (policy, value, full, level)
+                    stopped += value != full
+    assert stopped > 50
+
+
 def _ring(count: int, radius_m: float) -> ZoneSet:
     """``count`` zones round the origin (``bench_law.py``'s ring): from inside, no straight
     line leaves, so every hard turn flies its half revolution and the circle after it."""

@@ -1098,7 +1098,8 @@ def _straight_flight(
                 return -math.inf
         best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, ch, sh, eps, speed, amax, rate,
                                step, best)  # fmt: skip
-        best = _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, best)
+        if not best < stop_below:  # (below it, the abandon gap only takes it lower)
+            best = _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, best)
         if best < stop_below:
             return max(best, certified)
         if best <= certified:
@@ -1270,7 +1271,8 @@ def _turn_certificate(
         if sampling:
             best, made = _sample_gap(zn, ze, zmur, zreach, kz, n, e, ch, sh, eps, speed, amax,
                                      rate, step, best, room, made)  # fmt: skip
-            best = _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, best)
+            if not best < stop_below:  # (below it, the abandon gap only takes it lower)
+                best = _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, best)
             if best < stop_below:
                 return best
         leave = -math.inf

@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml
 	@echo "installing ezcompanion and its dependencies into $(VENV) (a minute or two the first time)"
 	$(BIN)/python -m pip install -qq --upgrade pip
 	$(BIN)/python -m pip install -qq -e '.[dev]'
-	@echo "compiling the guidance kernels into numba's cache (once, 25 to 45 s on a 2-core machine)"
+	@echo "compiling the guidance kernels into numba's cache (once, 25 to 50 s on a 2-core machine)"
 	$(BIN)/ezcompanion compile
 	touch $(STAMP)
 

@@ -5,7 +5,7 @@ Everything about the project is in pyproject.toml; this file only adds a step to
 compile`` runs there (a subprocess, on the build's own Python, with the build directory
 first on its path), so that numba's cache of the service's kernels lands inside the
 package (``ezcompanion/guidance/__pycache__/numba-<digest>/``) and ships in the wheel.
-``pip install .`` then takes the compile (some 25 to 45 s on a 2-core machine) and the
+``pip install .`` then takes the compile (some 25 to 50 s on a 2-core machine) and the
 first ``ezcompanion run`` loads the kernels instead (under a second).
 
 The cache is found wherever the package is installed (``ezcompanion/guidance/_jit.py``),

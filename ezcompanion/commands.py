@@ -126,7 +126,7 @@ def run_compile() -> int:
     """Compile the service's kernels (the one-vehicle step, with the law, the shield and the
     abandon check; the response fits' scan) into numba's cache, or say they are there
     already; 0 either way. Run once after an install or an update, so that the first
-    ``ezcompanion run`` starts at once instead of compiling for 25 to 45 s before its link
+    ``ezcompanion run`` starts at once instead of compiling for 25 to 50 s before its link
     opens."""
     import time
 

@@ -198,7 +198,7 @@ def kernels_cached(kernel: str = "guidance/single.step_one", directory: str | No
     (subpackage/module.function, by default the service's one-vehicle step) in a form this
     process will load: an index written by this numba, for the kernel's source as it is,
     with an entry for this CPU (the checks numba makes before it loads). False on the first
-    run after an install that did not compile, or an edit, which compiles it (25 to 45 s on
+    run after an install that did not compile, or an edit, which compiles it (25 to 50 s on
     a 2-core machine). True when nothing is compiled."""
     if not JIT_ENABLED:
         return True

@@ -150,7 +150,7 @@ class CompanionService:
         if not kernels_cached():
             self.events.emit(EventKind.WARNING, self.clock.now_s(), "compiling the guidance "
                              "kernels into numba's cache (the first run after an install or "
-                             "an update: 25 to 45 s on a 2-core machine, longer on a "
+                             "an update: 25 to 50 s on a 2-core machine, longer on a "
                              "busy one; `ezcompanion compile` does it ahead); the link opens "
                              "after it")  # fmt: skip
         self.loop = GuidanceLoop(

@@ -1803,14 +1803,18 @@ def scaled(params: GuidanceParams, length: float, time: float) -> GuidanceParams
     return scale_params(params, ScaleFactors(length=length, time=time))
 
 
+# 2 to 6 zones among one another, for the screens' and the tails' stopping tests
+_FEW_ZONES = st.lists(
+    st.builds(Defender, north_m=st.floats(-6, 6), east_m=st.floats(-6, 6),
+              range_m=st.floats(0.3, 2.0), capture_radius_m=st.floats(0, 0.5),
+              speed_ratio=st.floats(0.2, 0.95)),
+    min_size=2, max_size=6,
+).map(ZoneSet.from_defenders)
+
+
 @settings(max_examples=150, deadline=None)
 @given(
-    zones=st.lists(
-        st.builds(Defender, north_m=st.floats(-6, 6), east_m=st.floats(-6, 6),
-                  range_m=st.floats(0.3, 2.0), capture_radius_m=st.floats(0, 0.5),
-                  speed_ratio=st.floats(0.2, 0.95)),
-        min_size=2, max_size=6,
-    ).map(ZoneSet.from_defenders),
+    zones=_FEW_ZONES,
     n0=st.floats(-8, 8), e0=st.floats(-8, 8), h0=st.floats(-math.pi, math.pi),
     a0=st.floats(-0.99, 0.99), rank=st.floats(0.0, 1.0), upper=st.booleans(),
     shuffle=st.integers(0, 2**32 - 1),
@@ -1857,12 +1861,7 @@ def test_a_screen_that_stops_at_the_first_zone_below_its_level_decides_as_the_fu
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
-    zones=st.lists(
-        st.builds(Defender, north_m=st.floats(-6, 6), east_m=st.floats(-6, 6),
-                  range_m=st.floats(0.3, 2.0), capture_radius_m=st.floats(0, 0.5),
-                  speed_ratio=st.floats(0.2, 0.95)),
-        min_size=2, max_size=6,
-    ).map(ZoneSet.from_defenders),
+    zones=_FEW_ZONES,
     n0=st.floats(-8, 8), e0=st.floats(-8, 8), h0=st.floats(-math.pi, math.pi),
     a0=st.floats(-0.99, 0.99), av0=st.floats(-0.99, 0.99), tau=st.sampled_from([0.0, 0.6, 1.4]),
     rank=st.floats(0.0, 1.0), shuffle=st.integers(0, 2**32 - 1),

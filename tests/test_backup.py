@@ -1450,12 +1450,12 @@ def test_certificates_asked_from_a_level_up_are_exact_there_and_below_it_below()
 
 def test_with_an_abandon_profile_certificates_asked_from_a_level_are_exact_from_it_up() -> None:
     """With an abandon profile (ArduCopter's 3.6 s hold and PX4's 1.15 s, lags 0 to 1.4 s)
-    a certificate asked from a level skips the abandon path of a sample whose own gap is
-    already below the level (the path can only take the least lower): STRAIGHT's and each
-    hard turn's value is the one computed with no level wherever either reaches the level,
-    and below the level wherever the full one is. Drawn among 1 to 3 zones, where samples
-    fall below the level and exits are found and refused alike; the early stop must
-    happen in some."""
+    STRAIGHT's certificate asked from a level skips the abandon path of a sample whose own
+    gap is already below the level (the path can only take the least lower): its value,
+    and each hard turn's (which flies every sample's path), is the one computed with no
+    level wherever either reaches the level, and below the level wherever the full one is.
+    Drawn among 1 to 3 zones, where samples fall below the level and exits are found and
+    refused alike; the early stop must happen in some."""
     dt = 0.02
     stopped = 0
     rng = np.random.default_rng(73)
@@ -1484,6 +1484,35 @@ def test_with_an_abandon_profile_certificates_asked_from_a_level_are_exact_from_
                     assert value < level, (policy, value, full, level)
                     stopped += value != full
     assert stopped > 50
+
+
+def test_a_held_turns_value_stopped_below_the_best_keeps_its_abandon_paths() -> None:
+    """A reviewer's state (8 zones, ArduCopter's hold, no lag, RIGHT held): RIGHT's
+    certificate, asked after STRAIGHT's and LEFT's, stops early below them (its full value
+    is -4.88), and the shield's rule for the held backup compares that value as it is:
+    STRAIGHT better by 2 theta, RIGHT inside a zone, gives way. With the abandon path of
+    its last sample skipped (its own gap already below the level) the value rose from
+    -0.842 to -0.834 and RIGHT was kept; the path is flown there, and it gives way."""
+    zn = np.array([[2.7969783984832777, -1.5806948157518788, 4.5691127732198105,
+                    0.018893550524811786, -6.470062613080002, -1.9169364151722048,
+                    3.7929424939097203, -4.683025381082414]])  # fmt: skip
+    ze = np.array([[0.3969231211458464, 2.8092626684085413, 2.5478272643512963,
+                    -2.4307573228527053, -0.11766251154346996, 6.957284249884237,
+                    0.348021031004091, -1.0545277737564174]])  # fmt: skip
+    zmur = np.array([[0.7147365109783493, 0.35297427447216145, 0.7025217126016214,
+                      0.969865488399519, 0.1517171999162598, 0.9547895543341272,
+                      0.990691338161613, 0.9559735943122823]])  # fmt: skip
+    zreach = np.array([[3.2665283756560566, 2.175196877691722, 2.688033896033148,
+                        1.3803517375468157, 1.4017357006140299, 1.8311333581056841,
+                        1.3110544116105471, 2.7150440473859305]])  # fmt: skip
+    s = settings_for(dataclasses.replace(PARAMS, abandon_hold_s=3.6, abandon_brake_m_s2=2.5))
+    n, e, h, a = -0.39567677701824344, -0.4490793867529117, 3.759758637338148, 0.48109855223387954
+    theta = bk.acceptance_level_m(s, zmur, zreach, 0, 1.0, 0.02)
+    certs = np.full(bk.N_POLICIES, -math.inf)
+    bk.backup_certificates(s, zn, ze, zmur, zreach, 0, n, e, h, a, a, 1.0, 0.02, math.inf,
+                           -math.inf, certs)  # fmt: skip
+    right, straight = certs[bk.BACKUP_RIGHT], certs[bk.BACKUP_STRAIGHT]
+    assert right < -s[bk.S_EPS] and straight > right + 2.0 * theta, (right, straight, theta)
 
 
 def _ring(count: int, radius_m: float) -> ZoneSet:

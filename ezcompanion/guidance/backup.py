@@ -726,8 +726,9 @@ def _tube_gap(
 @jit_inline
 def _tube_holds(delta: float, w: float) -> bool:
     """Whether the tube's bound holds (``_tube_gap``): the headings stay within a right
-    angle of the ray (with room)."""
-    return 2.0 * delta + w < 1.2
+    angle of the ray (with room). True for a delta or w not a number, as before: the tube
+    is then not a number, and the flight's certificate fails closed (``_or_none``)."""
+    return not 2.0 * delta + w >= 1.2
 
 
 @jit_inline
@@ -1271,8 +1272,11 @@ def _turn_certificate(
         if sampling:
             best, made = _sample_gap(zn, ze, zmur, zreach, kz, n, e, ch, sh, eps, speed, amax,
                                      rate, step, best, room, made)  # fmt: skip
-            if not best < stop_below:  # (below it, the abandon gap only takes it lower)
-                best = _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, best)
+            # (the abandon gap asked even where the sample is already below stop_below: the
+            # value then returned, only known to be below it, is the one the shield's rule
+            # for the held backup compares, certs[current] < -eps; a reviewer found it
+            # skipped there flipping that rule, 1 in some 70,000 steps)
+            best = _abandon(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, best)
             if best < stop_below:
                 return best
         leave = -math.inf

@@ -1411,6 +1411,34 @@ def test_the_running_screen_refuses_only_exits_whose_certificate_is_below_the_le
     assert fired > 50 and screened > 50
 
 
+def test_an_exit_whose_own_point_is_below_the_level_has_a_certificate_below_it() -> None:
+    """A turn's exit is refused first on the gap of its own look-ahead point to a few zones
+    (``_point_below``, from the zone the last screen stopped at): only where STRAIGHT's
+    certificate computed in full (no level, sampled to the end) is below the level too,
+    however little below the point is; and a turn's exit (``_exit_here``) refused so
+    keeps the certificate's verdict. Drawn with lags up to 1.4 s, from every starting
+    zone, at levels just above and below the point's own gap and the full certificate;
+    the point must decide some."""
+    dt = 0.02
+    decided = 0
+    for s, z, n, e, h, a, av in _random_states(400, 71):
+        full = bk.straight_certificate(s, *z, n, e, h, a, av, 1.0, dt, -math.inf, math.inf)
+        ch, sh = math.cos(h), math.sin(h)
+        point = lk.point_gap(*z, n, e, ch, sh, s[bk.S_EPS], 1.0, 1.0, 0.0, 0.0)
+        count = z[0].shape[1]
+        for level in (point + 1e-9, point - 1e-9, full + 0.05, full + 1e-9, full - 1e-9):
+            for first in range(count):
+                if bk._point_below(s, *z, n, e, ch, sh, 1.0, lk.BY_INDEX, first, level):
+                    decided += 1
+                    assert full < level, (full, level, point)
+            constants = bk._flight_constants(s, dt)
+            made = (bk._NO_TO_COME, math.nan, math.nan)
+            leave, _, _ = bk._exit_here(s, *z, n, e, h, ch, sh, a, av, 1.0, dt, lk.BY_INDEX, 0,
+                                        level, level, math.inf, constants, made)  # fmt: skip
+            assert (leave >= level) == (full >= level), (leave, full, level)
+    assert decided > 100
+
+
 def test_certificates_asked_from_a_level_up_are_exact_there_and_below_it_below() -> None:
     """The nominal's look ahead only asks whether a backup's certificate reaches the
     acceptance level (the shield flies nothing short of it, whatever by), so its

@@ -98,6 +98,7 @@ from ezcompanion.guidance.lookahead import (
     point_gap_below,
     segment_gap,
     segment_zone_gap,
+    zone_gap_below,
 )
 from ezcompanion.guidance.params import SHIELD_PLAN_DEPTH_MAX, SHIELD_RUNGS_MAX, GuidanceParams
 
@@ -205,6 +206,12 @@ _SCREEN_SLACK = 1e-6
 # costliest 300 of 120,000 campaign steps, 95% did by the 4th sample; a long flight paid
 # for one at every sample (bench/bench_shield.py, docs/service.md, "Cost").
 _SCREEN_EVERY = 4
+# A turn's exit is first screened by the gap of its own look-ahead point to this many
+# zones, from the one its last screen stopped at (``_point_below``): with more zones,
+# the zone a sample dips into is among the few near the last blocker by bearing, and a
+# pass over all 300 zones of a ring at every exit tried took the 300-zone tick from 58 to
+# 164 us (bench_law.py --service).
+_POINT_ZONES = 3
 
 # Taken off the circle's closed form where it lets a turn's samples go unasked
 # (``_circle_floor``), in v^2 / a_max: Simpson's rule's drift from the exact path and
@@ -1149,6 +1156,33 @@ def _exit_to_come(
     return _straight_to_come(s, a, av, speed, constants[0], dt), a, av
 
 
+@jit_inline
+def _point_below(
+    s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
+    kz: int, n: float, e: float, ch: float, sh: float, speed: float, order: IntArray,
+    first: int, below: float,
+) -> bool:
+    """Whether the look-ahead point of this state (``ch``, ``sh``: the cosine and sine of
+    its heading) is less than ``below`` from one of the ``_POINT_ZONES`` zones from
+    position ``first`` of ``order`` (``_zone_round``): the zone a turn's last exit screen
+    stopped at and its neighbours by bearing. Where it is, STRAIGHT's certificate from this
+    state is below ``below`` too (up to round-off, which the exit screens' slack,
+    ``_SCREEN_SLACK``, covers): the certificate bounds the least gap of STRAIGHT's whole
+    flight from below, and the flight starts at this point. (Its first sample is this gap
+    less the dip, the same arithmetic; its tails are lower bounds on the flight from their
+    sample on; with an abandon profile its samples take the least with more gaps.) A turn
+    whose samples dip into a zone meets many such exits: inside the zone, every one
+    (bench_law.py --service, beside a lagging autopilot: 1,144 of 1,546 exits tried, of
+    which 140 flew STRAIGHT to a certificate below the level)."""
+    count = zn.shape[1]
+    for j in range(min(count, _POINT_ZONES)):
+        _, i = _zone_round(order, first, j, count)
+        if zone_gap_below(zn, ze, zmur, zreach, kz, i, n, e, ch, sh, s[S_EPS], speed,
+                          s[S_AMAX], 0.0, 0.0, below) < below:  # fmt: skip
+            return True
+    return False
+
+
 @jit_borrow  # on its own, not inlined: two inlined copies took most of its callers' compile
 def _exit_here(
     s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray,
@@ -1160,11 +1194,15 @@ def _exit_here(
 ) -> tuple[float, int, tuple[tuple[float, float, float, float, float, float], float, float]]:
     """STRAIGHT's certificate here, as a turn's exit (exact up to ``enough``), and the
     position in ``order`` of the zone that stopped the screen (``_rest_upper``, an upper
-    bound on STRAIGHT's least gap, so on its certificate); -inf where the screen is below
-    ``screen_level`` (any subset of the exits keeps the argument; the screen drops only
-    exits whose certificate is surely below the level). Third, what is left of the turn
+    bound on STRAIGHT's least gap, so on its certificate); -inf where the exit's own
+    look-ahead point (``_point_below``) or the screen is below ``screen_level`` (any subset
+    of the exits keeps the argument; the screens drop only exits whose certificate is
+    surely below the level). Third, what is left of the turn
     here, for the next exit (``_exit_to_come``, from ``made``). (``ch``, ``sh``: the turn's
     cosine and sine of ``h``; ``constants``: ``_flight_constants(s, dt)``, the turn's.)"""
+    if _point_below(s, zn, ze, zmur, zreach, kz, n, e, ch, sh, speed, order, blocker,
+                    screen_level):
+        return -math.inf, blocker, made
     made = _exit_to_come(s, a, av, speed, dt, constants, made)
     upper, blocker = _rest_upper(s, zn, ze, zmur, zreach, kz, n, e, h, ch, sh, speed, made[0],
                                  order, blocker, screen_level)  # fmt: skip

@@ -23,7 +23,7 @@ from ezcompanion.guidance._jit import jit_borrow, jit_inline
 __all__ = [
     "BY_INDEX", "annulus_gap", "arc_end", "bearing_order", "bearing_position", "dip",
     "lookahead_gap", "near_zones", "near_zones_among", "point_gap", "point_gap_among",
-    "point_gap_below", "segment_gap", "segment_zone_gap",
+    "point_gap_below", "segment_gap", "segment_zone_gap", "zone_gap_below",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -76,7 +76,7 @@ def point_gap(
 
 
 @jit_inline
-def _zone_gap_below(
+def zone_gap_below(
     zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int, i: int,
     n: float, e: float, cos_h: float, sin_h: float, eps: float, speed: float, amax: float,
     av_rate: float, step: float, below: float,
@@ -109,7 +109,7 @@ def point_gap_below(
     that cannot come below it: the same value, cheaper where many zones are far."""  # fmt: skip
     best = below
     for i in range(zn.shape[1]):
-        best = _zone_gap_below(zn, ze, zmur, zreach, kz, i, n, e, cos_h, sin_h, eps, speed,
+        best = zone_gap_below(zn, ze, zmur, zreach, kz, i, n, e, cos_h, sin_h, eps, speed,
                                amax, av_rate, step, best)  # fmt: skip
     return best
 
@@ -123,7 +123,7 @@ def point_gap_among(
     """``point_gap_below`` over the zones ``near[:count]`` alone (``near_zones``)."""
     best = below
     for j in range(count):
-        best = _zone_gap_below(zn, ze, zmur, zreach, kz, near[j], n, e, cos_h, sin_h, eps,
+        best = zone_gap_below(zn, ze, zmur, zreach, kz, near[j], n, e, cos_h, sin_h, eps,
                                speed, amax, av_rate, step, best)  # fmt: skip
     return best
 

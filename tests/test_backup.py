@@ -1439,6 +1439,28 @@ def test_an_exit_whose_own_point_is_below_the_level_has_a_certificate_below_it()
     assert decided > 100
 
 
+def test_an_exit_a_zone_1e9_m_out_is_not_refused_on_its_points_rounding() -> None:
+    """Zones may lie up to 1e9 m out (``MAGNITUDE_LIMIT``), where the point's gap rounds
+    by more than the screens' slack: a reviewer's state whose point's gap computes
+    4.5e-8 m under the exit level while STRAIGHT's certificate reaches it. The exit is
+    taken, as without the point's test (which asks a share of the coordinates lower)."""
+    s = bk.pack_shield(dataclasses.replace(PARAMS, response_lag_s=0.0, accel_max_m_s2=3.0))
+    z = (np.array([[999999994.5955111]]), np.array([[-999999986.9636936]]),
+         np.array([[1.3172516655704334]]), np.array([[1.68912618140989]]), 0)  # fmt: skip
+    n, e, h, speed, dt = 999999992.6294606, -999999986.7517824, -3.1281155829080465, 0.2, 0.02
+    level = 1.4997923892232554
+    screen = level - bk._SCREEN_SLACK * speed * speed / s[bk.S_AMAX]
+    ch, sh = math.cos(h), math.sin(h)
+    point = lk.point_gap(*z, n, e, ch, sh, s[bk.S_EPS], speed, 3.0, 0.0, 0.0)
+    full = bk.straight_certificate(s, *z, n, e, h, 0.0, 0.0, speed, dt, -math.inf, math.inf)
+    assert point < screen <= level <= full  # the rounding the test is about
+    made = (bk._NO_TO_COME, math.nan, math.nan)
+    leave, _, _ = bk._exit_here(s, *z, n, e, h, ch, sh, 0.0, 0.0, speed, dt, lk.BY_INDEX, 0,
+                                screen, level, math.inf, bk._flight_constants(s, dt),
+                                made)  # fmt: skip
+    assert leave == full
+
+
 def test_certificates_asked_from_a_level_up_are_exact_there_and_below_it_below() -> None:
     """The nominal's look ahead only asks whether a backup's certificate reaches the
     acceptance level (the shield flies nothing short of it, whatever by), so its

@@ -212,6 +212,9 @@ _SCREEN_EVERY = 4
 # pass over all 300 zones of a ring at every exit tried took the 300-zone tick from 58 to
 # 164 us (bench_law.py --service).
 _POINT_ZONES = 3
+# ... each asked this share of the coordinates' magnitudes below its level (some 4.5 units
+# in the last place: the point's gap and the tails' rounding apart)
+_POINT_ROUNDING = 1e-15
 
 # Taken off the circle's closed form where it lets a turn's samples go unasked
 # (``_circle_floor``), in v^2 / a_max: Simpson's rule's drift from the exact path and
@@ -1177,8 +1180,12 @@ def _point_below(
     count = zn.shape[1]
     for j in range(min(count, _POINT_ZONES)):
         _, i = _zone_round(order, first, j, count)
+        # asked that much lower than ``below``: the point's gap rounds within some ulps of
+        # the coordinates, and a zone 1e8 m out rounds it by more than the screens' slack
+        # (a reviewer's state: 4.5e-8 m low at 1e9 m, where the certificate reached the level)
+        level = below - _POINT_ROUNDING * (abs(n) + abs(e) + abs(zn[kz, i]) + abs(ze[kz, i]))
         if zone_gap_below(zn, ze, zmur, zreach, kz, i, n, e, ch, sh, s[S_EPS], speed,
-                          s[S_AMAX], 0.0, 0.0, below) < below:  # fmt: skip
+                          s[S_AMAX], 0.0, 0.0, level) < level:  # fmt: skip
             return True
     return False
 

@@ -1170,13 +1170,14 @@ def _point_below(
     position ``first`` of ``order`` (``_zone_round``): the zone a turn's last exit screen
     stopped at and its neighbours by bearing. Where it is, STRAIGHT's certificate from this
     state is below ``below`` too (up to round-off, which the exit screens' slack,
-    ``_SCREEN_SLACK``, covers): the certificate bounds the least gap of STRAIGHT's whole
-    flight from below, and the flight starts at this point. (Its first sample is this gap
-    less the dip, the same arithmetic; its tails are lower bounds on the flight from their
-    sample on; with an abandon profile its samples take the least with more gaps.) A turn
-    whose samples dip into a zone meets many such exits: inside the zone, every one
-    (bench_law.py --service, beside a lagging autopilot: 1,144 of 1,546 exits tried, of
-    which 140 flew STRAIGHT to a certificate below the level)."""
+    ``_SCREEN_SLACK``, and ``_POINT_ROUNDING`` cover): the certificate bounds the least
+    gap of STRAIGHT's whole flight from below, and the flight starts at this point. (Its
+    first sample is this gap less the dip, the same arithmetic; its tails are lower
+    bounds on the flight from their sample on; with an abandon profile its samples take
+    the least with more gaps.) A turn whose samples dip into a zone meets many such
+    exits: inside the zone, every one (bench_law.py --service, beside a lagging autopilot:
+    1,144 of 1,546 exits tried, of which 140 flew STRAIGHT to a certificate below the
+    level)."""
     count = zn.shape[1]
     for j in range(min(count, _POINT_ZONES)):
         _, i = _zone_round(order, first, j, count)

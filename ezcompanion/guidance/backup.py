@@ -1205,9 +1205,9 @@ def _exit_here(
     bound on STRAIGHT's least gap, so on its certificate); -inf where the exit's own
     look-ahead point (``_point_below``) or the screen is below ``screen_level`` (any subset
     of the exits keeps the argument; the screens drop only exits whose certificate is
-    surely below the level). Third, what is left of the turn
-    here, for the next exit (``_exit_to_come``, from ``made``). (``ch``, ``sh``: the turn's
-    cosine and sine of ``h``; ``constants``: ``_flight_constants(s, dt)``, the turn's.)"""
+    surely below the level). Third, what is left of the turn here, for the next exit
+    (``_exit_to_come``, from ``made``). (``ch``, ``sh``: the turn's cosine and sine of
+    ``h``; ``constants``: ``_flight_constants(s, dt)``, the turn's.)"""
     if _point_below(s, zn, ze, zmur, zreach, kz, n, e, ch, sh, speed, order, blocker,
                     screen_level):
         return -math.inf, blocker, made

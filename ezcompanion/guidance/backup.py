@@ -441,6 +441,18 @@ def sample_ticks(s: FloatArray, speed: float, dt: float) -> int:
 
 
 @jit_inline
+def _flyable(s: FloatArray, n: float, e: float, h: float, a: float, av: float,
+             speed: float) -> bool:
+    """Whether a flight can be computed from this state: every number finite, the speed
+    above 0 and the actuator inside its bound (|a| < a_max, as the model keeps it). The
+    public entries below ask it first and fail closed where it is not: a NaN or infinite
+    number flies a path of NaN, whose gaps no comparison counts, so a turn's closed-form
+    circle would be its certificate (a NaN actuator state gave LEFT 1.07 m)."""
+    return (abs(n) + abs(e) + abs(h) + abs(av) + speed < math.inf and speed > 0.0
+            and abs(a) < s[S_AMAX])
+
+
+@jit_inline
 def _or_none(value: float) -> float:
     """A certificate or value as computed, but -inf for +inf or NaN: with at least one zone
     every real one is finite, so those are an overflow, never a certificate (fail closed)."""
@@ -997,7 +1009,10 @@ def straight_certificate(
     stop_below: float, enough: float,
 ) -> float:
     """Certificate of STRAIGHT from this state (``_straight_flight``, with the cosine and
-    sine of ``h`` and the flight's constants computed here, the zones asked by index)."""
+    sine of ``h`` and the flight's constants computed here, the zones asked by index);
+    -inf where the state is not ``_flyable``."""
+    if not _flyable(s, n, e, h, a, av, speed):
+        return -math.inf
     return _straight_by_index(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt,
                               stop_below, enough, BY_INDEX)  # fmt: skip
 
@@ -1269,7 +1284,10 @@ def turn_certificate(
     dt: float, exit_now: float, exit_level: float, stop_below: float, enough: float,
     every_step: bool,
 ) -> float:
-    """``_turn_certificate``, with a room of its own (``_zone_room``)."""
+    """``_turn_certificate``, with a room of its own (``_zone_room``); -inf where the
+    state is not ``_flyable``."""
+    if not _flyable(s, n, e, h, a, av, speed):
+        return -math.inf
     return _turn_certificate(s, zn, ze, zmur, zreach, kz, policy, n, e, h, a, av, speed, dt,
                              exit_now, exit_level, stop_below, enough, every_step,
                              max(enough, stop_below), _zone_room(zn, ze, kz, n, e))  # fmt: skip
@@ -1456,7 +1474,11 @@ def backup_certificates(
     kz: int, n: float, e: float, h: float, a: float, av: float, speed: float, dt: float,
     enough: float, below: float, out: FloatArray,
 ) -> None:
-    """``_backup_certificates``, with a room of its own (``_zone_room``)."""
+    """``_backup_certificates``, with a room of its own (``_zone_room``); all -inf where
+    the state is not ``_flyable``."""
+    if not _flyable(s, n, e, h, a, av, speed):
+        out[:_N_BACKUPS] = -math.inf
+        return
     _backup_certificates(s, zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, dt, enough, below,
                          out, _zone_room(zn, ze, kz, n, e))  # fmt: skip
 
@@ -1641,9 +1663,11 @@ def rung_certificates(
     their cap, l - theta, is no more than the best: their slots keep what the caller put
     there (-inf in the shield: a held turn of such a rung gives way to the better one).
     Each side's turn is flown once for all its rungs (``_rung_turn``), when its first rung
-    is valued, and each rung's certificate read from that flight (``rung_value``)."""
+    is valued, and each rung's certificate read from that flight (``rung_value``). None
+    where the state is not ``_flyable``."""
     rungs = int(s[S_RUNGS])
-    if rungs == 0 or below >= rung_level_m(s, 1, theta) - theta:
+    if (rungs == 0 or below >= rung_level_m(s, 1, theta) - theta
+            or not _flyable(s, n, e, h, a, av, speed)):
         return
     levels = np.empty(rungs)
     for r in range(rungs):
@@ -1855,7 +1879,10 @@ def plan_value(
 ) -> float:
     """The value of a held plan from this state: the least gap (margin subtracted) of the
     control steps it still has to fly, each flown as the shield flies it, and then of
-    STRAIGHT for ever (its certificate). Under the model the flight comes no nearer."""
+    STRAIGHT for ever (its certificate). Under the model the flight comes no nearer.
+    -inf where the state is not ``_flyable``."""
+    if not _flyable(s, n, e, h, a, av, speed):
+        return -math.inf
     floor = math.inf
     steps = int(plan[PLAN_STEPS])
     for j in range(int(plan[PLAN_SEGMENT]), int(plan[PLAN_COUNT])):
@@ -1994,6 +2021,8 @@ def shield_one(
     certificate of the held backup at the start, the certificate one step ahead on the
     nominal, exact from the acceptance level up). ``plan``: the vehicle's plan row
     (``PLAN_SIZE``), read and updated where the held backup is (or becomes) BACKUP_PLAN.
+    Where the state is not ``_flyable``: (NaN, NaN, ``current``, 0, -inf, -inf), nothing
+    certified and no actuator state to fly.
 
     With an abandon profile every certificate also flies the abandon path of each of its
     states (``_abandon``); where that leaves the step flying a backup not certified so
@@ -2015,6 +2044,11 @@ def shield_one(
     counts a turn only where STRAIGHT is below theta. For the same reason a step whose
     held single backup ``backup_certificates`` puts at theta or above with the path is
     taken as it is only where ``_floor_certificate`` agrees.)"""
+    if not _flyable(s, n, e, h, a, av, speed):
+        # nothing can be computed: no certificate, no weight, no actuator state after it
+        out[k, 0], out[k, 1], out[k, 2], out[k, 3] = math.nan, math.nan, current, 0.0
+        out[k, 4] = out[k, 5] = -math.inf
+        return
     checked = s[S_AB_HOLD] > 0.0
     kept = plan.copy() if checked else plan
     room = _zone_room(zn, ze, kz, n, e)  # for the zones its flights ask

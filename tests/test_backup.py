@@ -702,6 +702,59 @@ def test_the_shield_overrides_a_nominal_that_flies_into_a_zone() -> None:
     assert min(weights) < 0.5 and max(weights) == 1.0
 
 
+_STATE_NAMES = ("north", "east", "course", "a", "a_v", "speed")
+
+
+@pytest.mark.parametrize("profile", [None, "copter", "plane"])
+@pytest.mark.parametrize("lag_s", [0.0, 0.6])
+@pytest.mark.parametrize("which", range(len(_STATE_NAMES)))
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_a_state_with_a_nan_or_infinite_number_certifies_nothing(
+    profile: str | None, lag_s: float, which: int, bad: float
+) -> None:
+    """Fail closed: a NaN or infinite number anywhere in the state (or an actuator at its
+    bound, outside the model) gives every certificate -inf, the shield no weight, no
+    certificate and no actuator state, and the abandon path no gap. (A NaN actuator state
+    gave LEFT and RIGHT 1.07 m here, and the shield held LEFT on it: a flight of NaN keeps
+    no gap any comparison counts, so the turn's closed-form circle was its value.)"""
+    zones = zones_of([(0.0, 3.0, 1.5, 0.5, 0.7), (4.0, -2.0, 1.0, 0.3, 0.5)])
+    z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m)
+    abandon = {None: {}, "copter": {"hold_s": 3.0, "brake_m_s2": 2.5},
+               "plane": {"turn_s": 2.0, "hold_s": 10.0, "brake_m_s2": 0.0}}[profile]
+    params = dataclasses.replace(PARAMS, response_lag_s=lag_s)
+    s = bk.pack_shield(params, **abandon)
+    state = [0.0, 0.0, 0.0, 0.3, 0.3, 1.0]
+    state[which] = bad
+    cases = [state]
+    if which == 3:  # the actuator at its bound: outside the model, refused as well
+        cases.append([*state[:3], math.copysign(params.accel_max_m_s2, bad), *state[4:]])
+    dt, theta = 0.02, 0.1
+    for n, e, h, a, av, v in cases:
+        certs = np.full(bk.N_POLICIES, -math.inf)
+        bk.backup_certificates(s, *z, 0, n, e, h, a, av, v, dt, math.inf, -math.inf, certs)
+        bk.rung_certificates(s, *z, 0, n, e, h, a, av, v, dt, theta, -math.inf, -math.inf,
+                             certs)  # fmt: skip
+        values = [*certs,
+                  bk.straight_certificate(s, *z, 0, n, e, h, a, av, v, dt, -math.inf, math.inf),
+                  bk.plan_value(s, *z, 0, np.zeros(bk.PLAN_SIZE, dtype=np.int64), n, e, h, a,
+                                av, v, dt)]  # fmt: skip
+        for policy in (bk.BACKUP_LEFT, bk.BACKUP_RIGHT):
+            values.append(bk.turn_certificate(s, *z, 0, policy, n, e, h, a, av, v, dt, -math.inf,
+                                              theta, -math.inf, math.inf, False))  # fmt: skip
+        assert values == [-math.inf] * len(values), (n, e, h, a, av, v, values)
+        for current in (bk.BACKUP_NONE, bk.BACKUP_LEFT, bk.BACKUP_STRAIGHT):
+            out = np.zeros((1, 6))
+            bk.shield_one(s, *z, 0, n, e, h, a, av, v, 0.1, dt, current, math.nan,
+                          np.zeros(bk.PLAN_SIZE, dtype=np.int64), out, 0)  # fmt: skip
+            assert math.isnan(out[0, 0]) and math.isnan(out[0, 1]), out
+            assert out[0, 2] == current and out[0, 3] == 0.0
+            assert out[0, 4] == out[0, 5] == -math.inf
+    if abandon:  # (it has no actuator model: an actuator at its bound is a state it flies)
+        gap = abandon_gap(*z, 0, *state, lag_s, abandon.get("turn_s", 0.0), abandon["hold_s"],
+                          abandon["brake_m_s2"], 0.1, math.inf)  # fmt: skip
+        assert gap == -math.inf, gap
+
+
 def held_after_one_step(
     state: tuple[float, float, float], held: int
 ) -> tuple[int, FloatArray, float]:
@@ -2268,6 +2321,38 @@ def test_the_abandon_gap_bounds_a_lagging_vehicle_that_turns_on_to_the_setpoint(
         best + 1e-3 - margin,
     )  # fmt: skip
     assert close <= best + 1e-5
+
+
+def test_the_abandon_gap_budgets_simpsons_rule_at_its_sample_cap() -> None:
+    """A turn of 22 rad still to come (tau 1.47 s, a_v 3, 0.2 m/s) over a 30 s hold: at the
+    64-sample cap each sample turns up to 3.4 rad, and Simpson's rule put the path 2 mm
+    off; without its error bound (``abandon._simpson_error``) the gap was 1.9 mm above the
+    flown path's least (a reviewer's case, then 100 zones drawn tangent to the path)."""
+    speed, lag_s, flown, hold_s = 0.2, 1.4667, 3.0, 30.0
+    t = np.linspace(0.0, hold_s, 4001)
+    heading = lag_s * flown / speed * (1.0 - np.exp(-t / lag_s))
+    path_n = np.concatenate([[0.0], np.cumsum(np.cos(heading[1:]) + np.cos(heading[:-1]))])
+    path_e = np.concatenate([[0.0], np.cumsum(np.sin(heading[1:]) + np.sin(heading[:-1]))])
+    path_n, path_e = path_n * 0.5 * speed * t[1], path_e * 0.5 * speed * t[1]
+    rng = np.random.default_rng(7)
+    cases = [(-5.165952857061838, 0.24314310579217938, 0.8596998714151383, 0.0,
+              0.37022926049641286)]  # fmt: skip
+    for _ in range(100):
+        i = rng.integers(0, len(t))
+        mu, reach, bearing = rng.uniform(0.05, 0.5), rng.uniform(0.05, 1.0), rng.uniform(0, 7)
+        range_m = rng.uniform(0.1, 1.0)
+        ahead_n = path_n[i] + mu * range_m * math.cos(heading[i]) + reach * math.cos(bearing)
+        ahead_e = path_e[i] + mu * range_m * math.sin(heading[i]) + reach * math.sin(bearing)
+        cases.append((ahead_n, ahead_e, range_m, max(reach - mu * range_m, 0.0), mu))
+    margin = PARAMS.shield_margin_m
+    for case in cases:
+        zones = zones_of([case])
+        got = margin + abandon_gap(
+            zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0, 0.0, 0.0, 0.0, 0.0,
+            flown, speed, lag_s, 0.0, hold_s, 0.0, margin, math.inf,
+        )  # fmt: skip
+        best = flown_abandon_gap(zones, 0.0, 0.0, 0.0, speed, flown, lag_s, hold_s, 0.0)
+        assert got <= best + 1e-5, case
 
 
 @settings(max_examples=150, deadline=None)

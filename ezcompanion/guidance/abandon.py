@@ -127,10 +127,15 @@ def abandon_gap(
     mu R ahead, in closed form (a braking vehicle's look-ahead shrinks to its reach disc).
     A velocity setpoint (``turn_s`` 0) flown with a lag ``lag_s`` leads the course by
     tau a_v / v (``flown_accel`` a_v): the vehicle turns on to it as its lag lets the turn
-    die out (``_lagged_straight``). ``below`` where no profile is set."""
+    die out (``_lagged_straight``). ``below`` where no profile is set; -inf where a number
+    of the state is NaN or infinite or the speed not above 0 (a path of NaN keeps no gap
+    that a comparison counts, so it would clear every level: fail closed)."""
     hold = hold_s
     if hold <= 0.0:
         return below
+    if not (abs(n) + abs(e) + abs(heading) + abs(accel) + abs(flown_accel) + speed < math.inf
+            and speed > 0.0):
+        return -math.inf
     if turn_s > 0.0:
         return _course_turn_on(zn, ze, zmur, zreach, kz, n, e, heading, accel, flown_accel,
                                speed, lag_s, turn_s, hold, margin_m, below)  # fmt: skip
@@ -236,14 +241,18 @@ def _lagged_straight(
     a_abs = abs(flown_accel)
     rate = a_abs / lag_s
     cos_j, sin_j = math.cos(h), math.sin(h)  # of each sample's course, computed once
+    off = margin_m  # the margin, and how far Simpson's rule may have put the sample so far
+    inv_lag = 1.0 / lag_s
+    turn_rate = abs(lead) * inv_lag  # the course's rate at the sample, |L| / tau e^(-t / tau)
+    decay = math.exp(-step * inv_lag)
     for j in range(count + 1):
-        best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, cos_j, sin_j, margin_m,
+        best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, cos_j, sin_j, off,
                                speed, a_abs, rate, step, best)  # fmt: skip
         if j == count:
             break
         if j % _LEAD_CHECK_EVERY == 0 and j > 0 and _lagged_tail(
                 zn, ze, zmur, zreach, kz, n, e, _heading_at(h, lead, lag_s, j * step), h_to,
-                length - speed * j * step, brake > 0.0, margin_m, mur_max) >= best:
+                length - speed * j * step, brake > 0.0, off, mur_max) >= best:
             # the samples so far cover the path to here, the closed form from here the
             # rest: the least is ``best`` (as the check before the first sample)
             return best
@@ -254,11 +263,29 @@ def _lagged_straight(
         n += f * (cos_j + 4.0 * math.cos(hm) + cos_1)
         e += f * (sin_j + 4.0 * math.sin(hm) + sin_1)
         cos_j, sin_j = cos_1, sin_1
+        off += _simpson_error(speed, step, turn_rate, inv_lag)
+        turn_rate *= decay
     h_from = _heading_at(h, lead, lag_s, sampled_t)
     rest = speed * (hold_s - sampled_t) + (0.5 * speed * speed / brake if brake > 0.0 else 0.0)
     tail = _lagged_tail(zn, ze, zmur, zreach, kz, n, e, h_from, h_to, rest, brake > 0.0,
-                        margin_m, mur_max)  # fmt: skip
+                        off, mur_max)  # fmt: skip
     return min(best, tail)
+
+
+@jit_inline
+def _simpson_error(speed: float, step: float, x: float, c: float) -> float:
+    """How far Simpson's rule over one ``step`` may put a position flown at ``speed`` along
+    a course h(t) whose rate is at most ``x`` over the step and whose k-th derivative is
+    that rate times (-``c``)^(k - 1) (h + L (1 - e^(-c t)), c = 1 / tau). The rule's error
+    for u(t) = (cos h, sin h) is at most step^5 / 2880 max |u^(4)| (its Peano kernel keeps
+    one sign, so the bound holds for a vector), and by Faa di Bruno's formula |u^(4)| is at
+    most the sum over the partitions of four derivatives of the products of |h^(k)|:
+    x c^3 + 7 x^2 c^2 + 6 x^3 c + x^4 (the Stirling numbers S(4, k)). At the 64-sample cap
+    a turn of 22 rad put the sampled path 2 mm off (a reviewer; the bound was 1.97 mm above
+    the flown least gap); at tau / 6 a sample a lead of 0.6 rad, some 1e-7 m a sample."""
+    x2 = x * x
+    c2 = c * c
+    return speed * step**5 / 2880.0 * (x * c2 * c + 7.0 * x2 * c2 + 6.0 * x2 * x * c + x2 * x2)
 
 
 @jit_inline

@@ -2326,7 +2326,7 @@ def test_the_abandon_gap_bounds_a_lagging_vehicle_that_turns_on_to_the_setpoint(
 def test_the_abandon_gap_budgets_simpsons_rule_at_its_sample_cap() -> None:
     """A turn of 22 rad still to come (tau 1.47 s, a_v 3, 0.2 m/s) over a 30 s hold: at the
     64-sample cap each sample turns up to 3.4 rad, and Simpson's rule put the path 2 mm
-    off; without its error bound (``abandon._simpson_error``) the gap was 1.9 mm above the
+    off; without its error bound (``abandon._simpson_rate``) the gap was 1.9 mm above the
     flown path's least (a reviewer's case, then 100 zones drawn tangent to the path)."""
     speed, lag_s, flown, hold_s = 0.2, 1.4667, 3.0, 30.0
     t = np.linspace(0.0, hold_s, 4001)

@@ -26,7 +26,7 @@ from ezcompanion.guidance.params import GuidanceParams
 from ezcompanion.guidance.zones import ZoneSet
 
 __all__ = ["ABANDON_PROFILES", "AbandonProfile", "abandon_gap", "abandon_gap_batch",
-           "abandon_gap_m"]
+           "abandon_gap_m", "flight_abandon_gap"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -42,6 +42,9 @@ _LEAD_TOL_MARGINS = 1e-2
 # ... and at every this many samples the closed form from the sample on is tried: where it
 # clears the least so far, the rest of the turn need not be sampled
 _LEAD_CHECK_EVERY = 4
+# ... its courses are made by products of e^(-step / 2 tau), each within this share of the
+# turn to come per sample of its exact course (a few units in the last place each)
+_EXP_ROUNDING = 1e-15
 # A course setpoint's turn-on (ArduPlane SITL, five kills mid-engagement at 22.9 m/s, leads
 # 7-40 degrees): the course came back against the turn by at most 0.02 degrees in 0.1 s (its
 # ground velocity's centimetre resolution) and went past the course sent by 3.5% of the lead
@@ -109,8 +112,29 @@ def abandon_gap_m(
     return out.reshape(shape)
 
 
-@jit_borrow  # on its own, not inlined: its copies took a share of each certificate's compile
+@jit_borrow
 def abandon_gap(
+    zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
+    n: float, e: float, heading: float, accel: float, flown_accel: float, speed: float,
+    lag_s: float, turn_s: float, hold_s: float, brake_m_s2: float, margin_m: float,
+    below: float,
+) -> float:
+    """``flight_abandon_gap``, -inf where a number of the state is NaN or infinite or the
+    speed not above 0 (a path of NaN keeps no gap that a comparison counts, so it would
+    clear every level: fail closed). The shield asks ``flight_abandon_gap`` of the states
+    of its flights, which it starts only from a state it has checked so
+    (``backup._flyable``): this check there cost a tenth of a step with ArduCopter's
+    profile (bench_law.py --service, 228 us against 193)."""
+    if not (abs(n) + abs(e) + abs(heading) + abs(accel) + abs(flown_accel) + speed < math.inf
+            and speed > 0.0):
+        return -math.inf
+    return flight_abandon_gap(zn, ze, zmur, zreach, kz, n, e, heading, accel, flown_accel,
+                              speed, lag_s, turn_s, hold_s, brake_m_s2, margin_m,
+                              below)  # fmt: skip
+
+
+@jit_borrow  # on its own, not inlined: its copies took a share of each certificate's compile
+def flight_abandon_gap(
     zn: FloatArray, ze: FloatArray, zmur: FloatArray, zreach: FloatArray, kz: int,
     n: float, e: float, heading: float, accel: float, flown_accel: float, speed: float,
     lag_s: float, turn_s: float, hold_s: float, brake_m_s2: float, margin_m: float,
@@ -127,15 +151,11 @@ def abandon_gap(
     mu R ahead, in closed form (a braking vehicle's look-ahead shrinks to its reach disc).
     A velocity setpoint (``turn_s`` 0) flown with a lag ``lag_s`` leads the course by
     tau a_v / v (``flown_accel`` a_v): the vehicle turns on to it as its lag lets the turn
-    die out (``_lagged_straight``). ``below`` where no profile is set; -inf where a number
-    of the state is NaN or infinite or the speed not above 0 (a path of NaN keeps no gap
-    that a comparison counts, so it would clear every level: fail closed)."""
+    die out (``_lagged_straight``). ``below`` where no profile is set. (Of a state of finite
+    numbers and a speed above 0; ``abandon_gap`` checks that first.)"""
     hold = hold_s
     if hold <= 0.0:
         return below
-    if not (abs(n) + abs(e) + abs(heading) + abs(accel) + abs(flown_accel) + speed < math.inf
-            and speed > 0.0):
-        return -math.inf
     if turn_s > 0.0:
         return _course_turn_on(zn, ze, zmur, zreach, kz, n, e, heading, accel, flown_accel,
                                speed, lag_s, turn_s, hold, margin_m, below)  # fmt: skip
@@ -241,51 +261,61 @@ def _lagged_straight(
     a_abs = abs(flown_accel)
     rate = a_abs / lag_s
     cos_j, sin_j = math.cos(h), math.sin(h)  # of each sample's course, computed once
-    off = margin_m  # the margin, and how far Simpson's rule may have put the sample so far
-    inv_lag = 1.0 / lag_s
-    turn_rate = abs(lead) * inv_lag  # the course's rate at the sample, |L| / tau e^(-t / tau)
-    decay = math.exp(-step * inv_lag)
+    # e^(-t / tau) at the samples and half-way, by products (two exponentials a path, not
+    # two a sample); the courses so made are within ``slack_h`` of h + L (1 - e^(-t / tau))
+    half = math.exp(-0.5 * step / lag_s)
+    full = half * half
+    decayed = 1.0  # e^(-j step / tau)
+    slack_h = abs(lead) * _EXP_ROUNDING * (count + 2)
+    # the margin, and how far Simpson's rule (``_simpson_rate``) and the courses' rounding
+    # may have put the sample so far
+    off = margin_m
+    quintic = speed * step * step * step * step * step / 2880.0
+    c = 1.0 / lag_s
     for j in range(count + 1):
-        best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, cos_j, sin_j, off,
-                               speed, a_abs, rate, step, best)  # fmt: skip
+        best = point_gap_below(zn, ze, zmur, zreach, kz, n, e, cos_j, sin_j,
+                               off + mur_max * slack_h, speed, a_abs, rate, step,
+                               best)  # fmt: skip
         if j == count:
             break
+        rest = length - speed * j * step
         if j % _LEAD_CHECK_EVERY == 0 and j > 0 and _lagged_tail(
-                zn, ze, zmur, zreach, kz, n, e, _heading_at(h, lead, lag_s, j * step), h_to,
-                length - speed * j * step, brake > 0.0, off, mur_max) >= best:
+                zn, ze, zmur, zreach, kz, n, e, h + lead * (1.0 - decayed), h_to, rest,
+                brake > 0.0, off + (rest + mur_max) * slack_h, mur_max) >= best:
             # the samples so far cover the path to here, the closed form from here the
             # rest: the least is ``best`` (as the check before the first sample)
             return best
-        hm = _heading_at(h, lead, lag_s, (j + 0.5) * step)
-        h1 = _heading_at(h, lead, lag_s, (j + 1) * step)
+        hm = h + lead * (1.0 - decayed * half)
+        h1 = h + lead * (1.0 - decayed * full)
         cos_1, sin_1 = math.cos(h1), math.sin(h1)
         f = speed * step / 6.0
         n += f * (cos_j + 4.0 * math.cos(hm) + cos_1)
         e += f * (sin_j + 4.0 * math.sin(hm) + sin_1)
         cos_j, sin_j = cos_1, sin_1
-        off += _simpson_error(speed, step, turn_rate, inv_lag)
-        turn_rate *= decay
-    h_from = _heading_at(h, lead, lag_s, sampled_t)
+        off += quintic * _simpson_rate(abs(lead) * c * decayed, c) + speed * step * slack_h
+        decayed *= full
+    h_from = h + lead * (1.0 - decayed)
     rest = speed * (hold_s - sampled_t) + (0.5 * speed * speed / brake if brake > 0.0 else 0.0)
     tail = _lagged_tail(zn, ze, zmur, zreach, kz, n, e, h_from, h_to, rest, brake > 0.0,
-                        off, mur_max)  # fmt: skip
+                        off + (rest + mur_max) * slack_h, mur_max)  # fmt: skip
     return min(best, tail)
 
 
 @jit_inline
-def _simpson_error(speed: float, step: float, x: float, c: float) -> float:
-    """How far Simpson's rule over one ``step`` may put a position flown at ``speed`` along
-    a course h(t) whose rate is at most ``x`` over the step and whose k-th derivative is
-    that rate times (-``c``)^(k - 1) (h + L (1 - e^(-c t)), c = 1 / tau). The rule's error
-    for u(t) = (cos h, sin h) is at most step^5 / 2880 max |u^(4)| (its Peano kernel keeps
-    one sign, so the bound holds for a vector), and by Faa di Bruno's formula |u^(4)| is at
-    most the sum over the partitions of four derivatives of the products of |h^(k)|:
-    x c^3 + 7 x^2 c^2 + 6 x^3 c + x^4 (the Stirling numbers S(4, k)). At the 64-sample cap
-    a turn of 22 rad put the sampled path 2 mm off (a reviewer; the bound was 1.97 mm above
-    the flown least gap); at tau / 6 a sample a lead of 0.6 rad, some 1e-7 m a sample."""
+def _simpson_rate(x: float, c: float) -> float:
+    """How far Simpson's rule over one step may put a position, over speed step^5 / 2880,
+    along a course h(t) whose rate is at most ``x`` over the step and whose k-th derivative
+    is that rate times (-``c``)^(k - 1) (h + L (1 - e^(-c t)), c = 1 / tau). The rule's
+    error for u(t) = (cos h, sin h) is at most step^5 / 2880 max |u^(4)| (its Peano kernel
+    keeps one sign, so the bound holds for a vector), and by Faa di Bruno's formula
+    |u^(4)| is at most the sum over the partitions of four derivatives of the products of
+    |h^(k)|: x c^3 + 7 x^2 c^2 + 6 x^3 c + x^4 (the Stirling numbers S(4, k)). At the
+    64-sample cap a turn of 22 rad put the sampled path 2 mm off (a reviewer; the bound was
+    1.97 mm above the flown least gap); at tau / 6 a sample a lead of 0.6 rad, some 1e-7 m
+    a sample."""
     x2 = x * x
     c2 = c * c
-    return speed * step**5 / 2880.0 * (x * c2 * c + 7.0 * x2 * c2 + 6.0 * x2 * x * c + x2 * x2)
+    return x * c2 * c + 7.0 * x2 * c2 + 6.0 * x2 * x * c + x2 * x2
 
 
 @jit_inline

@@ -84,7 +84,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ezcompanion.guidance._jit import jit, jit_borrow, jit_inline
-from ezcompanion.guidance.abandon import abandon_gap
+from ezcompanion.guidance.abandon import flight_abandon_gap
 from ezcompanion.guidance.actuator import advance_one
 from ezcompanion.guidance.lookahead import (
     BY_INDEX,
@@ -296,7 +296,7 @@ def _abandon(
     gap, compiled on its own, is made only where a profile is set)."""
     if s[S_AB_HOLD] <= 0.0:
         return below
-    return abandon_gap(
+    return flight_abandon_gap(
         zn, ze, zmur, zreach, kz, n, e, h, a, av, speed, s[S_TAU], s[S_AB_TURN], s[S_AB_HOLD],
         s[S_AB_BRAKE], s[S_EPS], below,
     )  # fmt: skip

@@ -42,8 +42,9 @@ _LEAD_TOL_MARGINS = 1e-2
 # ... and at every this many samples the closed form from the sample on is tried: where it
 # clears the least so far, the rest of the turn need not be sampled
 _LEAD_CHECK_EVERY = 4
-# ... its courses are made by products of e^(-step / 2 tau), each within this share of the
-# turn to come per sample of its exact course (a few units in the last place each)
+# ... its courses are made by products of e^(-step / 2 tau): after j samples within j + 2
+# times this share of the lead L of the exact course (each product rounds by a few units
+# in the last place)
 _EXP_ROUNDING = 1e-15
 # A course setpoint's turn-on (ArduPlane SITL, five kills mid-engagement at 22.9 m/s, leads
 # 7-40 degrees): the course came back against the turn by at most 0.02 degrees in 0.1 s (its

@@ -22,6 +22,7 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from ezcompanion.config import load_scenario
+from ezcompanion.errors import ConfigError, StateError
 from ezcompanion.field import scale_scenario
 from ezcompanion.guidance import (
     Defender,
@@ -2321,6 +2322,41 @@ def test_the_abandon_gap_bounds_a_lagging_vehicle_that_turns_on_to_the_setpoint(
         best + 1e-3 - margin,
     )  # fmt: skip
     assert close <= best + 1e-5
+
+
+def test_an_abandon_path_of_a_number_not_finite_or_a_batch_it_cannot_read_is_refused() -> None:
+    """A reviewer's cases: an infinite lag gave the lagging path +inf (its lead infinite,
+    its end course NaN, nothing sampled), a NaN hold +inf too, and ``abandon_gap_m`` read
+    the zones of a third vehicle past the end of two rows (9.70 m where the gap is some
+    1e6 m). The kernel fails closed, the profile and the batch wrapper refuse, naming the
+    field."""
+    zones = zones_of([(0.0, 3.0, 1.5, 0.5, 0.7)])
+    z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m)
+    state = (0.0, 0.0, 0.0, 1.0, 1.0, 1.0)  # north, east, course, a, a_v, speed
+    good = (0.6, 0.0, 3.6, 2.5, 0.1)  # lag, turn, hold, brake, margin
+    assert math.isfinite(abandon_gap(*z, 0, *state, *good, math.inf))
+    for i, bad in itertools.product(range(len(good)), (math.nan, math.inf)):
+        settings = list(good)
+        settings[i] = bad
+        assert abandon_gap(*z, 0, *state, *settings, math.inf) == -math.inf, (i, bad)
+    for name in ("turn_s", "hold_s", "brake_m_s2"):
+        with pytest.raises(ConfigError, match=name):
+            AbandonProfile(**{"turn_s": 0.0, "hold_s": 1.0, "brake_m_s2": 1.0, name: math.nan})
+    with pytest.raises(ConfigError, match="hold_s"):
+        AbandonProfile(turn_s=0.0, hold_s=-1.0, brake_m_s2=1.0)
+    two = zones_of([(1e6, 0.0, 1.0, 0.1, 0.5), (1e6, 1.0, 1.0, 0.1, 0.5)])
+    two = dataclasses.replace(two, names=two.names[:1], **{  # two rows of one zone each
+        name: getattr(two, name).reshape(2, 1)
+        for name in ("north_m", "east_m", "mu_range_m", "reach_term", "reach_m")})
+    at = {"north_m": np.zeros(3), "east_m": np.zeros(3), "course_rad": np.zeros(3),
+          "accel_lat_m_s2": np.zeros(3), "flown_accel_m_s2": np.zeros(3),
+          "speed_m_s": np.ones(3)}  # fmt: skip
+    profile = ABANDON_PROFILES["px4"]
+    with pytest.raises(StateError, match="zones"):
+        abandon_gap_m(profile, PARAMS, two, **at)
+    with pytest.raises(StateError, match="lag_s"):
+        abandon_gap_m(profile, PARAMS, zones, **at, lag_s=np.array([0.5, math.inf, 0.5]))
+    assert abandon_gap_m(profile, PARAMS, zones, **at).shape == (3,)
 
 
 def test_the_abandon_gap_budgets_simpsons_rule_at_its_sample_cap() -> None:

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from ezcompanion.errors import ConfigError, StateError
 from ezcompanion.guidance._jit import jit, jit_borrow, jit_inline
 from ezcompanion.guidance.lookahead import point_gap_below, segment_gap
 from ezcompanion.guidance.params import GuidanceParams
@@ -62,6 +63,12 @@ class AbandonProfile:
     hold_s: float
     brake_m_s2: float
 
+    def __post_init__(self) -> None:
+        for name in ("turn_s", "hold_s", "brake_m_s2"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
+                raise ConfigError(name, value, "must be a finite number >= 0")
+
     def packed(self, margin_m: float) -> FloatArray:
         """(turn, hold, brake, ``margin_m``): the settings ``abandon_gap`` takes."""
         return np.array([self.turn_s, self.hold_s, self.brake_m_s2, margin_m])
@@ -100,15 +107,22 @@ def abandon_gap_m(
     ``response_lag_s``)."""
     packed = profile.packed(params.shield_margin_m)
     shape = np.shape(north_m)
+    size = int(np.prod(shape))
+    rows = zones.north_m.shape[0]
+    if rows not in (1, size):  # (the kernel reads zone row k for vehicle k)
+        raise StateError("zones", rows, f"must have 1 or {size} rows for this batch")
+    lags = np.asarray(params.response_lag_s if lag_s is None else lag_s, dtype=np.float64)
+    if not (np.isfinite(lags).all() and (lags >= 0.0).all()):
+        raise StateError("lag_s", lag_s, "must be finite and >= 0")
 
     def flat(value: FloatArray | float) -> FloatArray:
         return np.ascontiguousarray(np.broadcast_to(value, shape), dtype=np.float64).ravel()
 
-    out = np.empty(int(np.prod(shape)))
+    out = np.empty(size)
     abandon_gap_batch(
         packed, zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, flat(north_m),
         flat(east_m), flat(course_rad), flat(accel_lat_m_s2), flat(flown_accel_m_s2),
-        flat(speed_m_s), flat(params.response_lag_s if lag_s is None else lag_s), out,
+        flat(speed_m_s), flat(lags), out,
     )  # fmt: skip
     return out.reshape(shape)
 
@@ -120,13 +134,15 @@ def abandon_gap(
     lag_s: float, turn_s: float, hold_s: float, brake_m_s2: float, margin_m: float,
     below: float,
 ) -> float:
-    """``flight_abandon_gap``, -inf where a number of the state is NaN or infinite or the
-    speed not above 0 (a path of NaN keeps no gap that a comparison counts, so it would
-    clear every level: fail closed). The shield asks ``flight_abandon_gap`` of the states
-    of its flights, which it starts only from a state it has checked so
-    (``backup._flyable``): this check there cost a tenth of a step with ArduCopter's
-    profile (bench_law.py --service, 228 us against 193)."""
-    if not (abs(n) + abs(e) + abs(heading) + abs(accel) + abs(flown_accel) + speed < math.inf
+    """``flight_abandon_gap``, -inf where a number of the state or of the profile (lag,
+    turn, hold, braking, margin) is NaN or infinite or the speed not above 0 (a path of
+    NaN keeps no gap that a comparison counts, so it would clear every level: fail
+    closed; a reviewer's infinite lag gave +inf). The shield asks ``flight_abandon_gap``
+    of the states of its flights, which it starts only from a state and settings it has
+    checked so (``backup._flyable``, ``GuidanceParams``): this check there cost a tenth of
+    a step with ArduCopter's profile (bench_law.py --service, 228 us against 193)."""
+    if not (abs(n) + abs(e) + abs(heading) + abs(accel) + abs(flown_accel) + speed + abs(lag_s)
+            + abs(turn_s) + abs(hold_s) + abs(brake_m_s2) + abs(margin_m) < math.inf
             and speed > 0.0):
         return -math.inf
     return flight_abandon_gap(zn, ze, zmur, zreach, kz, n, e, heading, accel, flown_accel,

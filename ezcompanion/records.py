@@ -67,6 +67,7 @@ class Hold(StrEnum):
     DISARMED = "the vehicle disarmed during the engagement"
     REBOOTED = "the vehicle rebooted during the engagement"
     RANGE = "the vehicle's state is beyond what the law computes"
+    LAW = "the law computed no command for this state"
     PARAMETER = "the vehicle's parameters answered twice, differently"
 
 

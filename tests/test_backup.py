@@ -30,6 +30,7 @@ from ezcompanion.guidance import (
     GuidanceParams,
     KinematicState,
     LawName,
+    Target,
     ZoneSet,
     ez_boundary_point,
 )
@@ -717,7 +718,8 @@ def test_a_state_with_a_nan_or_infinite_number_certifies_nothing(
     bound, outside the model) gives every certificate -inf, the shield no weight, no
     certificate and no actuator state, and the abandon path no gap. (A NaN actuator state
     gave LEFT and RIGHT 1.07 m here, and the shield held LEFT on it: a flight of NaN keeps
-    no gap any comparison counts, so the turn's closed-form circle was its value.)"""
+    no gap any comparison counts, so the turn's closed-form circle was its value; a
+    reviewer found ``plan_search`` left out, +inf from a NaN state.)"""
     zones = zones_of([(0.0, 3.0, 1.5, 0.5, 0.7), (4.0, -2.0, 1.0, 0.3, 0.5)])
     z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m)
     abandon = {None: {}, "copter": {"hold_s": 3.0, "brake_m_s2": 2.5},
@@ -727,8 +729,10 @@ def test_a_state_with_a_nan_or_infinite_number_certifies_nothing(
     state = [0.0, 0.0, 0.0, 0.3, 0.3, 1.0]
     state[which] = bad
     cases = [state]
-    if which == 3:  # the actuator at its bound: outside the model, refused as well
-        cases.append([*state[:3], math.copysign(params.accel_max_m_s2, bad), *state[4:]])
+    if which == 3:  # the actuator beyond its bound: outside the model, refused as well
+        cases.append([*state[:3], math.copysign(1.5 * params.accel_max_m_s2, bad), *state[4:]])
+    if which == 2:  # a course whose own rounding is wider than a turn (1e20 rad)
+        cases.append([*state[:2], math.copysign(1e20, bad), *state[3:]])
     dt, theta = 0.02, 0.1
     for n, e, h, a, av, v in cases:
         certs = np.full(bk.N_POLICIES, -math.inf)
@@ -742,6 +746,8 @@ def test_a_state_with_a_nan_or_infinite_number_certifies_nothing(
         for policy in (bk.BACKUP_LEFT, bk.BACKUP_RIGHT):
             values.append(bk.turn_certificate(s, *z, 0, policy, n, e, h, a, av, v, dt, -math.inf,
                                               theta, -math.inf, math.inf, False))  # fmt: skip
+        values.append(bk.plan_search(s, *z, 0, n, e, h, a, av, v, dt, theta,
+                                     np.zeros(bk.PLAN_SIZE, dtype=np.int64))[0])
         assert values == [-math.inf] * len(values), (n, e, h, a, av, v, values)
         for current in (bk.BACKUP_NONE, bk.BACKUP_LEFT, bk.BACKUP_STRAIGHT):
             out = np.zeros((1, 6))
@@ -754,6 +760,33 @@ def test_a_state_with_a_nan_or_infinite_number_certifies_nothing(
         gap = abandon_gap(*z, 0, *state, lag_s, abandon.get("turn_s", 0.0), abandon["hold_s"],
                           abandon["brake_m_s2"], 0.1, math.inf)  # fmt: skip
         assert gap == -math.inf, gap
+
+
+def test_an_actuator_whose_rest_point_rounds_to_its_bound_is_flown() -> None:
+    """A reviewer's settings, which the loader accepts: with an actuator gain p1 of 1e-12
+    (n 32, command limit 1000 per second) the actuator's rest point rounds to a_max
+    itself. The shield takes that state (the model is defined at its bound), where a
+    guard refusing |a| = a_max had written NaN into the controller and its setpoints."""
+    params = dataclasses.replace(PARAMS, actuator_p1_1_s=1e-12, actuator_n=32,
+                                 command_limit_1_s=1000.0)  # fmt: skip
+    assert advance_one(0.0, 1000.0, 0.02, 1.0, 1e-12, 32, 1000.0) == 1.0
+    zones = zones_of([(6.0, 0.0, 1.5, 0.5, 0.7)])
+    s = bk.pack_shield(params)
+    out = np.zeros((1, 6))
+    bk.shield_one(s, zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m, 0, 0.0, 0.0,
+                  0.0, 1.0, 1.0, 1.0, 0.0, 0.02, bk.BACKUP_NONE, math.nan,
+                  np.zeros(bk.PLAN_SIZE, dtype=np.int64), out, 0)  # fmt: skip
+    assert np.isfinite(out[0, :2]).all() and abs(out[0, 0]) <= 1.0, out
+    controller = GuidanceController(zones=zones, target=Target(north_m=12.0, east_m=0.0),
+                                    params=params, law=LawName.BACKUP)  # fmt: skip
+    controller.reset(0.0)
+    north, east, course = 0.0, 0.0, 0.0
+    for _ in range(40):
+        step = controller.step_one(north_m=north, east_m=east, course_rad=course,
+                                   speed_m_s=1.0, dt_s=0.02)  # fmt: skip
+        assert math.isfinite(float(step.accel_lat_cmd_m_s2))
+        course += float(step.accel_lat_m_s2) * 0.02
+        north, east = north + 0.02 * math.cos(course), east + 0.02 * math.sin(course)
 
 
 def held_after_one_step(

@@ -205,6 +205,27 @@ def test_a_scenario_too_far_out_for_its_speed_is_refused_and_a_tick_beyond_it_ho
     assert isinstance(loop.tick(t.snapshot(0.25, 1.02), 1.02), TickCommand)
 
 
+def test_a_law_that_computes_no_command_holds_the_failsafe_and_sends_nothing() -> None:
+    """The last line under the kernels' own checks: an actuator state corrupted to NaN
+    (injected: the controller's checks keep it from arising) makes the shield certify
+    nothing and compute no command (``backup._flyable``); the tick holds as the named
+    ``law`` failsafe rather than hand a NaN to the setpoints, and a reset flies again."""
+    scenario = load_scenario(CONFIG)
+    loop = GuidanceLoop(scenario, loop_rate_hz=50.0, stale_after_s=0.25)
+    t = known_origin()
+    t.update(local(1000, 8.0, -4.0, 0.5, 0.0), now_s=1.0)
+    first = loop.tick(t.snapshot(0.25, 1.0), 1.0)
+    assert isinstance(first, TickCommand) and math.isfinite(first.accel_lat_m_s2)
+    loop.controller._accel[...] = math.nan  # the fault
+    t.update(local(1020, 8.02, -4.0, 0.5, 0.0), now_s=1.02)
+    assert loop.tick(t.snapshot(0.25, 1.02), 1.02) is Hold.LAW
+    assert Hold.LAW.name.lower() == "law"
+    loop.reset()
+    t.update(local(1040, 8.04, -4.0, 0.5, 0.0), now_s=1.04)
+    again = loop.tick(t.snapshot(0.25, 1.04), 1.04)
+    assert isinstance(again, TickCommand) and math.isfinite(again.accel_lat_m_s2)
+
+
 def test_a_tick_soon_after_the_last_takes_a_step_of_a_period() -> None:
     """A late sample just after a deadline tick ticks at once, 0.1 ms after it; its command
     is then held until the next tick, half a period or more. The law verifies its command

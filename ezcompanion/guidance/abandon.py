@@ -27,7 +27,7 @@ from ezcompanion.guidance.params import GuidanceParams
 from ezcompanion.guidance.zones import ZoneSet
 
 __all__ = ["ABANDON_PROFILES", "AbandonProfile", "abandon_gap", "abandon_gap_batch",
-           "abandon_gap_m", "flight_abandon_gap"]
+           "abandon_gap_m"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -168,8 +168,9 @@ def flight_abandon_gap(
     mu R ahead, in closed form (a braking vehicle's look-ahead shrinks to its reach disc).
     A velocity setpoint (``turn_s`` 0) flown with a lag ``lag_s`` leads the course by
     tau a_v / v (``flown_accel`` a_v): the vehicle turns on to it as its lag lets the turn
-    die out (``_lagged_straight``). ``below`` where no profile is set. (Of a state of finite
-    numbers and a speed above 0; ``abandon_gap`` checks that first.)"""
+    die out (``_lagged_straight``). ``below`` where no profile is set. Unchecked: for the
+    shield's flights, from a state and settings checked before (``backup._flyable``,
+    ``GuidanceParams``; not exported); ``abandon_gap`` checks them first."""
     hold = hold_s
     if hold <= 0.0:
         return below

@@ -83,6 +83,7 @@ import math
 import numpy as np
 import numpy.typing as npt
 
+from ezcompanion.config_limits import MAGNITUDE_LIMIT
 from ezcompanion.guidance._jit import jit, jit_borrow, jit_inline
 from ezcompanion.guidance.abandon import flight_abandon_gap
 from ezcompanion.guidance.actuator import advance_one
@@ -443,13 +444,20 @@ def sample_ticks(s: FloatArray, speed: float, dt: float) -> int:
 @jit_inline
 def _flyable(s: FloatArray, n: float, e: float, h: float, a: float, av: float,
              speed: float) -> bool:
-    """Whether a flight can be computed from this state: every number finite, the speed
-    above 0 and the actuator inside its bound (|a| < a_max, as the model keeps it). The
-    public entries below ask it first and fail closed where it is not: a NaN or infinite
-    number flies a path of NaN, whose gaps no comparison counts, so a turn's closed-form
-    circle would be its certificate (a NaN actuator state gave LEFT 1.07 m)."""
-    return (abs(n) + abs(e) + abs(h) + abs(av) + speed < math.inf and speed > 0.0
-            and abs(a) < s[S_AMAX])
+    """Whether a flight can be computed from this state: every number within the law's
+    magnitude (``MAGNITUDE_LIMIT`` each, so finite), the speed above 0 and the actuator
+    within its bound (|a| <= a_max: the model keeps it there, and with an actuator gain
+    p1 of some 1e-12 its rest point rounds to a_max itself, a reviewer found; the model
+    is defined there and points inward). The public entries below ask it first and fail
+    closed where it is not: a NaN or infinite number flies a path of NaN, whose gaps no
+    comparison counts, so a turn's closed-form circle would be its certificate (a NaN
+    actuator state gave LEFT 1.07 m), and a course of 1e20 rad can no longer turn in its
+    own rounding (LEFT "certified" at 0.50 m)."""
+    return (abs(n) + abs(e) + abs(h) + abs(av) + speed <= _FLYABLE_MAGNITUDE
+            and speed > 0.0 and abs(a) <= s[S_AMAX])
+
+
+_FLYABLE_MAGNITUDE = 5.0 * MAGNITUDE_LIMIT  # (five numbers: ``_flyable``)
 
 
 @jit_inline
@@ -1911,7 +1919,10 @@ def plan_search(
     with the control steps the search flew; returns -inf, of ``plan`` only its segment
     length written, where none is found, the family exhausted or ``PLAN_BUDGET_STEPS``
     control steps flown. The value is exact under the model: the plan is flown step by
-    step as it was searched."""
+    step as it was searched. -inf, with nothing written, where the state is not
+    ``_flyable``."""
+    if not _flyable(s, n, e, h, a, av, speed):
+        return -math.inf, 0
     depth = int(s[S_PLAN])
     steps = max(1, round(PLAN_SEGMENT_TURN_TIMES * speed / s[S_AMAX] / dt))
     nodes = np.empty((depth + 1, 3, 6))  # per level, the children: state and floor

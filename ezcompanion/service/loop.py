@@ -334,6 +334,11 @@ class GuidanceLoop:
         except PrecisionError:  # beyond the law's precision radius, so far out at its speed
             self._last_tick_s = last
             return Hold.RANGE
+        if not math.isfinite(step.accel_lat_cmd_m_s2):
+            # the shield certified nothing and computed no actuator state (a state its
+            # kernels refuse, ``backup._flyable``): nothing is sent that it cannot justify
+            self._last_tick_s = last
+            return Hold.LAW
         self.miss_distance_m = min(self.miss_distance_m, float(step.law.range_to_target_m))
         self.captured = bool(step.captured)
         return TickCommand(

@@ -444,8 +444,9 @@ def sample_ticks(s: FloatArray, speed: float, dt: float) -> int:
 @jit_inline
 def _flyable(s: FloatArray, n: float, e: float, h: float, a: float, av: float,
              speed: float) -> bool:
-    """Whether a flight can be computed from this state: every number within the law's
-    magnitude (``MAGNITUDE_LIMIT`` each, so finite), the speed above 0 and the actuator
+    """Whether a flight can be computed from this state: its numbers' magnitudes summing
+    to at most five times the law's limit (``MAGNITUDE_LIMIT`` each), so each finite,
+    the speed above 0 and the actuator
     within its bound (|a| <= a_max: the model keeps it there, and with an actuator gain
     p1 of some 1e-12 its rest point rounds to a_max itself, a reviewer found; the model
     is defined there and points inward). The public entries below ask it first and fail

@@ -762,6 +762,19 @@ def test_a_state_with_a_nan_or_infinite_number_certifies_nothing(
         assert gap == -math.inf, gap
 
 
+def test_a_line_from_rest_of_a_position_not_a_number_clears_nothing() -> None:
+    """A reviewer's case: a NaN or infinite position or yaw gave the line from rest a gap
+    of +inf, so ``rest_course`` took the yaw as a clear start. Now no course clears."""
+    zones = zones_of([(6.0, 0.0, 1.5, 0.5, 0.7)])
+    z = (zones.north_m, zones.east_m, zones.mu_range_m, zones.reach_m)
+    s = bk.pack_shield(PARAMS)
+    assert bk.rest_line_gap_m(s, *z, 0, 0.0, 3.0, 0.0) > 0.0  # a clear line, as a check
+    assert not math.isnan(bk.rest_course(s, *z, 0, 0.0, 3.0, 0.0, 1.0, 0.02, 0.0))
+    for n, e, h in ((math.nan, 3.0, 0.0), (0.0, math.inf, 0.0), (0.0, 3.0, math.nan)):
+        assert bk.rest_line_gap_m(s, *z, 0, n, e, h) == -math.inf
+        assert math.isnan(bk.rest_course(s, *z, 0, n, e, h, 1.0, 0.02, 0.0))
+
+
 def test_an_actuator_whose_rest_point_rounds_to_its_bound_is_flown() -> None:
     """A reviewer's settings, which the loader accepts: with an actuator gain p1 of 1e-12
     (n 32, command limit 1000 per second) the actuator's rest point rounds to a_max

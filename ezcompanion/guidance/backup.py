@@ -2334,7 +2334,11 @@ def rest_line_gap_m(s: FloatArray, zn: FloatArray, ze: FloatArray, zmur: FloatAr
     along it), and slower than v the look-ahead mu R v' / v lies between p and p + mu R u:
     so this bounds every look-ahead point of that start, and of its abandon path, which
     runs along the same line. At speed on the line with no turn (a = a_v = 0), STRAIGHT's
-    certificate is at least this less its samples' dips (<= theta)."""  # fmt: skip
+    certificate is at least this less its samples' dips (<= theta). -inf where n, e or h
+    is NaN or infinite (a line of NaN would clear every zone: a reviewer's NaN position
+    was taken as a clear start)."""  # fmt: skip
+    if not abs(n) + abs(e) + abs(h) < math.inf:
+        return -math.inf
     return float(segment_gap(zn, ze, zmur, zreach, kz, n, e, math.cos(h), math.sin(h), 0.0,
                              math.inf, True, s[S_EPS], 0.0))  # fmt: skip
 

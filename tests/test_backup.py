@@ -714,9 +714,10 @@ _STATE_NAMES = ("north", "east", "course", "a", "a_v", "speed")
 def test_a_state_with_a_nan_or_infinite_number_certifies_nothing(
     profile: str | None, lag_s: float, which: int, bad: float
 ) -> None:
-    """Fail closed: a NaN or infinite number anywhere in the state (or an actuator at its
-    bound, outside the model) gives every certificate -inf, the shield no weight, no
-    certificate and no actuator state, and the abandon path no gap. (A NaN actuator state
+    """Fail closed: a NaN or infinite number anywhere in the state (or an actuator beyond
+    its bound, outside the model, or a course of 1e20 rad) gives every certificate -inf,
+    the shield no weight, no certificate and no actuator state, and the abandon path no
+    gap. (A NaN actuator state
     gave LEFT and RIGHT 1.07 m here, and the shield held LEFT on it: a flight of NaN keeps
     no gap any comparison counts, so the turn's closed-form circle was its value; a
     reviewer found ``plan_search`` left out, +inf from a NaN state.)"""

@@ -219,7 +219,6 @@ def test_a_law_that_computes_no_command_holds_the_failsafe_and_sends_nothing() -
     loop.controller._accel[...] = math.nan  # the fault
     t.update(local(1020, 8.02, -4.0, 0.5, 0.0), now_s=1.02)
     assert loop.tick(t.snapshot(0.25, 1.02), 1.02) is Hold.LAW
-    assert Hold.LAW.name.lower() == "law"
     loop.reset()
     t.update(local(1040, 8.04, -4.0, 0.5, 0.0), now_s=1.04)
     again = loop.tick(t.snapshot(0.25, 1.04), 1.04)

@@ -441,24 +441,23 @@ def sample_ticks(s: FloatArray, speed: float, dt: float) -> int:
     return max(1, ticks)
 
 
+_FLYABLE_MAGNITUDE = 5.0 * MAGNITUDE_LIMIT  # (five numbers: ``_flyable``)
+
+
 @jit_inline
 def _flyable(s: FloatArray, n: float, e: float, h: float, a: float, av: float,
              speed: float) -> bool:
     """Whether a flight can be computed from this state: its numbers' magnitudes summing
-    to at most five times the law's limit (``MAGNITUDE_LIMIT`` each), so each finite,
-    the speed above 0 and the actuator
-    within its bound (|a| <= a_max: the model keeps it there, and with an actuator gain
-    p1 of some 1e-12 its rest point rounds to a_max itself, a reviewer found; the model
-    is defined there and points inward). The public entries below ask it first and fail
-    closed where it is not: a NaN or infinite number flies a path of NaN, whose gaps no
-    comparison counts, so a turn's closed-form circle would be its certificate (a NaN
-    actuator state gave LEFT 1.07 m), and a course of 1e20 rad can no longer turn in its
-    own rounding (LEFT "certified" at 0.50 m)."""
+    to at most five times the law's limit (``MAGNITUDE_LIMIT`` each), so each finite, the
+    speed above 0 and the actuator within its bound (|a| <= a_max: the model keeps it
+    there, and with an actuator gain p1 of some 1e-12 its rest point rounds to a_max
+    itself, a reviewer found; the model is defined there and points inward). The public
+    entries below ask it first and fail closed where it is not: a NaN or infinite number
+    flies a path of NaN, whose gaps no comparison counts, so a turn's closed-form circle
+    would be its certificate (a NaN actuator state gave LEFT 1.07 m), and a course of
+    1e20 rad can no longer turn in its own rounding (LEFT "certified" at 0.50 m)."""
     return (abs(n) + abs(e) + abs(h) + abs(av) + speed <= _FLYABLE_MAGNITUDE
             and speed > 0.0 and abs(a) <= s[S_AMAX])
-
-
-_FLYABLE_MAGNITUDE = 5.0 * MAGNITUDE_LIMIT  # (five numbers: ``_flyable``)
 
 
 @jit_inline
